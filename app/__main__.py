@@ -1,0 +1,22 @@
+"""``stylize3d`` / ``python -m app``: the GUI with no sub-command, batch sub-commands otherwise.
+
+Batch sub-commands never import Qt or VTK (tests enforce it); the GUI modules are imported only
+when the window is opened.
+"""
+
+from __future__ import annotations
+
+import sys
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    from app import cli
+
+    if argv and argv[0] in cli.SUBCOMMANDS:
+        return cli.main(argv)
+    return cli.gui_main(argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

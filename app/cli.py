@@ -1,0 +1,205 @@
+"""Batch sub-commands of ``stylize3d``. Imports no Qt and no VTK.
+
+Every sub-command prints a plain message and exits non-zero on bad input (the exit status is the
+error's ``exit_code``: 2 unreadable file, 3 unwritable file, 4 invalid mesh, 5 bad parameter).
+Method flags are generated from the methods' Params dataclasses (one definition per parameter).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from algorithms.errors import InvalidMeshError, MeshWriteError, ParameterError, Stylize3DError
+from algorithms.params import describe, params_from_dict, params_to_dict
+
+SUBCOMMANDS = ("info", "clean", "smooth")
+
+
+# ----------------------------------------------------------------------------- Params -> flags
+def add_params_arguments(parser: argparse.ArgumentParser, params_cls: type) -> None:
+    """Add one flag per field of ``params_cls`` (defaults, ranges and help from its metadata)."""
+    group = parser.add_argument_group("method parameters")
+    for spec in describe(params_cls):
+        rng = ""
+        if spec.minimum is not None or spec.maximum is not None:
+            rng = f" Range {spec.minimum:g}..{spec.maximum:g}." if spec.maximum is not None else ""
+        help_text = f"{spec.tooltip}{rng} Default: {spec.default}."
+        help_text = help_text.replace("%", "%%")
+        if spec.type is bool:
+            group.add_argument(spec.flag, dest=spec.name, action=argparse.BooleanOptionalAction,
+                               default=spec.default, help=help_text)
+        elif spec.type is str:
+            group.add_argument(spec.flag, dest=spec.name, default=spec.default,
+                               choices=spec.choices, help=help_text)
+        else:
+            group.add_argument(spec.flag, dest=spec.name, type=spec.type, default=spec.default,
+                               metavar=spec.name.upper(), help=help_text)
+
+
+def params_from_args(params_cls: type, args: argparse.Namespace) -> Any:
+    values = {spec.name: getattr(args, spec.name) for spec in describe(params_cls)}
+    return params_from_dict(params_cls, values)
+
+
+# ----------------------------------------------------------------------------- helpers
+def _read_valid(path: str, *, allow_errors: bool = False):
+    from algorithms.mesh import read_mesh, validate_mesh
+
+    data = read_mesh(path)
+    report = validate_mesh(data.V, data.F, notes=data.notes)
+    if report.errors and not allow_errors:
+        raise InvalidMeshError(
+            f"{path} cannot be processed as it is:\n{report.summary()}\n"
+            f"Try: stylize3d clean {path} -o cleaned{Path(path).suffix}")
+    return data, report
+
+
+def _check_output(path: str, overwrite: bool, inp: str | None = None) -> None:
+    out = Path(path)
+    if inp is not None and out.exists() and os.path.samefile(out, inp) and not overwrite:
+        raise MeshWriteError(f"{path} is the input file; pass --overwrite to replace it.")
+    if out.exists() and not overwrite:
+        raise MeshWriteError(f"{path} already exists; pass --overwrite to replace it.")
+    if out.is_dir():
+        raise MeshWriteError(f"{path} is a folder, not a file name.")
+
+
+def _print_json(obj: dict) -> None:
+    print(json.dumps(obj, indent=2, sort_keys=False, default=float))
+
+
+# ----------------------------------------------------------------------------- sub-commands
+def cmd_info(args: argparse.Namespace) -> int:
+    from algorithms.mesh import read_mesh, validate_mesh
+
+    data = read_mesh(args.mesh)
+    report = validate_mesh(data.V, data.F, notes=data.notes)
+    if args.json:
+        out = {"file": str(args.mesh), "ok": report.ok, "notes": list(data.notes)}
+        out.update(report.to_dict())
+        _print_json(out)
+    else:
+        print(f"{args.mesh}")
+        print(report.summary())
+    return 0 if report.ok else InvalidMeshError.exit_code
+
+
+def cmd_clean(args: argparse.Namespace) -> int:
+    from algorithms.mesh import clean_mesh, read_mesh, validate_mesh, write_mesh
+
+    _check_output(args.output, args.overwrite, args.mesh)
+    data = read_mesh(args.mesh)
+    result = clean_mesh(data.V, data.F)
+    after = validate_mesh(result.V, result.F)
+    write_mesh(args.output, result.V, result.F)
+    if args.json:
+        _print_json({"input": args.mesh, "output": args.output, "actions": list(result.actions),
+                     "ok": after.ok, **after.to_dict()})
+    else:
+        for a in list(data.notes) + list(result.actions):
+            print(a)
+        print(f"Wrote {args.output} ({len(result.V)} vertices, {len(result.F)} triangles).")
+        if not after.ok:
+            print("Problems that Clean could not fix:\n" + after.summary())
+    return 0 if after.ok else InvalidMeshError.exit_code
+
+
+def cmd_smooth(args: argparse.Namespace) -> int:
+    from algorithms.mesh import write_mesh
+    from algorithms.smoothing import SmoothParams, smooth_iter
+
+    params = params_from_args(SmoothParams, args)
+    _check_output(args.output, args.overwrite, args.mesh)
+    data, _ = _read_valid(args.mesh)
+    t0 = time.perf_counter()
+    history = []
+    last = None
+    for last in smooth_iter(data.V, data.F, params):
+        history.append(last.metrics)
+        if not args.json and not args.quiet:
+            print(f"  step {last.iteration}/{last.total}: energy {last.metrics['dirichlet_energy']:.6g}",
+                  file=sys.stderr)
+    seconds = time.perf_counter() - t0
+    write_mesh(args.output, last.V, data.F)
+    if args.json:
+        _print_json({"input": args.mesh, "output": args.output, "params": params_to_dict(params),
+                     "iterations": last.iteration, "seconds": seconds,
+                     "dirichlet_energy": [h["dirichlet_energy"] for h in history],
+                     "displacement": [h["displacement"] for h in history]})
+    else:
+        print(f"Smoothed {args.mesh} in {seconds:.2f} s ({last.iteration} steps); wrote {args.output}.")
+    return 0
+
+
+# ----------------------------------------------------------------------------- parser
+def build_parser() -> argparse.ArgumentParser:
+    from algorithms.smoothing import SmoothParams
+
+    p = argparse.ArgumentParser(
+        prog="stylize3d",
+        description="Stylize3D: stylize and process 3D surface meshes. With no sub-command, "
+                    "opens the app (optionally on MESH).")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
+    s = sub.add_parser("info", help="check a mesh and print its statistics")
+    s.add_argument("mesh", help="mesh file (.obj .ply .stl .off)")
+    s.add_argument("--json", action="store_true", help="print the report as JSON")
+    s.set_defaults(func=cmd_info)
+
+    s = sub.add_parser("clean", help="fix what can be fixed in a mesh and say what was done")
+    s.add_argument("mesh")
+    s.add_argument("-o", "--output", required=True, help="where to write the cleaned mesh")
+    s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_clean)
+
+    s = sub.add_parser("smooth", help="implicit Laplacian / mean-curvature smoothing of the shape")
+    s.add_argument("mesh")
+    s.add_argument("-o", "--output", required=True, help="where to write the smoothed mesh")
+    s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
+    s.add_argument("--json", action="store_true", help="print figures as JSON")
+    s.add_argument("--quiet", action="store_true", help="no per-step progress")
+    add_params_arguments(s, SmoothParams)
+    s.set_defaults(func=cmd_smooth)
+    return p
+
+
+
+def main(argv: list[str]) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse already printed a usage message
+        return int(e.code or 0)
+    if not getattr(args, "command", None):
+        parser.print_help()
+        return 0
+    try:
+        return int(args.func(args))
+    except Stylize3DError as e:
+        print(f"stylize3d {args.command}: {e}", file=sys.stderr)
+        return e.exit_code
+    except KeyboardInterrupt:
+        print("stylize3d: interrupted; nothing was written.", file=sys.stderr)
+        return 130
+
+
+# ----------------------------------------------------------------------------- GUI
+def gui_main(argv: list[str]) -> int:
+    p = argparse.ArgumentParser(prog="stylize3d", description="Open the Stylize3D app.",
+                                epilog="Batch sub-commands: " + ", ".join(SUBCOMMANDS)
+                                + " (stylize3d COMMAND --help).")
+    p.add_argument("mesh", nargs="?", help="mesh file to open")
+    p.add_argument("--screenshot", metavar="PNG",
+                   help="save a screenshot of the window once the mesh is shown, then quit")
+    args = p.parse_args(argv)
+    from app.gui import run_app  # Qt is imported only here
+
+    return run_app(args.mesh, screenshot=args.screenshot)

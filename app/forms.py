@@ -1,0 +1,176 @@
+"""A parameter form generated from a Params dataclass (label, range, step, tooltip from metadata).
+
+Numbers get a spin box plus a slider (logarithmic where the field says so) for immediate feedback;
+booleans a check box; strings with choices a drop-down. ``changed`` fires on every edit with the
+new Params instance; ``params()`` returns the current one; ``set_params`` loads one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import (QAbstractSpinBox, QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout,
+                               QHBoxLayout, QLabel, QSlider, QSpinBox, QWidget)
+
+from algorithms.params import ParamSpec, describe
+
+SLIDER_STEPS = 1000
+
+
+class _NumberEditor(QWidget):
+    """Spin box + slider kept in sync."""
+
+    valueChanged = Signal()
+
+    def __init__(self, spec: ParamSpec, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.spec = spec
+        lay = QHBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        if spec.type is int:
+            self.spin = QSpinBox()
+            self.spin.setRange(int(spec.minimum if spec.minimum is not None else -10**9),
+                               int(spec.maximum if spec.maximum is not None else 10**9))
+            self.spin.setSingleStep(int(spec.step or 1))
+        else:
+            self.spin = QDoubleSpinBox()
+            self.spin.setDecimals(spec.decimals if spec.decimals is not None else 4)
+            self.spin.setRange(spec.minimum if spec.minimum is not None else -1e12,
+                               spec.maximum if spec.maximum is not None else 1e12)
+            if spec.log_scale:
+                self.spin.setStepType(QAbstractSpinBox.StepType.AdaptiveDecimalStepType)
+            else:
+                self.spin.setSingleStep(spec.step or 0.1)
+        self.spin.setKeyboardTracking(False)
+        self.spin.setMinimumWidth(90)
+        self.slider = None
+        if spec.minimum is not None and spec.maximum is not None:
+            self.slider = QSlider(Qt.Orientation.Horizontal)
+            self.slider.setRange(0, SLIDER_STEPS)
+            self.slider.setMinimumWidth(80)
+            lay.addWidget(self.slider, 1)
+            self.slider.valueChanged.connect(self._from_slider)
+        lay.addWidget(self.spin)
+        self.spin.valueChanged.connect(self._from_spin)
+        self._sync = False
+
+    # slider position <-> value (log-scale when asked and the range is positive)
+    def _to_pos(self, v: float) -> int:
+        lo, hi = self.spec.minimum, self.spec.maximum
+        if self.spec.log_scale and lo > 0:
+            t = (math.log(v) - math.log(lo)) / (math.log(hi) - math.log(lo))
+        else:
+            t = (v - lo) / (hi - lo) if hi > lo else 0.0
+        return int(round(min(max(t, 0.0), 1.0) * SLIDER_STEPS))
+
+    def _from_pos(self, pos: int) -> float:
+        lo, hi = self.spec.minimum, self.spec.maximum
+        t = pos / SLIDER_STEPS
+        if self.spec.log_scale and lo > 0:
+            v = math.exp(math.log(lo) + t * (math.log(hi) - math.log(lo)))
+            digits = max(0, -int(math.floor(math.log10(v))) + 1)  # two significant digits
+            return round(v, digits)
+        v = lo + t * (hi - lo)
+        if self.spec.step:
+            v = lo + round((v - lo) / self.spec.step) * self.spec.step
+        return v
+
+    def _from_slider(self, pos: int) -> None:
+        if self._sync:
+            return
+        v = self._from_pos(pos)
+        self._sync = True
+        self.spin.setValue(int(round(v)) if self.spec.type is int else v)
+        self._sync = False
+        self.valueChanged.emit()
+
+    def _from_spin(self, _v) -> None:
+        if self.slider is not None and not self._sync:
+            self._sync = True
+            self.slider.setValue(self._to_pos(self.spin.value()))
+            self._sync = False
+        if not self._sync:
+            self.valueChanged.emit()
+
+    def value(self):
+        return int(self.spin.value()) if self.spec.type is int else float(self.spin.value())
+
+    def setValue(self, v) -> None:  # noqa: N802
+        self._sync = True
+        self.spin.setValue(v)
+        if self.slider is not None:
+            self.slider.setValue(self._to_pos(float(v)))
+        self._sync = False
+
+
+class ParamsForm(QWidget):
+    """See the module docstring. ``editors[name]`` is the widget of each field (tests use it)."""
+
+    changed = Signal(object)
+
+    def __init__(self, params_cls: type, parent: QWidget | None = None, values: Any = None):
+        super().__init__(parent)
+        self.params_cls = params_cls
+        self.specs = describe(params_cls)
+        self.editors: dict[str, QWidget] = {}
+        form = QFormLayout(self)
+        form.setContentsMargins(0, 0, 0, 0)
+        for spec in self.specs:
+            if spec.type is bool:
+                w = QCheckBox()
+                w.toggled.connect(self._emit)
+            elif spec.type is str:
+                w = QComboBox()
+                w.addItems(list(spec.choices or [spec.default]))
+                w.currentTextChanged.connect(self._emit)
+            else:
+                w = _NumberEditor(spec)
+                w.valueChanged.connect(self._emit)
+            tip = spec.tooltip
+            if spec.minimum is not None and spec.maximum is not None:
+                tip += f"\nRange {spec.minimum:g} to {spec.maximum:g}; default {spec.default}."
+            w.setToolTip(tip)
+            label = QLabel(spec.label)
+            label.setToolTip(tip)
+            form.addRow(label, w)
+            self.editors[spec.name] = w
+        self._loading = False
+        self.set_params(values if values is not None else params_cls())
+
+    def _emit(self, *_):
+        if not self._loading:
+            self.changed.emit(self.params())
+
+    def params(self) -> Any:
+        values = {}
+        for spec in self.specs:
+            w = self.editors[spec.name]
+            if spec.type is bool:
+                values[spec.name] = w.isChecked()
+            elif spec.type is str:
+                values[spec.name] = w.currentText()
+            else:
+                values[spec.name] = w.value()
+        return self.params_cls(**values)
+
+    def set_params(self, params: Any) -> None:
+        self._loading = True
+        try:
+            for spec in self.specs:
+                v = getattr(params, spec.name)
+                w = self.editors[spec.name]
+                if spec.type is bool:
+                    w.setChecked(bool(v))
+                elif spec.type is str:
+                    w.setCurrentText(str(v))
+                else:
+                    w.setValue(v)
+        finally:
+            self._loading = False
+
+    def reset_defaults(self) -> None:
+        self.set_params(self.params_cls())
+        self.changed.emit(self.params())

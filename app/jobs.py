@@ -1,0 +1,183 @@
+"""Runs an algorithm generator (DESIGN.md §2) on a QThread: progress, live preview, cancel.
+
+``JobRunner.start(name, factory)`` calls ``factory()`` *on the worker thread* (so precomputation
+such as factorizations does not freeze the window) and iterates the :class:`~algorithms.steps.Step`
+generator it returns. The worker only stores the newest step; a GUI-thread timer publishes it at
+most ~30 times a second through :attr:`JobRunner.preview`, so a fast method never floods the event
+queue and only the GUI thread ever touches VTK. Cancelling sets a flag the worker checks before
+asking the generator for its next step; the job then ends with :attr:`cancelled`. Exceptions end
+it with :attr:`failed` and a plain message. A new ``start`` while a job runs cancels the old job and
+starts the new one as soon as the old thread has stopped (used by live sliders).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import traceback
+from typing import Callable, Iterator
+
+from PySide6.QtCore import QObject, QThread, QTimer, Signal
+
+from algorithms.errors import Stylize3DError
+from algorithms.steps import Step
+
+PREVIEW_INTERVAL_MS = 33  # ~30 Hz
+
+
+class _JobThread(QThread):
+    """Iterates the generator; communicates only through a lock-protected slot and signals."""
+
+    ended = Signal(object, str, str)  # (last Step or None, status "done"|"cancelled"|"failed", message)
+
+    def __init__(self, name: str, factory: Callable[[], Iterator[Step]]):
+        super().__init__()
+        self.name = name
+        self.factory = factory
+        self.cancel_requested = threading.Event()
+        self._lock = threading.Lock()
+        self._latest: Step | None = None
+        self._seq = 0
+        self.details = ""
+
+    def take_latest(self) -> tuple[int, Step | None]:
+        with self._lock:
+            return self._seq, self._latest
+
+    def run(self) -> None:  # worker thread
+        last = None
+        try:
+            steps = self.factory()
+            for step in steps:
+                last = step
+                with self._lock:
+                    self._latest = step
+                    self._seq += 1
+                if self.cancel_requested.is_set():
+                    break
+            if self.cancel_requested.is_set():
+                if hasattr(steps, "close"):
+                    steps.close()
+                self.ended.emit(last, "cancelled", f"{self.name} was cancelled.")
+            elif last is None:
+                self.ended.emit(None, "failed", f"{self.name} produced no result.")
+            else:
+                self.ended.emit(last, "done", "")
+        except Stylize3DError as e:
+            self.details = traceback.format_exc()
+            self.ended.emit(last, "failed", str(e))
+        except MemoryError:
+            self.details = traceback.format_exc()
+            self.ended.emit(last, "failed",
+                            f"{self.name} ran out of memory. Try a smaller mesh or fewer iterations.")
+        except Exception as e:  # a bug: say so plainly, keep the traceback for the details box
+            self.details = traceback.format_exc()
+            self.ended.emit(last, "failed",
+                            f"{self.name} stopped because of an unexpected error "
+                            f"({type(e).__name__}: {e}). Your mesh was not changed.")
+
+
+class JobRunner(QObject):
+    """Runs one job at a time; see the module docstring.
+
+    Signals
+    -------
+    started(str) : job name.
+    progress(int, object, str) : iteration, total (int or None), message.
+    preview(object) : the newest Step, throttled to ~30 Hz (GUI thread).
+    finished(object) : the last Step of a job that ran to its end.
+    cancelled(str) : a cancelled job; the document must be shown as it was.
+    failed(str, str) : message for the user, technical details.
+    busy_changed(bool)
+    """
+
+    started = Signal(str)
+    progress = Signal(int, object, str)
+    preview = Signal(object)
+    finished = Signal(object)
+    cancelled = Signal(str)
+    failed = Signal(str, str)
+    busy_changed = Signal(bool)
+
+    def __init__(self, parent: QObject | None = None):
+        super().__init__(parent)
+        self._thread: _JobThread | None = None
+        self._pending: tuple[str, Callable] | None = None
+        self._published_seq = 0
+        self._timer = QTimer(self)
+        self._timer.setInterval(PREVIEW_INTERVAL_MS)
+        self._timer.timeout.connect(self._publish)
+        self.started_at = 0.0
+        self.last_duration = 0.0
+
+    @property
+    def busy(self) -> bool:
+        return self._thread is not None
+
+    @property
+    def name(self) -> str | None:
+        return self._thread.name if self._thread else None
+
+    def start(self, name: str, factory: Callable[[], Iterator[Step]]) -> None:
+        """Run ``factory()``'s steps; if a job is running, cancel it and queue this one."""
+        if self._thread is not None:
+            self._pending = (name, factory)
+            self._thread.cancel_requested.set()
+            return
+        self._launch(name, factory)
+
+    def cancel(self) -> None:
+        """Ask the running job to stop after its current iteration (no-op when idle)."""
+        self._pending = None
+        if self._thread is not None:
+            self._thread.cancel_requested.set()
+
+    def wait(self, timeout_ms: int = 60000) -> bool:
+        """Block until the worker thread ends (tests, shutdown). Signals still need the event loop."""
+        t = self._thread
+        return True if t is None else t.wait(timeout_ms)
+
+    # -- internals ---------------------------------------------------------------------------
+    def _launch(self, name: str, factory: Callable) -> None:
+        t = _JobThread(name, factory)
+        t.ended.connect(self._on_ended)
+        self._thread = t
+        self._published_seq = 0
+        self.started_at = time.perf_counter()
+        self._timer.start()
+        self.busy_changed.emit(True)
+        self.started.emit(name)
+        t.start()
+
+    def _publish(self) -> None:
+        t = self._thread
+        if t is None:
+            return
+        seq, step = t.take_latest()
+        if step is not None and seq != self._published_seq:
+            self._published_seq = seq
+            if not t.cancel_requested.is_set():
+                self.progress.emit(step.iteration, step.total, step.message)
+                self.preview.emit(step)
+
+    def _on_ended(self, last: Step | None, status: str, message: str) -> None:
+        t = self._thread
+        if t is None or self.sender() is not t:
+            return
+        t.wait()
+        self._timer.stop()
+        self._thread = None
+        self.last_duration = time.perf_counter() - self.started_at
+        details = t.details
+        t.deleteLater()
+        pending, self._pending = self._pending, None
+        if status == "done":
+            self.finished.emit(last)
+        elif status == "cancelled":
+            self.cancelled.emit(message)
+        else:
+            self.failed.emit(message, details)
+        if pending is not None:
+            self._launch(*pending)
+        else:
+            self.busy_changed.emit(False)

@@ -1,0 +1,140 @@
+"""The pattern every method panel copies: Params form, Run/Stop, live re-run, streamed preview,
+a metrics plot, and the finished result as one undoable command.
+
+A subclass sets ``title``, ``params_cls``, ``description``, ``plot_metrics`` and implements
+:meth:`build_steps`, which receives an immutable snapshot of the document and returns the method's
+Step generator. It runs on the worker thread, so it must not touch widgets.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Iterator
+
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtWidgets import (QCheckBox, QDockWidget, QHBoxLayout, QLabel, QPushButton,
+                               QVBoxLayout, QWidget)
+
+from algorithms.steps import Step
+from app.document import MeshState
+from app.forms import ParamsForm
+from app.widgets import LinePlot
+
+if TYPE_CHECKING:  # pragma: no cover
+    from app.main_window import MainWindow
+
+
+class MethodPanel(QDockWidget):
+    title = "Method"
+    description = ""
+    params_cls: type = object
+    plot_metrics: tuple[str, ...] = ()
+    plot_log_y = False
+    live_debounce_ms = 300
+
+    def __init__(self, window: "MainWindow"):
+        super().__init__(self.title, window)
+        self.setObjectName(f"panel_{self.title.lower().replace(' ', '_')}")
+        self.window_ = window
+        body = QWidget()
+        lay = QVBoxLayout(body)
+        if self.description:
+            desc = QLabel(self.description)
+            desc.setWordWrap(True)
+            desc.setStyleSheet("color: #444;")
+            lay.addWidget(desc)
+        self.form = ParamsForm(self.params_cls)
+        lay.addWidget(self.form)
+        row = QHBoxLayout()
+        self.run_button = QPushButton(f"Run {self.title.lower()}")
+        self.run_button.setToolTip("Run with these settings. The result can be undone (Ctrl+Z).")
+        self.stop_button = QPushButton("Stop")
+        self.stop_button.setToolTip("Stop the running job; the mesh goes back to how it was (Esc).")
+        self.stop_button.setEnabled(False)
+        self.defaults_button = QPushButton("Defaults")
+        self.defaults_button.setToolTip("Reset every parameter to its default value.")
+        row.addWidget(self.run_button, 2)
+        row.addWidget(self.stop_button, 1)
+        row.addWidget(self.defaults_button, 1)
+        lay.addLayout(row)
+        self.live_box = QCheckBox("Live: re-run when a parameter changes")
+        self.live_box.setToolTip("Each parameter change restarts the method from the current mesh, "
+                                 "so you see its effect at once. The result is applied only when "
+                                 "the run finishes.")
+        lay.addWidget(self.live_box)
+        self.status_label = QLabel("Ready.")
+        self.status_label.setWordWrap(True)
+        lay.addWidget(self.status_label)
+        self.plot = LinePlot(", ".join(self.plot_metrics), log_y=self.plot_log_y)
+        lay.addWidget(self.plot)
+        lay.addStretch(1)
+        self.setWidget(body)
+
+        self._debounce = QTimer(self)
+        self._debounce.setSingleShot(True)
+        self._debounce.setInterval(self.live_debounce_ms)
+        self._debounce.timeout.connect(self.run)
+        self.run_button.clicked.connect(self.run)
+        self.stop_button.clicked.connect(window.cancel_job)
+        self.defaults_button.clicked.connect(self.form.reset_defaults)
+        self.form.changed.connect(self._on_params_changed)
+        runner = window.runner
+        runner.preview.connect(self._on_preview)
+        runner.started.connect(self._on_busy)
+        runner.busy_changed.connect(self._on_busy)
+        runner.finished.connect(self._on_finished)
+        runner.cancelled.connect(self._on_stopped)
+        runner.failed.connect(lambda msg, _d: self._on_stopped(msg))
+
+    # -- to implement -------------------------------------------------------------------------
+    def build_steps(self, state: MeshState, params: Any) -> Iterator[Step]:
+        raise NotImplementedError
+
+    # -- behaviour ----------------------------------------------------------------------------
+    def _mine(self) -> bool:
+        return self.window_.runner.name == self.title
+
+    def run(self) -> None:
+        state = self.window_.document.state
+        if state is None:
+            self.status_label.setText("Open a mesh first (File > Open).")
+            return
+        params = self.form.params()
+        self.plot.clear()
+        self.status_label.setText("Starting…")
+        self.window_.start_positions_job(self.title, lambda: self.build_steps(state, params))
+
+    def _on_params_changed(self, _params) -> None:
+        if self.live_box.isChecked() and not self.window_.document.is_empty:
+            self._debounce.start()
+
+    def _on_busy(self, *_):
+        busy = self.window_.runner.busy
+        self.stop_button.setEnabled(busy and self._mine())
+
+    def _on_preview(self, step: Step) -> None:
+        if not self._mine():
+            return
+        for name in self.plot_metrics:
+            if name in step.metrics:
+                self.plot.append(name, step.metrics[name])
+        total = f"/{step.total}" if step.total else ""
+        self.status_label.setText(f"Iteration {step.iteration}{total}")
+
+    def _on_finished(self, step: Step) -> None:
+        if self.window_.last_job_name != self.title:
+            return
+        # the final step may not have been published by the throttled preview: plot it too
+        ys = self.plot.series.get(self.plot_metrics[0]) if self.plot_metrics else None
+        if self.plot_metrics and (ys is None or len(ys) < step.iteration):
+            for name in self.plot_metrics:
+                if name in step.metrics:
+                    self.plot.append(name, step.metrics[name])
+        self.status_label.setText(f"Done: {step.iteration} iterations in "
+                                  f"{self.window_.runner.last_duration:.2f} s. Undo with Ctrl+Z.")
+        self.stop_button.setEnabled(False)
+
+    def _on_stopped(self, message: str) -> None:
+        if self.window_.last_job_name != self.title:
+            return
+        self.status_label.setText(message)
+        self.stop_button.setEnabled(False)

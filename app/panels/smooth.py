@@ -1,0 +1,17 @@
+"""Panel "Smooth": implicit Laplacian / mean-curvature smoothing of the vertex positions."""
+
+from __future__ import annotations
+
+from algorithms.smoothing import SmoothParams, smooth_iter
+from app.panels.base import MethodPanel
+
+
+class SmoothPanel(MethodPanel):
+    title = "Smooth"
+    description = ("Smooths the shape with implicit steps (direct sparse solver). Try 10 steps "
+                   "first, then raise the step size for a stronger effect.")
+    params_cls = SmoothParams
+    plot_metrics = ("dirichlet_energy",)
+
+    def build_steps(self, state, params):
+        return smooth_iter(state.V, state.F, params)

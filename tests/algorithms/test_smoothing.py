@@ -1,0 +1,100 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse.linalg as spla
+
+import igl
+from algorithms.errors import InvalidMeshError, ParameterError
+from algorithms.linalg import SPDSolver
+from algorithms.mesh import icosphere, read_mesh
+from algorithms.mesh.operators import cotangent_laplacian, face_areas, mass_matrix
+from algorithms.smoothing import SmoothParams, smooth, smooth_iter
+from tests.conftest import shared_mesh
+
+
+def noisy_sphere(seed=0):
+    V, F = icosphere(3)
+    rng = np.random.default_rng(seed)
+    return V + 0.03 * rng.standard_normal(V.shape), F
+
+
+def test_one_laplacian_step_solves_the_backward_euler_system():
+    V, F = noisy_sphere()
+    p = SmoothParams(step_size=1e-3, iterations=1, keep_size=False)
+    V1 = smooth(V, F, p)
+    L = igl.cotmatrix(V, F)
+    M = igl.massmatrix(V, F, igl.MASSMATRIX_TYPE_BARYCENTRIC)
+    h = 1e-3 * face_areas(V, F).sum()
+    expected = spla.spsolve((M - h * L).tocsc(), M @ V)
+    np.testing.assert_allclose(V1, expected, atol=1e-10)
+
+
+@pytest.mark.parametrize("flow", ["laplacian", "cmcf", "mcf"])
+def test_energy_decreases_and_size_is_kept(flow):
+    V, F = noisy_sphere(1)
+    steps = list(smooth_iter(V, F, SmoothParams(flow=flow, step_size=1e-3, iterations=5)))
+    E = [s.metrics["dirichlet_energy"] for s in steps]
+    L0 = cotangent_laplacian(V, F)
+    E0 = float(np.einsum("ij,ij->", V, -L0 @ V)) / face_areas(V, F).sum()
+    assert E[0] < E0 and all(b <= a * (1 + 1e-9) for a, b in zip(E, E[1:]))
+    assert face_areas(steps[-1].V, F).sum() == pytest.approx(face_areas(V, F).sum(), rel=1e-9)
+    assert [s.iteration for s in steps] == [1, 2, 3, 4, 5] and steps[-1].total == 5
+
+
+def test_smoothing_removes_noise_on_a_real_mesh():
+    data = read_mesh(shared_mesh("spot_lowres.obj"))
+    V, F = data.V, data.F
+    rng = np.random.default_rng(2)
+    n = igl.per_vertex_normals(V, F)
+    noisy = V + 0.01 * rng.standard_normal((len(V), 1)) * n
+    out = smooth(noisy, F, SmoothParams(step_size=2e-4, iterations=3))
+    assert np.linalg.norm(out - V) < 0.6 * np.linalg.norm(noisy - V)
+
+
+def test_keep_size_off_shrinks_a_closed_mesh():
+    V, F = icosphere(2)
+    out = smooth(V, F, SmoothParams(flow="mcf", step_size=5e-3, iterations=3, keep_size=False))
+    assert face_areas(out, F).sum() < 0.95 * face_areas(V, F).sum()
+
+
+def test_fixed_boundary_stays_put():
+    from algorithms.mesh import grid
+    from algorithms.mesh.topology import boundary_loops
+
+    V, F = grid(12, 12)
+    rng = np.random.default_rng(3)
+    V = V.copy()
+    V[:, 2] += 0.05 * rng.standard_normal(len(V))
+    b = np.concatenate(boundary_loops(F))
+    out = smooth(V, F, SmoothParams(step_size=1e-2, iterations=4, fix_boundary=True))
+    np.testing.assert_array_equal(out[b], V[b])
+    inner = np.setdiff1d(np.arange(len(V)), b)
+    assert np.abs(out[inner, 2]).std() < np.abs(V[inner, 2]).std()
+
+
+def test_bad_inputs_raise_plain_errors():
+    V, F = icosphere(1)
+    Vn = V.copy()
+    Vn[0, 0] = np.nan
+    with pytest.raises(InvalidMeshError, match="NaN"):
+        next(smooth_iter(Vn, F))
+    with pytest.raises(InvalidMeshError):
+        next(smooth_iter(V, np.zeros((0, 3), np.int64)))
+    with pytest.raises(ParameterError):
+        next(smooth_iter(V, F, SmoothParams(iterations=0)))
+
+
+def test_spd_solver_with_dirichlet_matches_dense():
+    V, F = icosphere(2)
+    A = (mass_matrix(V, F) - 0.1 * cotangent_laplacian(V, F)).tocsc()
+    rng = np.random.default_rng(4)
+    fixed = np.array([0, 5, 17])
+    b = rng.standard_normal((len(V), 2))
+    xc = rng.standard_normal((3, 2))
+    x = SPDSolver(A, fixed).solve(b, xc)
+    Ad = A.toarray()
+    free = np.setdiff1d(np.arange(len(V)), fixed)
+    ref = np.linalg.solve(Ad[np.ix_(free, free)], b[free] - Ad[np.ix_(free, fixed)] @ xc)
+    np.testing.assert_allclose(x[free], ref, atol=1e-10)
+    np.testing.assert_array_equal(x[fixed], xc)

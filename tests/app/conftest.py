@@ -1,0 +1,76 @@
+"""GUI harness: a real MainWindow with a real VTK viewport, settings in a temp file, dialogs
+patched to record what the user would have seen and answer as the test says."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+
+class DialogRecorder:
+    def __init__(self):
+        self.errors: list[tuple[str, str]] = []
+        self.infos: list[tuple[str, str]] = []
+        self.questions: list[tuple[str, str, list[str]]] = []
+        self.answers: list[str | None] = []   # answers for choose/confirm, in order
+        self.open_paths: list[str | None] = []
+        self.save_paths: list[str | None] = []
+
+    def error(self, parent, title, text, details=None):
+        self.errors.append((title, text))
+
+    def info(self, parent, title, text):
+        self.infos.append((title, text))
+
+    def choose(self, parent, title, text, choices, default=None, details=None):
+        self.questions.append((title, text, list(choices)))
+        if not self.answers:
+            raise AssertionError(f"unexpected question: {title}: {text}")
+        ans = self.answers.pop(0)
+        assert ans is None or ans in choices, (ans, choices)
+        return ans
+
+    def confirm(self, parent, title, text, yes="Yes", no="Cancel"):
+        return self.choose(parent, title, text, [yes, no]) == yes
+
+    def open_file(self, parent, title, filter, directory=""):
+        return self.open_paths.pop(0)
+
+    def save_file(self, parent, title, filter, directory=""):
+        return self.save_paths.pop(0)
+
+
+@pytest.fixture
+def dialogs(monkeypatch):
+    from app import dialogs as mod
+
+    rec = DialogRecorder()
+    for name in ("error", "info", "choose", "confirm", "open_file", "save_file"):
+        monkeypatch.setattr(mod, name, getattr(rec, name))
+    return rec
+
+
+@pytest.fixture
+def needs_display():
+    if not os.environ.get("DISPLAY"):
+        pytest.skip("the VTK viewport needs an X display: install Debian's 'xvfb' package "
+                    "(scripts/setup.sh does this when run as root) so pytest-xvfb can start one")
+
+
+@pytest.fixture
+def window(qtbot, tmp_path, dialogs, needs_display):
+    from PySide6.QtCore import QSettings
+
+    from app.main_window import MainWindow
+
+    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    win = MainWindow(settings=settings)
+    qtbot.addWidget(win)
+    win.show()
+    qtbot.waitExposed(win)
+    yield win
+    win.runner.cancel()
+    win.runner.wait(10000)
+    win.document.modified = False
+    win.close()

@@ -1,0 +1,105 @@
+"""The batch CLI, run as a user would: a separate process, plain messages, exit codes."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from algorithms.mesh import read_mesh
+from tests.conftest import ROOT, SAMPLES, shared_mesh
+
+
+def stylize3d(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "app", *map(str, args)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def test_info_json_on_real_mesh():
+    r = stylize3d("info", shared_mesh("bob.obj"), "--json")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["ok"] and d["stats"]["vertices"] == 5344 and d["stats"]["faces"] == 10688
+    assert d["stats"]["genus"] == 1
+
+
+def test_info_text_on_mesh_with_boundary():
+    r = stylize3d("info", shared_mesh("camelhead.off"))
+    assert r.returncode == 0, r.stderr
+    assert "11381" in r.stdout.replace(",", "") and "bound" in r.stdout.lower()
+
+
+@pytest.mark.parametrize("kind, code", [("empty", 2), ("garbage", 2), ("nan", 4),
+                                        ("out_of_range", 4), ("nonmanifold", 4)])
+def test_bad_input_plain_message_nonzero_exit(bad_files, kind, code):
+    r = stylize3d("info", bad_files[kind])
+    assert r.returncode == code, (r.stdout, r.stderr)
+    msg = r.stdout + r.stderr
+    assert "Traceback" not in msg and len(msg.strip()) > 20
+
+
+@pytest.mark.parametrize("kind", ["empty", "garbage", "nan", "out_of_range", "nonmanifold"])
+def test_smooth_refuses_bad_input_and_writes_nothing(bad_files, tmp_path, kind):
+    out = tmp_path / "out.obj"
+    r = stylize3d("smooth", bad_files[kind], "-o", out)
+    assert r.returncode != 0 and "Traceback" not in r.stderr and r.stderr.strip()
+    assert not out.exists()
+
+
+def test_clean_fixes_duplicates_and_reports(bad_files, tmp_path):
+    out = tmp_path / "clean.obj"
+    r = stylize3d("clean", bad_files["duplicates"], "-o", out)
+    assert r.returncode == 0, r.stderr
+    assert "duplicate" in r.stdout.lower()
+    data = read_mesh(out)
+    assert data.V.shape == (4, 3) and data.F.shape == (4, 3)
+
+
+def test_smooth_json_and_no_overwrite(tmp_path):
+    out = tmp_path / "s.obj"
+    r = stylize3d("smooth", SAMPLES / "blob.obj", "-o", out, "--iterations", "4", "--flow", "cmcf",
+                  "--step-size", "0.002", "--json")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["iterations"] == 4 and d["params"]["flow"] == "cmcf" and d["seconds"] > 0
+    e = d["dirichlet_energy"]
+    assert len(e) == 4 and all(b <= a for a, b in zip(e, e[1:]))
+    before = out.read_bytes()
+    r = stylize3d("smooth", SAMPLES / "blob.obj", "-o", out)
+    assert r.returncode == 3 and "already exists" in r.stderr
+    assert out.read_bytes() == before
+    r = stylize3d("smooth", SAMPLES / "blob.obj", "-o", out, "--overwrite", "--iterations", "1")
+    assert r.returncode == 0 and out.read_bytes() != before
+
+
+def test_smooth_flags_come_from_params_and_are_checked(tmp_path):
+    r = stylize3d("smooth", "--help")
+    assert r.returncode == 0
+    for flag in ("--flow", "--step-size", "--iterations", "--keep-size", "--no-keep-size",
+                 "--fix-boundary"):
+        assert flag in r.stdout
+    r = stylize3d("smooth", SAMPLES / "blob.obj", "-o", tmp_path / "x.obj", "--iterations", "0")
+    assert r.returncode == 5 and "at least 1" in r.stderr
+    assert not (tmp_path / "x.obj").exists()
+
+
+def test_gui_opens_bundled_sample_and_screenshots(tmp_path):
+    """What the README's first command does: open the app on the sample mesh (here it also
+    saves a screenshot and quits)."""
+    import os
+
+    if not os.environ.get("DISPLAY"):
+        pytest.skip("needs an X display (pytest-xvfb with Debian's xvfb)")
+    shot = tmp_path / "app.png"
+    r = subprocess.run([sys.executable, "-m", "app", str(SAMPLES / "blob.obj"), "--screenshot",
+                        str(shot)], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                       env={**os.environ, "HOME": str(tmp_path)})
+    assert r.returncode == 0, r.stderr
+    from PySide6.QtGui import QImage
+
+    img = QImage(str(shot))
+    assert not img.isNull() and img.width() >= 400

@@ -1,0 +1,68 @@
+"""The parameter form generated from a Params dataclass (no viewport needed)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import pytest
+
+from algorithms.params import param
+from algorithms.smoothing import SmoothParams
+
+
+@dataclass(frozen=True)
+class DemoParams:
+    weight: float = param(0.2, label="Weight", minimum=0.0, maximum=1.0, step=0.05,
+                          tooltip="How strong.")
+    scale: float = param(1e-3, label="Scale", minimum=1e-6, maximum=1.0, log_scale=True,
+                         decimals=6, tooltip="Log-scaled.")
+    count: int = param(5, label="Count", minimum=1, maximum=100, step=1, tooltip="How many.")
+    mode: str = param("b", label="Mode", choices=("a", "b", "c"), tooltip="Which.")
+    flag: bool = param(True, label="Flag", tooltip="On or off.")
+
+
+def test_form_reflects_metadata_and_defaults(qtbot):
+    from app.forms import ParamsForm
+
+    form = ParamsForm(DemoParams)
+    qtbot.addWidget(form)
+    assert form.params() == DemoParams()
+    w = form.editors["weight"]
+    assert w.spin.minimum() == 0.0 and w.spin.maximum() == 1.0
+    assert w.spin.singleStep() == pytest.approx(0.05)
+    assert "How strong." in w.toolTip() and "Range 0 to 1" in w.toolTip()
+    assert form.editors["mode"].count() == 3
+
+
+def test_form_edits_emit_new_params(qtbot):
+    from app.forms import ParamsForm
+
+    form = ParamsForm(DemoParams)
+    qtbot.addWidget(form)
+    got = []
+    form.changed.connect(got.append)
+    form.editors["count"].setValue(7)  # programmatic set does not emit...
+    assert got == []
+    form.editors["count"].spin.setValue(9)  # ...a user edit does
+    assert got[-1].count == 9
+    form.editors["weight"].slider.setValue(500)  # slider half-way
+    assert got[-1].weight == pytest.approx(0.5)
+    assert form.editors["weight"].spin.value() == pytest.approx(0.5)
+    form.editors["scale"].slider.setValue(500)  # log slider half-way between 1e-6 and 1
+    assert got[-1].scale == pytest.approx(1e-3, rel=0.05)
+    form.editors["flag"].setChecked(False)
+    assert got[-1].flag is False
+    form.editors["mode"].setCurrentText("c")
+    assert got[-1].mode == "c"
+    form.reset_defaults()
+    assert form.params() == DemoParams()
+
+
+def test_smooth_form_round_trip(qtbot):
+    from app.forms import ParamsForm
+
+    form = ParamsForm(SmoothParams)
+    qtbot.addWidget(form)
+    p = SmoothParams(flow="cmcf", step_size=0.01, iterations=3, keep_size=False, fix_boundary=True)
+    form.set_params(p)
+    assert form.params() == p

@@ -1,0 +1,225 @@
+"""pytest-qt tests driving the real main window and its VTK viewport."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PySide6.QtCore import QMimeData, QPointF, Qt, QUrl
+from PySide6.QtGui import QDropEvent, QImage
+
+from algorithms.mesh import read_mesh
+from tests.conftest import SAMPLES, shared_mesh
+
+SAMPLE = SAMPLES / "blob.obj"
+
+
+def open_via_menu(window, dialogs, path) -> None:
+    dialogs.open_paths.append(str(path))
+    window.actions_by_name["open"].trigger()
+
+
+def test_open_through_file_menu_shows_mesh(window, dialogs):
+    path = shared_mesh("spot_lowres.obj")
+    open_via_menu(window, dialogs, path)
+    assert not dialogs.errors
+    assert window.viewport.n_points == 829
+    assert window.viewport.mesh_actor.GetMapper().GetInput().GetNumberOfCells() == 1654
+    assert "V 829" in window.stats_label.text() and "genus 0" in window.stats_label.text()
+    assert str(Path(path).resolve()) in window.recent_files()
+    assert "spot_lowres.obj" in window.windowTitle()
+
+
+def test_smooth_streams_finishes_and_is_undoable(window, dialogs, qtbot):
+    assert window.open_path(SAMPLE)
+    V0 = window.document.V.copy()
+    panel = window.panels["Smooth"]
+    panel.form.editors["iterations"].setValue(25)
+    panel.form.editors["step_size"].setValue(0.005)
+    previews = []
+    window.runner.preview.connect(lambda s: previews.append(s.iteration))
+    with qtbot.waitSignal(window.runner.finished, timeout=60000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    assert previews, "no streamed update reached the GUI"
+    V1 = window.document.V.copy()
+    assert np.abs(V1 - V0).max() > 1e-4
+    np.testing.assert_allclose(window.viewport.points, V1)
+    assert window.undo_stack.count() == 1 and window.undo_stack.undoText() == "Smooth"
+    assert window.document.modified and "*" in window.document.title
+    assert len(panel.plot.series["dirichlet_energy"]) == 25
+    window.actions_by_name["undo"].trigger()
+    np.testing.assert_array_equal(window.document.V, V0)
+    np.testing.assert_array_equal(window.viewport.points, V0)
+    assert not window.document.modified
+    window.actions_by_name["redo"].trigger()
+    np.testing.assert_array_equal(window.document.V, V1)
+    np.testing.assert_array_equal(window.viewport.points, V1)
+
+
+def test_cancel_mid_run_restores_mesh(window, dialogs, qtbot):
+    assert window.open_path(SAMPLE)
+    V0 = window.document.V.copy()
+    panel = window.panels["Smooth"]
+    panel.form.editors["flow"].setCurrentText("mcf")  # refactors every step: slow enough to cancel
+    panel.form.editors["iterations"].setValue(1000)
+    with qtbot.waitSignal(window.runner.preview, timeout=30000):
+        panel.run_button.click()
+    assert window.cancel_button.isVisible() and window.progress_bar.isVisible()
+    assert np.abs(window.viewport.points - V0).max() > 0  # the preview moved the view
+    with qtbot.waitSignal(window.runner.cancelled, timeout=30000):
+        qtbot.keyClick(window, Qt.Key.Key_Escape)
+    qtbot.waitUntil(lambda: not window.runner.busy)
+    np.testing.assert_array_equal(window.document.V, V0)
+    np.testing.assert_array_equal(window.viewport.points, V0)
+    assert window.undo_stack.count() == 0
+    assert not window.cancel_button.isVisible()
+    assert not dialogs.errors
+
+
+def test_failing_job_shows_message_and_restores(window, dialogs, qtbot):
+    assert window.open_path(SAMPLE)
+    V0 = window.document.V.copy()
+    from algorithms.steps import Step
+
+    def broken():
+        yield Step(1, 3, V0 * 2.0)
+        raise ZeroDivisionError("boom")
+
+    with qtbot.waitSignal(window.runner.failed, timeout=10000):
+        window.start_positions_job("Broken", broken)
+    qtbot.waitUntil(lambda: not window.runner.busy)
+    assert dialogs.errors and "Broken failed" in dialogs.errors[-1][0]
+    assert "ZeroDivisionError" in dialogs.errors[-1][1]
+    np.testing.assert_array_equal(window.viewport.points, V0)
+    assert window.undo_stack.count() == 0
+
+
+def test_export_screenshot_is_not_blank(window, dialogs, tmp_path):
+    assert window.open_path(SAMPLE)
+    out = tmp_path / "shot.png"
+    dialogs.save_paths.append(str(out))
+    assert window.export_screenshot_dialog()
+    img = QImage(str(out))
+    assert not img.isNull() and img.width() > 100 and img.height() > 100
+    a = np.array([[img.pixelColor(x, y).getRgb()[:3] for x in range(0, img.width(), 8)]
+                  for y in range(0, img.height(), 8)], dtype=float)
+    bg_corner = a[0, 0]
+    differs = np.abs(a - bg_corner).sum(axis=2) > 30
+    assert differs.mean() > 0.05, "the screenshot shows only background"
+    # the mesh colour (warm beige) is present, not only the blue-grey gradient background
+    warm = (a[..., 0] > a[..., 2] + 20)
+    assert warm.mean() > 0.02
+
+
+@pytest.mark.parametrize("kind", ["empty", "garbage", "nan", "out_of_range", "nonmanifold",
+                                  "duplicates"])
+def test_bad_input_keeps_document(window, dialogs, bad_files, kind):
+    assert window.open_path(SAMPLE)
+    state = window.document.state
+    n = window.viewport.n_points
+    # where the problem is fixable, the app offers to clean; this user says Cancel
+    dialogs.answers.extend(["Cancel"])
+    assert not window.open_path(bad_files[kind])
+    shown = dialogs.errors[-1][1] if dialogs.errors else dialogs.questions[-1][1]
+    assert len(shown) > 20 and "Traceback" not in shown
+    assert window.document.state is state
+    assert window.viewport.n_points == n
+    assert window.isVisible()
+
+
+def test_duplicates_can_be_cleaned_on_open(window, dialogs, bad_files):
+    dialogs.answers.append("Clean and open")
+    assert window.open_path(bad_files["duplicates"])
+    assert window.viewport.n_points == 4  # welded tetrahedron
+    assert "duplicate" in dialogs.questions[-1][1].lower()
+
+
+def test_nonmanifold_message_names_the_problem(window, dialogs, bad_files):
+    dialogs.answers.append("Cancel")
+    window.open_path(bad_files["nonmanifold"])
+    text = (dialogs.questions[-1][1] if dialogs.questions else dialogs.errors[-1][1]).lower()
+    assert "non-manifold" in text or "more than two" in text
+
+
+def test_save_over_existing_file_asks_first(window, dialogs, tmp_path, qtbot):
+    assert window.open_path(SAMPLE)
+    target = tmp_path / "existing.obj"
+    target.write_text("precious")
+    dialogs.save_paths.append(str(target))
+    dialogs.answers.append("Cancel")
+    assert not window.save_as()
+    assert target.read_text() == "precious"
+    assert "Replace" in dialogs.questions[-1][2]
+    dialogs.save_paths.append(str(target))
+    dialogs.answers.append("Replace")
+    assert window.save_as()
+    data = read_mesh(target)
+    np.testing.assert_allclose(data.V, window.document.V)
+    assert window.document.path == target and not window.document.modified
+    # saving again to a file this session wrote does not ask again
+    assert window.save()
+
+
+def test_failed_save_keeps_old_file_and_tells(window, dialogs, tmp_path, monkeypatch):
+    assert window.open_path(SAMPLE)
+    folder = tmp_path / "out"
+    folder.mkdir()
+    target = folder / "keep.obj"
+    target.write_text("old contents")
+    import algorithms.mesh.io as io_mod
+
+    def boom(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    # fail inside the real writer, after the temporary file was opened
+    monkeypatch.setattr(io_mod.os, "fsync", boom)
+    dialogs.save_paths.append(str(target))
+    dialogs.answers.append("Replace")
+    assert not window.save_as()
+    assert target.read_text() == "old contents"
+    assert dialogs.errors and "save" in dialogs.errors[-1][0].lower()
+    assert [p.name for p in folder.iterdir()] == ["keep.obj"], "a temporary file was left behind"
+
+
+def test_drop_opens_mesh(window, dialogs, qtbot):
+    mime = QMimeData()
+    mime.setUrls([QUrl.fromLocalFile(str(SAMPLE))])
+    ev = QDropEvent(QPointF(50, 50), Qt.DropAction.CopyAction, mime, Qt.MouseButton.LeftButton,
+                    Qt.KeyboardModifier.NoModifier)
+    with qtbot.waitSignal(window.mesh_shown, timeout=10000):
+        window.dropEvent(ev)
+    assert window.viewport.n_points == len(read_mesh(SAMPLE).V)
+
+
+def test_view_toggles_and_ghost(window, dialogs):
+    assert window.open_path(SAMPLE)
+    window.actions_by_name["wireframe"].setChecked(True)
+    assert window.viewport.mesh_actor.prop.show_edges
+    window.actions_by_name["flat"].setChecked(True)
+    assert window.viewport.mesh_actor.prop.interpolation.name.lower() == "flat"
+    window.actions_by_name["ghost"].setChecked(True)
+    assert window.viewport.ghost_actor is not None
+    window.actions_by_name["ghost"].setChecked(False)
+    assert window.viewport.ghost_actor is None
+
+
+def test_discarding_unsaved_changes_asks(window, dialogs, qtbot):
+    assert window.open_path(SAMPLE)
+    with qtbot.waitSignal(window.runner.finished, timeout=30000):
+        window.panels["Smooth"].run()
+    assert window.document.modified
+    dialogs.answers.append("Cancel")
+    assert not window.open_path(SAMPLE)
+    assert window.undo_stack.count() == 1
+    dialogs.answers.append("Discard changes")
+    assert window.open_path(SAMPLE)
+    assert window.undo_stack.count() == 0
+
+
+def test_settings_persist_recent_files(window, dialogs, tmp_path):
+    assert window.open_path(SAMPLE)
+    from PySide6.QtCore import QSettings
+
+    s = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    assert str(SAMPLE.resolve()) in [str(p) for p in (s.value("files/recent") or [])]

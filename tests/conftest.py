@@ -1,0 +1,66 @@
+"""Shared fixtures: paths to the shared meshes, bad input files, and the GUI harness.
+
+GUI tests need an X display for the VTK viewport. ``scripts/setup.sh test`` runs pytest with the
+pytest-xvfb plugin, which starts a virtual X server; where none can be started the viewport tests
+skip and say why, and Qt falls back to the offscreen platform for the widget-only tests.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_MESHES = ROOT.parent / "shared" / "meshes"
+SAMPLES = ROOT / "resources" / "samples"
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_configure(config):
+    # pytest-xvfb has set DISPLAY by now when it could start Xvfb.
+    if not os.environ.get("DISPLAY"):
+        os.environ["QT_QPA_PLATFORM"] = "offscreen"
+
+
+def shared_mesh(name: str) -> Path:
+    """Path of a mesh in ../shared/meshes, skipping the calling test when it is not there."""
+    p = SHARED_MESHES / name
+    if not p.exists():
+        pytest.skip(f"shared mesh {name} not found in {SHARED_MESHES}")
+    return p
+
+
+@pytest.fixture
+def bad_files(tmp_path) -> dict[str, Path]:
+    """The bad inputs every entry point must survive, as files."""
+    files = {}
+    p = tmp_path / "empty.obj"
+    p.write_text("")
+    files["empty"] = p
+    p = tmp_path / "garbage.obj"
+    p.write_bytes(np.random.default_rng(0).integers(0, 256, 4096, dtype=np.uint8).tobytes())
+    files["garbage"] = p
+    p = tmp_path / "nan.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 nan 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n")
+    files["nan"] = p
+    p = tmp_path / "out_of_range.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\nf 1 4 9\nf 2 4 3\n")
+    files["out_of_range"] = p
+    p = tmp_path / "nonmanifold.obj"
+    # three triangles sharing the edge (1, 2)
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0.5 1 0\nv 0.5 -1 0\nv 0.5 0 1\nf 1 2 3\nf 2 1 4\nf 1 2 5\n")
+    files["nonmanifold"] = p
+    p = tmp_path / "duplicates.obj"
+    # a tetrahedron whose faces each have their own copies of the corners
+    P = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    tris = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+    lines = []
+    for t in tris:
+        lines += [f"v {P[i][0]} {P[i][1]} {P[i][2]}" for i in t]
+    lines += [f"f {3 * k + 1} {3 * k + 2} {3 * k + 3}" for k in range(4)]
+    p.write_text("\n".join(lines) + "\n")
+    files["duplicates"] = p
+    return files
