@@ -124,14 +124,14 @@ def cmd_smooth(args: argparse.Namespace) -> int:
     for last in smooth_iter(data.V, data.F, params):
         history.append(last.metrics)
         if not args.json and not args.quiet:
-            print(f"  step {last.iteration}/{last.total}: energy {last.metrics['dirichlet_energy']:.6g}",
+            print(f"  step {last.iteration}/{last.total}: bending energy {last.metrics['bending_energy']:.6g}",
                   file=sys.stderr)
     seconds = time.perf_counter() - t0
     write_mesh(args.output, last.V, data.F)
     if args.json:
         _print_json({"input": args.mesh, "output": args.output, "params": params_to_dict(params),
                      "iterations": last.iteration, "seconds": seconds,
-                     "dirichlet_energy": [h["dirichlet_energy"] for h in history],
+                     "bending_energy": [h["bending_energy"] for h in history],
                      "displacement": [h["displacement"] for h in history]})
     else:
         print(f"Smoothed {args.mesh} in {seconds:.2f} s ({last.iteration} steps); wrote {args.output}.")

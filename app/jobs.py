@@ -38,11 +38,14 @@ class _JobThread(QThread):
         self._lock = threading.Lock()
         self._latest: Step | None = None
         self._seq = 0
+        self._history: list[tuple[int, dict]] = []  # (iteration, metrics) of every step
         self.details = ""
 
-    def take_latest(self) -> tuple[int, Step | None]:
+    def take_latest(self) -> tuple[int, Step | None, list[tuple[int, dict]]]:
+        """The newest step and the metrics of every step since the previous call."""
         with self._lock:
-            return self._seq, self._latest
+            hist, self._history = self._history, []
+            return self._seq, self._latest, hist
 
     def run(self) -> None:  # worker thread
         last = None
@@ -53,6 +56,7 @@ class _JobThread(QThread):
                 with self._lock:
                     self._latest = step
                     self._seq += 1
+                    self._history.append((step.iteration, dict(step.metrics)))
                 if self.cancel_requested.is_set():
                     break
             if self.cancel_requested.is_set():
@@ -85,6 +89,8 @@ class JobRunner(QObject):
     started(str) : job name.
     progress(int, object, str) : iteration, total (int or None), message.
     preview(object) : the newest Step, throttled to ~30 Hz (GUI thread).
+    metrics(object) : list of (iteration, metrics dict) of *every* step since the last emission
+        (emitted just before ``preview`` and once more before ``finished``), for plots.
     finished(object) : the last Step of a job that ran to its end.
     cancelled(str) : a cancelled job; the document must be shown as it was.
     failed(str, str) : message for the user, technical details.
@@ -94,6 +100,7 @@ class JobRunner(QObject):
     started = Signal(str)
     progress = Signal(int, object, str)
     preview = Signal(object)
+    metrics = Signal(object)
     finished = Signal(object)
     cancelled = Signal(str)
     failed = Signal(str, str)
@@ -149,16 +156,19 @@ class JobRunner(QObject):
         self.started.emit(name)
         t.start()
 
-    def _publish(self) -> None:
-        t = self._thread
+    def _publish(self, t: _JobThread | None = None) -> None:
+        t = t or self._thread
         if t is None:
             return
-        seq, step = t.take_latest()
+        seq, step, hist = t.take_latest()
+        if t.cancel_requested.is_set():
+            return
+        if hist:
+            self.metrics.emit(hist)
         if step is not None and seq != self._published_seq:
             self._published_seq = seq
-            if not t.cancel_requested.is_set():
-                self.progress.emit(step.iteration, step.total, step.message)
-                self.preview.emit(step)
+            self.progress.emit(step.iteration, step.total, step.message)
+            self.preview.emit(step)
 
     def _on_ended(self, last: Step | None, status: str, message: str) -> None:
         t = self._thread
@@ -166,6 +176,8 @@ class JobRunner(QObject):
             return
         t.wait()
         self._timer.stop()
+        if status == "done":
+            self._publish(t)  # the last steps' metrics and the final shape
         self._thread = None
         self.last_duration = time.perf_counter() - self.started_at
         details = t.details

@@ -20,6 +20,7 @@ BACKGROUND_TOP = "#d9dee8"
 BACKGROUND_BOTTOM = "#7d8799"
 MESH_COLOR = "#e8d4b0"
 GHOST_COLOR = "#5b8bd9"
+HOME_VIEW_DIRECTION = (0.55, 0.35, 1.0)
 
 
 def _faces_vtk(F: np.ndarray) -> np.ndarray:
@@ -60,12 +61,11 @@ class Viewport(QWidget):
         self.mesh_actor = self.plotter.add_mesh(
             poly, name="mesh", color=MESH_COLOR, smooth_shading=False, show_edges=self._edges,
             edge_color="#404040", line_width=0.5, specular=0.25, specular_power=20,
-            show_scalars=False, reset_camera=False)
+            scalars=None, reset_camera=False)
         self._apply_shading()
         self._field_name = None
         if reset_camera:
-            self.plotter.reset_camera()
-            self.plotter.camera.zoom(1.1)
+            self._home_camera()
         self.render()
 
     def update_points(self, V: np.ndarray) -> None:
@@ -106,7 +106,7 @@ class Viewport(QWidget):
             ghost = pv.PolyData(np.asarray(V, dtype=np.float64), _faces_vtk(F))
             self.ghost_actor = self.plotter.add_mesh(ghost, name="ghost", color=GHOST_COLOR,
                                                      opacity=0.25, reset_camera=False,
-                                                     show_scalars=False)
+                                                     scalars=None)
         self.render()
 
     def set_wireframe(self, on: bool) -> None:
@@ -143,9 +143,14 @@ class Viewport(QWidget):
             self._field_name = name
         self.render()
 
-    def reset_camera(self) -> None:
+    def _home_camera(self) -> None:
+        # Most mesh files are Y-up: a three-quarter view from the front, Y pointing up.
+        self.plotter.view_vector(HOME_VIEW_DIRECTION, viewup=(0.0, 1.0, 0.0))
         self.plotter.reset_camera()
-        self.plotter.camera.zoom(1.1)
+        self.plotter.camera.zoom(1.15)
+
+    def reset_camera(self) -> None:
+        self._home_camera()
         self.render()
 
     def render(self) -> None:

@@ -48,11 +48,16 @@ stamp=.venv/.stylize3d-installed
 want="$(sha256sum pyproject.toml | cut -d' ' -f1)"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo ">> installing Stylize3D and its dependencies into .venv (first time: a few minutes)"
-  .venv/bin/python -m pip install -q --upgrade pip setuptools wheel
+  log=.venv/install.log
+  pipi() { .venv/bin/python -m pip install --no-input "$@" >>"$log" 2>&1 || {
+    echo "!! pip install $* failed; the last lines of $log:" >&2; tail -n 30 "$log" >&2; exit 1; }; }
+  : > "$log"
+  pipi --upgrade pip setuptools wheel
   # torch first, exactly pinned: it then satisfies every later requirement without a CUDA download.
-  .venv/bin/python -m pip install -q "torch==2.13.0"
-  .venv/bin/python -m pip install -q -e ".[test]"
+  pipi "torch==2.13.0"
+  pipi -e ".[test]"
   echo "$want" > "$stamp"
+  echo ">> installed (log: $log)"
 fi
 
 if [ "$mode" = app ]; then

@@ -79,6 +79,7 @@ class MethodPanel(QDockWidget):
         self.form.changed.connect(self._on_params_changed)
         runner = window.runner
         runner.preview.connect(self._on_preview)
+        runner.metrics.connect(self._on_metrics)
         runner.started.connect(self._on_busy)
         runner.busy_changed.connect(self._on_busy)
         runner.finished.connect(self._on_finished)
@@ -111,24 +112,23 @@ class MethodPanel(QDockWidget):
         busy = self.window_.runner.busy
         self.stop_button.setEnabled(busy and self._mine())
 
+    def _on_metrics(self, history) -> None:
+        if not self._mine():
+            return
+        for _it, metrics in history:
+            for name in self.plot_metrics:
+                if name in metrics:
+                    self.plot.append(name, metrics[name])
+
     def _on_preview(self, step: Step) -> None:
         if not self._mine():
             return
-        for name in self.plot_metrics:
-            if name in step.metrics:
-                self.plot.append(name, step.metrics[name])
         total = f"/{step.total}" if step.total else ""
         self.status_label.setText(f"Iteration {step.iteration}{total}")
 
     def _on_finished(self, step: Step) -> None:
         if self.window_.last_job_name != self.title:
             return
-        # the final step may not have been published by the throttled preview: plot it too
-        ys = self.plot.series.get(self.plot_metrics[0]) if self.plot_metrics else None
-        if self.plot_metrics and (ys is None or len(ys) < step.iteration):
-            for name in self.plot_metrics:
-                if name in step.metrics:
-                    self.plot.append(name, step.metrics[name])
         self.status_label.setText(f"Done: {step.iteration} iterations in "
                                   f"{self.window_.runner.last_duration:.2f} s. Undo with Ctrl+Z.")
         self.stop_button.setEnabled(False)

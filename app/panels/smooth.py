@@ -11,7 +11,7 @@ class SmoothPanel(MethodPanel):
     description = ("Smooths the shape with implicit steps (direct sparse solver). Try 10 steps "
                    "first, then raise the step size for a stronger effect.")
     params_cls = SmoothParams
-    plot_metrics = ("dirichlet_energy",)
+    plot_metrics = ("bending_energy",)
 
     def build_steps(self, state, params):
         return smooth_iter(state.V, state.F, params)

@@ -66,11 +66,13 @@ def window(qtbot, tmp_path, dialogs, needs_display):
 
     settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
     win = MainWindow(settings=settings)
-    qtbot.addWidget(win)
+    # closed by this fixture (qtbot.addWidget would close it before our teardown runs)
     win.show()
     qtbot.waitExposed(win)
     yield win
     win.runner.cancel()
     win.runner.wait(10000)
+    win.undo_stack.setClean()
     win.document.modified = False
     win.close()
+    win.deleteLater()

@@ -47,7 +47,7 @@ def test_smooth_streams_finishes_and_is_undoable(window, dialogs, qtbot):
     np.testing.assert_allclose(window.viewport.points, V1)
     assert window.undo_stack.count() == 1 and window.undo_stack.undoText() == "Smooth"
     assert window.document.modified and "*" in window.document.title
-    assert len(panel.plot.series["dirichlet_energy"]) == 25
+    assert len(panel.plot.series["bending_energy"]) == 25
     window.actions_by_name["undo"].trigger()
     np.testing.assert_array_equal(window.document.V, V0)
     np.testing.assert_array_equal(window.viewport.points, V0)

@@ -1,0 +1,82 @@
+#!/usr/bin/env python3
+"""Regenerate the sample meshes shipped in resources/samples/.
+
+Usage::
+
+    python scripts/make_samples.py            # writes blob.obj, bumpy.obj, pretzel.obj
+    python scripts/make_samples.py --check    # only validate the shipped files (no writing)
+
+The shapes come from :func:`algorithms.mesh.primitives.organic_sample` (marching cubes of
+implicit fields made by the project, so there are no third-party licence questions).
+Coordinates are rounded to 6 decimals to keep the files small; every file is validated after
+writing (closed, manifold, outward, expected genus).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from algorithms.mesh.io import read_mesh, write_mesh  # noqa: E402
+from algorithms.mesh.operators import signed_volume  # noqa: E402
+from algorithms.mesh.primitives import ORGANIC_SAMPLES, organic_sample  # noqa: E402
+from algorithms.mesh.samples import SAMPLES_DIR  # noqa: E402
+from algorithms.mesh.validate import validate_mesh  # noqa: E402
+
+DECIMALS = 6
+MAX_BYTES = 600_000
+
+
+def build(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """The sample ``name`` as it is stored: (V rounded to DECIMALS, F)."""
+    V, F = organic_sample(name)
+    return np.round(V, DECIMALS) + 0.0, F
+
+
+def check(path: Path, genus: int) -> list[str]:
+    """Problems with a written sample file (empty list if fine)."""
+    problems = []
+    mesh = read_mesh(path)
+    report = validate_mesh(mesh.V, mesh.F)
+    s = report.stats
+    if report.errors or report.warnings:
+        problems.append(f"{path.name}: {report.codes}")
+    if not s["closed"] or s["genus"] != genus or s["components"] != 1:
+        problems.append(
+            f"{path.name}: closed={s['closed']} genus={s['genus']} parts={s['components']}"
+        )
+    if signed_volume(mesh.V, mesh.F) <= 0:
+        problems.append(f"{path.name}: not outward oriented")
+    if path.stat().st_size > MAX_BYTES:
+        problems.append(f"{path.name}: {path.stat().st_size} bytes > {MAX_BYTES}")
+    return problems
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--check", action="store_true", help="verify instead of writing")
+    parser.add_argument("--out", type=Path, default=SAMPLES_DIR, help="output folder")
+    args = parser.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    problems: list[str] = []
+    for name, genus in ORGANIC_SAMPLES.items():
+        path = args.out / f"{name}.obj"
+        if not args.check:
+            V, F = build(name)
+            write_mesh(path, V, F)
+        problems += check(path, genus)
+        print(f"{path}: {path.stat().st_size / 1000:.0f} kB")
+    for p in problems:
+        print("PROBLEM:", p, file=sys.stderr)
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
