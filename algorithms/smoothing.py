@@ -21,6 +21,9 @@ Choices written down here (the thesis gives no smoothing method for the foundati
   Without it a closed mesh shrinks towards a point, which surprises users. It is skipped while boundary
   vertices are fixed (rescaling would move them).
 * ``fix_boundary`` pins boundary vertices (Dirichlet rows eliminated by the reduced system).
+  Vertices used by no triangle have no mass and no stiffness; they are always pinned (they stay
+  where they are) so the system stays definite. Degenerate triangles (zero area) make the
+  cotangent weights infinite: they are refused with a message that points to Clean.
 * Metrics per step: ``bending_energy`` = Σᵢ Mᵢᵢ |Hᵢ|² with the
   mean curvature Hᵢ = |M⁻¹LV|ᵢ / 2 of the current mesh (the discrete Willmore energy ∫H² dA,
   4π for a round sphere; what a user sees fall as bumps disappear); ``displacement`` is the
@@ -109,16 +112,22 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
     diag = float(np.linalg.norm(V0.max(axis=0) - V0.min(axis=0)))
     h = params.step_size * area0
     L0 = cotangent_laplacian(V0, F)
+    if not np.isfinite(L0.data).all():
+        raise InvalidMeshError("The mesh has degenerate (zero-area) triangles, so smoothing "
+                               "weights are undefined. Run Clean first to remove them.")
     K0 = -L0  # positive semidefinite stiffness
 
-    fixed = np.zeros(0, dtype=np.int64)
+    used = np.zeros(len(V0), dtype=bool)
+    used[F.ravel()] = True
+    fixed = np.flatnonzero(~used)  # loose points: pinned
     if params.fix_boundary and not closed:
-        fixed = np.unique(np.concatenate(boundary_loops(F))).astype(np.int64)
+        loops = np.concatenate(boundary_loops(F)).astype(np.int64)
+        fixed = np.union1d(fixed, loops)
 
     def bending(X: np.ndarray) -> float:
         m = mass_matrix(X, F).diagonal()
-        hn = (cotangent_laplacian(X, F) @ X) / np.maximum(m, 1e-300)[:, None]
-        return float((m * np.einsum("ij,ij->i", hn, hn)).sum() / 4.0)
+        hn = (cotangent_laplacian(X, F) @ X)[used] / np.maximum(m[used], 1e-300)[:, None]
+        return float((m[used] * np.einsum("ij,ij->i", hn, hn)).sum() / 4.0)
 
     solver = None
     if params.flow == "laplacian":
@@ -138,13 +147,13 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
         if not np.isfinite(Xn).all() or area <= 0:
             raise InvalidMeshError(
                 "Smoothing collapsed the mesh (its area became zero). Use a smaller step size.")
-        if params.keep_size and not fixed.size:
+        if params.keep_size and not (params.fix_boundary and not closed):
             vol = abs(signed_volume(Xn, F)) if closed else 0.0
             if closed and vol0 > 0 and vol > 0:
                 scale = (vol0 / vol) ** (1.0 / 3.0)
             else:
                 scale = np.sqrt(area0 / area)
-            Xn = (Xn - C) * scale + C0
+            Xn[used] = (Xn[used] - C) * scale + C0
         disp = float(np.linalg.norm(Xn - X, axis=1).max()) / max(diag, 1e-300)
         X = Xn
         yield Step(iteration=it, total=params.iterations, V=X.copy(),

@@ -49,15 +49,26 @@ def params_from_args(params_cls: type, args: argparse.Namespace) -> Any:
 
 
 # ----------------------------------------------------------------------------- helpers
-def _read_valid(path: str, *, allow_errors: bool = False):
-    from algorithms.mesh import read_mesh, validate_mesh
+def _read_valid(path: str, *, clean: bool = False, quiet: bool = False):
+    """Read a mesh a method can process. Errors and fixable problems are refused with the report
+    (and a hint to clean), unless ``clean`` is set: then the mesh is cleaned and what was done is
+    printed to stderr."""
+    from algorithms.mesh import MeshData, clean_mesh, read_mesh, validate_mesh
 
     data = read_mesh(path)
     report = validate_mesh(data.V, data.F, notes=data.notes)
-    if report.errors and not allow_errors:
-        raise InvalidMeshError(
-            f"{path} cannot be processed as it is:\n{report.summary()}\n"
-            f"Try: stylize3d clean {path} -o cleaned{Path(path).suffix}")
+    if clean and (report.errors or report.needs_cleaning):
+        res = clean_mesh(data.V, data.F)
+        if not quiet:
+            for a in res.actions:
+                print(f"clean: {a}", file=sys.stderr)
+        data = MeshData(res.V, res.F, list(data.notes) + list(res.actions))
+        report = validate_mesh(data.V, data.F, notes=data.notes)
+    if report.errors or report.needs_cleaning:
+        hint = ("" if clean else
+                f"\nAdd --clean to fix what can be fixed first, or run: "
+                f"stylize3d clean {path} -o cleaned{Path(path).suffix}")
+        raise InvalidMeshError(f"{path} cannot be processed as it is:\n{report.summary()}{hint}")
     return data, report
 
 
@@ -88,7 +99,8 @@ def cmd_info(args: argparse.Namespace) -> int:
     else:
         print(f"{args.mesh}")
         print(report.summary())
-    return 0 if report.ok else InvalidMeshError.exit_code
+    # 0: every method accepts the mesh as it is; 4: it has errors or needs cleaning first
+    return 0 if report.ok and not report.needs_cleaning else InvalidMeshError.exit_code
 
 
 def cmd_clean(args: argparse.Namespace) -> int:
@@ -117,7 +129,7 @@ def cmd_smooth(args: argparse.Namespace) -> int:
 
     params = params_from_args(SmoothParams, args)
     _check_output(args.output, args.overwrite, args.mesh)
-    data, _ = _read_valid(args.mesh)
+    data, _ = _read_valid(args.mesh, clean=args.clean, quiet=args.json or args.quiet)
     t0 = time.perf_counter()
     history = []
     last = None
@@ -148,7 +160,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "opens the app (optionally on MESH).")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
-    s = sub.add_parser("info", help="check a mesh and print its statistics")
+    s = sub.add_parser("info", help="check a mesh and print its statistics",
+                       description="Check a mesh and print its statistics. Exit status 0: every "
+                                   "method accepts it as it is; 4: it has errors or needs "
+                                   "cleaning first; 2: the file cannot be read.")
     s.add_argument("mesh", help="mesh file (.obj .ply .stl .off)")
     s.add_argument("--json", action="store_true", help="print the report as JSON")
     s.set_defaults(func=cmd_info)
@@ -166,6 +181,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
     s.add_argument("--json", action="store_true", help="print figures as JSON")
     s.add_argument("--quiet", action="store_true", help="no per-step progress")
+    s.add_argument("--clean", action="store_true",
+                   help="clean the mesh first when it has fixable problems (says what it fixed)")
     add_params_arguments(s, SmoothParams)
     s.set_defaults(func=cmd_smooth)
     return p

@@ -2,8 +2,8 @@
 
 Every change goes through :meth:`Document.set_state` with a :class:`MeshState` snapshot, so an undo
 command is just "state before" / "state after" (app/commands.py wraps that in a QUndoCommand).
-Listeners registered with :meth:`subscribe` are told what changed ("mesh", "positions", "fields",
-"selection", "path"); the GUI redraws from that. Arrays stored here are never modified in place:
+Listeners registered with :meth:`subscribe` are told what changed ("mesh" for a newly opened
+mesh, "topology" when an edit changed the triangles, "positions", "fields", "selection", "path"); the GUI redraws from that. Arrays stored here are never modified in place:
 each state owns read-only copies.
 """
 
@@ -127,9 +127,12 @@ class Document:
         old = self.state
         self.state = state
         self.modified = modified
-        if old is None or old.F is not state.F and (old.F.shape != state.F.shape
-                                                    or not np.array_equal(old.F, state.F)):
+        if old is None:
             self._notify("mesh")
+        elif len(old.V) != len(state.V) or (old.F is not state.F and (
+                old.F.shape != state.F.shape or not np.array_equal(old.F, state.F))):
+            self.report = None  # stale: the window re-validates
+            self._notify("topology")
         else:
             if old.V is not state.V:
                 self._notify("positions")
@@ -137,6 +140,24 @@ class Document:
                 self._notify("fields")
             if old.selection is not state.selection:
                 self._notify("selection")
+
+    def remapped(self, V, F, vertex_map: np.ndarray) -> MeshState:
+        """A new state on (V, F) whose per-vertex fields and selection follow ``vertex_map``
+        (old vertex -> new vertex, -1 deleted). New vertices without a preimage (copies made by
+        splitting a vertex) take the field's mean value and are not selected."""
+        old = self.state
+        vmap = np.asarray(vertex_map, dtype=np.int64)
+        keep = vmap >= 0
+        n = len(V)
+
+        def move(values, fill):
+            out = np.full(n, fill, dtype=np.asarray(values).dtype)
+            out[vmap[keep]] = np.asarray(values)[keep]
+            return out
+
+        fields = {k: move(v, float(np.mean(v)) if len(v) else 0.0) for k, v in old.fields.items()}
+        sel = None if old.selection is None else move(old.selection, False)
+        return MeshState.make(V, F, fields, sel)
 
     def mark_saved(self, path: str | Path) -> None:
         self.path = Path(path)

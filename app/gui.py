@@ -24,7 +24,7 @@ def run_app(mesh: str | None = None, screenshot: str | None = None) -> int:
             if mesh and win.document.is_empty:
                 print(f"stylize3d: could not open {mesh}", file=sys.stderr)
                 status["code"] = 2
-            elif not win.export_screenshot(screenshot):
+            elif not win.save_window_image(screenshot):
                 status["code"] = 3
             else:
                 print(f"Saved screenshot to {screenshot}")

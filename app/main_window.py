@@ -114,6 +114,9 @@ class MainWindow(QMainWindow):
         redo = self.undo_stack.createRedoAction(self, "&Redo")
         redo.setShortcuts([QKeySequence.StandardKey.Redo, QKeySequence("Ctrl+Shift+Z")])
         self.actions_by_name["undo"], self.actions_by_name["redo"] = undo, redo
+        A("clean", "&Clean Mesh", lambda: self.clean_mesh(), QKeySequence("Ctrl+Shift+C"),
+          tip="Fix duplicate or loose vertices, degenerate or extra triangles, flipped triangles "
+              "(undoable; says what it changed)")
         A("reset_camera", "&Reset Camera", lambda: self.viewport.reset_camera(), QKeySequence("R"))
         A("wireframe", "Show &Edges", self.viewport.set_wireframe, QKeySequence("W"), checkable=True,
           tip="Draw the triangle edges on the surface")
@@ -140,6 +143,8 @@ class MainWindow(QMainWindow):
         m = mb.addMenu("&Edit")
         m.addAction(a["undo"])
         m.addAction(a["redo"])
+        m.addSeparator()
+        m.addAction(a["clean"])
         m = mb.addMenu("&View")
         for name in ("reset_camera", "wireframe", "flat", "ghost"):
             m.addAction(a[name])
@@ -153,7 +158,7 @@ class MainWindow(QMainWindow):
         sb = self.statusBar()
         self.stats_label = QLabel()
         self.stats_label.setToolTip("Vertices, triangles, boundary loops and genus of the open mesh")
-        sb.addWidget(self.stats_label, 1)
+        sb.addPermanentWidget(self.stats_label)
         self.progress_bar = QProgressBar()
         self.progress_bar.setMaximumWidth(220)
         self.progress_bar.setTextVisible(True)
@@ -338,6 +343,49 @@ class MainWindow(QMainWindow):
         self.statusBar().showMessage(f"Screenshot saved to {path}", 5000)
         return True
 
+    def save_window_image(self, path: str) -> bool:
+        """A PNG of the whole window (menus, panels, status bar) with the 3D view composited in
+        (the OpenGL view is rendered off the widget tree, so it is painted from its own frame)."""
+        from PySide6.QtGui import QImage, QPainter
+
+        pix = self.grab()
+        img = self.viewport.screenshot()
+        h, w = img.shape[:2]
+        buf = np.ascontiguousarray(img[..., :3])
+        view = QImage(buf.data, w, h, 3 * w, QImage.Format.Format_RGB888).copy()
+        painter = QPainter(pix)
+        top_left = self.viewport.mapTo(self, self.viewport.rect().topLeft())
+        target = self.viewport.rect().translated(top_left)
+        painter.drawImage(target, view)
+        painter.end()
+        tmp = f"{path}.part.png"
+        if not pix.save(tmp, "PNG"):
+            return False
+        os.replace(tmp, path)
+        return True
+
+    # ------------------------------------------------------------------------------ edits
+    def clean_mesh(self) -> bool:
+        """Edit > Clean Mesh: one undoable command; tells the user what it changed."""
+        doc = self.document
+        if doc.is_empty or self.runner.busy:
+            return False
+        try:
+            res = clean_mesh(doc.V, doc.F)
+        except Stylize3DError as e:
+            dialogs.error(self, "Cannot clean the mesh", str(e))
+            return False
+        changed = res.V.shape != doc.V.shape or res.F.shape != doc.F.shape or not (
+            np.array_equal(res.F, doc.F) and np.array_equal(res.V, doc.V))
+        if not changed:
+            dialogs.info(self, "Clean mesh", "\n".join(res.actions))
+            return False
+        before = doc.state
+        after = doc.remapped(res.V, res.F, res.vertex_map)
+        self.undo_stack.push(StateCommand(doc, before, after, "Clean mesh"))
+        dialogs.info(self, "Clean mesh", "\n".join(res.actions) + "\n\nUndo with Ctrl+Z.")
+        return True
+
     # ------------------------------------------------------------------------------ jobs
     def start_positions_job(self, name: str, factory) -> None:
         """Run a Step generator whose vertices replace the document's positions when it ends."""
@@ -369,7 +417,7 @@ class MainWindow(QMainWindow):
         self.cancel_button.setVisible(busy)
         if busy:
             self.progress_bar.setRange(0, 0)
-        for name in ("open", "save", "save_as", "undo", "redo"):
+        for name in ("open", "save", "save_as", "undo", "redo", "clean"):
             self.actions_by_name[name].setEnabled(not busy)
         if not busy:
             self.actions_by_name["undo"].setEnabled(self.undo_stack.canUndo())
@@ -415,6 +463,10 @@ class MainWindow(QMainWindow):
             self._refresh_ghost()
             self._update_stats()
             self.mesh_shown.emit()
+        elif what == "topology":
+            doc.report = validate_mesh(doc.V, doc.F)
+            self.viewport.set_mesh(doc.V, doc.F, reset_camera=False)
+            self._update_stats()
         elif what == "positions":
             self.viewport.update_points(doc.V)
         self._update_title()
@@ -424,8 +476,8 @@ class MainWindow(QMainWindow):
         self._update_title()
 
     def _update_title(self) -> None:
-        t = self.document.title
-        self.setWindowTitle(f"{t} — {APP_NAME}" if t else APP_NAME)
+        t = self.document.title.removesuffix(" *")
+        self.setWindowTitle(f"{t}[*] — {APP_NAME}" if t else f"{APP_NAME}[*]")
         self.setWindowModified(self.document.modified)
 
     def _update_stats(self) -> None:
@@ -435,9 +487,15 @@ class MainWindow(QMainWindow):
             return
         s = r.stats
         genus = "—" if s.get("genus") is None else s["genus"]
-        self.stats_label.setText(
-            f"V {s['vertices']:,}   F {s['faces']:,}   boundary loops {s['boundary_loops']}   "
-            f"genus {genus}   components {s['components']}")
+        text = (f"V {s['vertices']:,}   F {s['faces']:,}   boundary loops {s['boundary_loops']}   "
+                f"genus {genus}   components {s['components']}")
+        problems = len(r.errors) + len(r.warnings)
+        if problems:
+            text += f"   ⚠ {problems} problem{'s' if problems > 1 else ''} (Edit > Clean Mesh)"
+            self.stats_label.setToolTip(r.summary())
+        else:
+            self.stats_label.setToolTip("Vertices, triangles, boundary loops and genus of the open mesh")
+        self.stats_label.setText(text)
 
     def _toggle_ghost(self, on: bool) -> None:
         self._refresh_ghost()

@@ -992,7 +992,9 @@ def read_mesh(path: str | os.PathLike) -> MeshData:
     try:
         V, F, notes = _READERS[ext](data)
     except _ParseError as exc:
-        raise MeshReadError(f"'{p.name}' could not be read as {fmt} file: {exc}.") from None
+        msg = str(exc)
+        raise MeshReadError(f"'{p.name}' could not be read as {fmt} file: {msg}"
+                            + ("" if msg.endswith(("?", ".", "!")) else ".")) from None
     except MemoryError:
         raise MeshReadError(f"'{p.name}' is too large to read into memory.") from None
     except Exception as exc:  # noqa: BLE001 -- never a bare traceback for a bad file

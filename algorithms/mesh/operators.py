@@ -157,7 +157,7 @@ def cotangent_laplacian(V, F) -> sp.csr_matrix:
     V, F = _check(V, F)
     import igl  # local import keeps `import algorithms.mesh` light
 
-    return sp.csr_matrix(igl.cotmatrix(V, F))
+    return _square(igl.cotmatrix(V, F), len(V))
 
 
 def cotangent_laplacian_psd(V, F) -> sp.csr_matrix:
@@ -203,7 +203,17 @@ def mass_matrix(V, F, kind: str = "barycentric") -> sp.csr_matrix:
         raise ParameterError(
             f"Unknown mass matrix kind {kind!r}; use 'barycentric' or 'voronoi'."
         )
-    return sp.csr_matrix(igl.massmatrix(V, F, kinds[kind]))
+    return _square(igl.massmatrix(V, F, kinds[kind]), len(V))
+
+
+def _square(A, n: int) -> sp.csr_matrix:
+    """libigl sizes some operators by the largest index used in F: pad to (n, n) so vertices that
+    no triangle uses (trailing loose points) get empty rows and columns."""
+    A = sp.csr_matrix(A)
+    if A.shape != (n, n):
+        A = sp.csr_matrix((A.data, A.indices, A.indptr), shape=A.shape)
+        A.resize((n, n))
+    return A
 
 
 def signed_volume(V, F) -> float:

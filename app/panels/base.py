@@ -28,6 +28,7 @@ class MethodPanel(QDockWidget):
     description = ""
     params_cls: type = object
     plot_metrics: tuple[str, ...] = ()
+    plot_title = ""
     plot_log_y = False
     live_debounce_ms = 300
 
@@ -64,7 +65,7 @@ class MethodPanel(QDockWidget):
         self.status_label = QLabel("Ready.")
         self.status_label.setWordWrap(True)
         lay.addWidget(self.status_label)
-        self.plot = LinePlot(", ".join(self.plot_metrics), log_y=self.plot_log_y)
+        self.plot = LinePlot(self.plot_title or ", ".join(self.plot_metrics), log_y=self.plot_log_y)
         lay.addWidget(self.plot)
         lay.addStretch(1)
         self.setWidget(body)

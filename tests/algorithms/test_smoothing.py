@@ -124,3 +124,14 @@ def test_spd_solver_with_dirichlet_matches_dense():
     ref = np.linalg.solve(Ad[np.ix_(free, free)], b[free] - Ad[np.ix_(free, fixed)] @ xc)
     np.testing.assert_allclose(x[free], ref, atol=1e-10)
     np.testing.assert_array_equal(x[fixed], xc)
+
+
+def test_loose_points_stay_and_degenerate_faces_are_refused():
+    V, F = icosphere(2)
+    V2 = np.vstack([V, [[5.0, 5.0, 5.0]]])  # an unreferenced vertex
+    out = smooth(V2, F, SmoothParams(iterations=2))
+    np.testing.assert_array_equal(out[-1], V2[-1])
+    np.testing.assert_allclose(out[:-1], smooth(V, F, SmoothParams(iterations=2)), atol=1e-12)
+    Fd = np.vstack([F, [[0, 0, 1]]])  # a zero-area triangle
+    with pytest.raises(InvalidMeshError, match="Clean"):
+        next(smooth_iter(V, Fd))

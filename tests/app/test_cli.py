@@ -34,7 +34,8 @@ def test_info_text_on_mesh_with_boundary():
 
 
 @pytest.mark.parametrize("kind, code", [("empty", 2), ("garbage", 2), ("nan", 4),
-                                        ("out_of_range", 4), ("nonmanifold", 4)])
+                                        ("out_of_range", 4), ("nonmanifold", 4),
+                                        ("duplicates", 4)])
 def test_bad_input_plain_message_nonzero_exit(bad_files, kind, code):
     r = stylize3d("info", bad_files[kind])
     assert r.returncode == code, (r.stdout, r.stderr)
@@ -42,7 +43,8 @@ def test_bad_input_plain_message_nonzero_exit(bad_files, kind, code):
     assert "Traceback" not in msg and len(msg.strip()) > 20
 
 
-@pytest.mark.parametrize("kind", ["empty", "garbage", "nan", "out_of_range", "nonmanifold"])
+@pytest.mark.parametrize("kind", ["empty", "garbage", "nan", "out_of_range", "nonmanifold",
+                                  "duplicates"])
 def test_smooth_refuses_bad_input_and_writes_nothing(bad_files, tmp_path, kind):
     out = tmp_path / "out.obj"
     r = stylize3d("smooth", bad_files[kind], "-o", out)
@@ -57,6 +59,16 @@ def test_clean_fixes_duplicates_and_reports(bad_files, tmp_path):
     assert "duplicate" in r.stdout.lower()
     data = read_mesh(out)
     assert data.V.shape == (4, 3) and data.F.shape == (4, 3)
+
+
+def test_smooth_with_clean_flag_says_what_it_fixed(bad_files, tmp_path):
+    out = tmp_path / "out.obj"
+    r = stylize3d("smooth", bad_files["duplicates"], "-o", out, "--iterations", "1")
+    assert r.returncode == 4 and "--clean" in r.stderr and "duplicate" in r.stderr.lower()
+    r = stylize3d("smooth", bad_files["duplicates"], "-o", out, "--iterations", "1", "--clean")
+    assert r.returncode == 0, r.stderr
+    assert "clean:" in r.stderr and "merged" in r.stderr.lower()
+    assert read_mesh(out).V.shape == (4, 3)
 
 
 def test_smooth_json_and_no_overwrite(tmp_path):

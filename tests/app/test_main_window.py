@@ -46,7 +46,7 @@ def test_smooth_streams_finishes_and_is_undoable(window, dialogs, qtbot):
     assert np.abs(V1 - V0).max() > 1e-4
     np.testing.assert_allclose(window.viewport.points, V1)
     assert window.undo_stack.count() == 1 and window.undo_stack.undoText() == "Smooth"
-    assert window.document.modified and "*" in window.document.title
+    assert window.document.modified and window.isWindowModified()
     assert len(panel.plot.series["bending_energy"]) == 25
     window.actions_by_name["undo"].trigger()
     np.testing.assert_array_equal(window.document.V, V0)
@@ -67,8 +67,10 @@ def test_cancel_mid_run_restores_mesh(window, dialogs, qtbot):
         panel.run_button.click()
     assert window.cancel_button.isVisible() and window.progress_bar.isVisible()
     assert np.abs(window.viewport.points - V0).max() > 0  # the preview moved the view
+    window.activateWindow()
+    qtbot.waitUntil(window.isActiveWindow, timeout=5000)
     with qtbot.waitSignal(window.runner.cancelled, timeout=30000):
-        qtbot.keyClick(window, Qt.Key.Key_Escape)
+        qtbot.keyClick(window.viewport, Qt.Key.Key_Escape)
     qtbot.waitUntil(lambda: not window.runner.busy)
     np.testing.assert_array_equal(window.document.V, V0)
     np.testing.assert_array_equal(window.viewport.points, V0)
@@ -223,3 +225,27 @@ def test_settings_persist_recent_files(window, dialogs, tmp_path):
 
     s = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
     assert str(SAMPLE.resolve()) in [str(p) for p in (s.value("files/recent") or [])]
+
+
+def test_open_as_is_then_clean_is_undoable(window, dialogs, tmp_path):
+    # a mesh with a loose vertex: opens "as it is", smooths (the loose point stays), cleans
+    from algorithms.mesh import icosphere, write_mesh
+
+    V, F = icosphere(2)
+    path = tmp_path / "loose.obj"
+    write_mesh(path, np.vstack([V, [[3.0, 0.0, 0.0]]]), F)
+    dialogs.answers.append("Open as it is")
+    assert window.open_path(path)
+    assert window.viewport.n_points == len(V) + 1
+    assert "problem" in window.stats_label.text()
+    assert window.clean_mesh()
+    assert "unused" in dialogs.infos[-1][1].lower() or "loose" in dialogs.infos[-1][1].lower() \
+        or "not used" in dialogs.infos[-1][1].lower()
+    assert window.viewport.n_points == len(V) and window.document.V.shape == V.shape
+    assert "problem" not in window.stats_label.text()
+    window.undo_stack.undo()
+    assert window.viewport.n_points == len(V) + 1 and window.document.V.shape[0] == len(V) + 1
+    window.undo_stack.redo()
+    assert window.viewport.n_points == len(V)
+    assert not window.clean_mesh()  # nothing left to fix
+    assert "Nothing to fix" in dialogs.infos[-1][1]

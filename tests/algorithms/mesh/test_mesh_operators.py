@@ -135,3 +135,17 @@ def test_operators_reject_bad_input():
         O.face_normals(V[:, :2], F)
     with pytest.raises(InvalidMeshError, match=r"\(m, 3\)"):
         O.vertex_normals(V, F[:, :2])
+
+
+def test_operators_keep_trailing_loose_vertices():
+    from algorithms.mesh import icosphere
+    from algorithms.mesh.operators import cotangent_laplacian, mass_matrix
+
+    V, F = icosphere(1)
+    V2 = np.vstack([V, [[3.0, 0.0, 0.0], [4.0, 0.0, 0.0]]])
+    for kind in ("barycentric", "voronoi"):
+        M = mass_matrix(V2, F, kind)
+        assert M.shape == (len(V2), len(V2)) and M[len(V), len(V)] == 0
+        np.testing.assert_allclose(M[: len(V), : len(V)].toarray(), mass_matrix(V, F, kind).toarray())
+    L = cotangent_laplacian(V2, F)
+    assert L.shape == (len(V2), len(V2)) and abs(L[len(V):]).sum() == 0
