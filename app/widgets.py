@@ -43,7 +43,8 @@ class LinePlot(QWidget):
         font.setPointSizeF(max(7.0, font.pointSizeF() - 1))
         p.setFont(font)
         m = 8
-        area = QRectF(m + 2, m + 14, self.width() - 2 * m - 4, self.height() - 2 * m - 18)
+        top = m + 14 + 12 * max(len(self.series), 1)
+        area = QRectF(m + 2, top, self.width() - 2 * m - 4, self.height() - top - m)
         p.setPen(QColor("#333"))
         p.drawText(QPointF(m, m + 8), self.title or ", ".join(self.series))
         for i, (name, ys) in enumerate(self.series.items()):
@@ -62,6 +63,6 @@ class LinePlot(QWidget):
             p.setPen(QPen(QColor(self.COLORS[i % len(self.COLORS)]), 1.6))
             p.drawPath(path)
             last = ys[-1]
-            p.drawText(QRectF(area.left(), area.top() - 14 + 12 * i, area.width(), 12),
-                       Qt.AlignmentFlag.AlignRight, f"{name}: {last:.4g}")
+            p.drawText(QRectF(m, m + 12 + 12 * i, self.width() - 2 * m, 12),
+                       Qt.AlignmentFlag.AlignLeft, f"last {last:.4g} · min {min(ys):.4g} · max {max(ys):.4g}")
         p.end()

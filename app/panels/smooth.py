@@ -12,7 +12,7 @@ class SmoothPanel(MethodPanel):
                    "first, then raise the step size for a stronger effect.")
     params_cls = SmoothParams
     plot_metrics = ("bending_energy",)
-    plot_title = "Bending energy ∫H² dA per step (falls as bumps disappear)"
+    plot_title = "Bending energy ∫H² dA"
 
     def build_steps(self, state, params):
         return smooth_iter(state.V, state.F, params)
