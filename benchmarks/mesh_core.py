@@ -14,9 +14,7 @@ Usage: .venv/bin/python benchmarks/mesh_core.py [--repeat 5] [mesh names...]
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import igl
@@ -24,6 +22,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from _timing import median_seconds  # noqa: E402
 
 from algorithms.mesh import read_mesh, validate_mesh  # noqa: E402
 from algorithms.mesh.operators import vertex_normals  # noqa: E402
@@ -31,15 +32,6 @@ from algorithms.mesh.topology import boundary_loops, unique_edges  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "meshes"
 DEFAULT = ["spot_lowres.obj", "camelhead.off", "stanford-bunny.obj", "koala.obj", "igea.ply"]
-
-
-def median_time(fn, repeat):
-    ts = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts)
 
 
 def main() -> None:
@@ -66,11 +58,11 @@ def main() -> None:
             ("validate", lambda: validate_mesh(V, F), None),
         ]
         for task, ours, peer in rows:
-            t_ours = median_time(ours, args.repeat)
+            t_ours = median_seconds(ours, args.repeat)
             if peer is None:
                 print(f"{name:20s} {len(V):8d} {len(F):8d} {task:9s} {1e3 * t_ours:9.1f} {'—':>10s} {'—':>6s}")
                 continue
-            t_peer = median_time(peer, args.repeat)
+            t_peer = median_seconds(peer, args.repeat)
             print(f"{name:20s} {len(V):8d} {len(F):8d} {task:9s} {1e3 * t_ours:9.1f} "
                   f"{1e3 * t_peer:10.1f} {t_ours / t_peer:6.2f}")
 

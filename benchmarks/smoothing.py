@@ -13,9 +13,7 @@ Usage: .venv/bin/python benchmarks/smoothing.py [--repeat 3] [mesh names...]
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +21,9 @@ import scipy.sparse.linalg as spla
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from _timing import median_seconds  # noqa: E402
 
 from algorithms.linalg import SPDSolver  # noqa: E402
 from algorithms.mesh import read_mesh  # noqa: E402
@@ -31,15 +32,6 @@ from algorithms.smoothing import SmoothParams, smooth  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "meshes"
 DEFAULT = ["spot_lowres.obj", "armadillo.obj", "koala.obj", "igea.ply"]
-
-
-def med(fn, repeat):
-    ts = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts)
 
 
 def main() -> None:
@@ -60,12 +52,12 @@ def main() -> None:
         A = (mass_matrix(V, F) - h * cotangent_laplacian(V, F)).tocsc()
         B = mass_matrix(V, F) @ V
         solver = SPDSolver(A)
-        t_factor = med(lambda: SPDSolver(A), args.repeat)
-        t_solve = med(lambda: solver.solve(B), args.repeat)
-        t_peer = med(lambda: spla.spsolve(A, B), args.repeat)
+        t_factor = median_seconds(lambda: SPDSolver(A), args.repeat)
+        t_solve = median_seconds(lambda: solver.solve(B), args.repeat)
+        t_peer = median_seconds(lambda: spla.spsolve(A, B), args.repeat)
         x = solver.solve(B)
         assert np.allclose(x, spla.spsolve(A, B), atol=1e-9)
-        t_run = med(lambda: smooth(V, F, SmoothParams(iterations=10)), 1)
+        t_run = median_seconds(lambda: smooth(V, F, SmoothParams(iterations=10)), 1)
         print(f"{name:18s} {len(V):7d} {t_factor:9.3f} {t_solve:8.3f} {t_peer:9.3f} "
               f"{t_solve / t_peer:10.3f} {t_run:10.3f} {t_run / (10 * t_peer):16.3f}")
     print(f"backend: {solver.backend}")
