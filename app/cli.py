@@ -27,9 +27,9 @@ def add_params_arguments(parser: argparse.ArgumentParser, params_cls: type) -> N
     """Add one flag per field of ``params_cls`` (defaults, ranges and help from its metadata)."""
     group = parser.add_argument_group("method parameters")
     for spec in describe(params_cls):
-        rng = ""
-        if spec.minimum is not None or spec.maximum is not None:
-            rng = f" Range {spec.minimum:g}..{spec.maximum:g}." if spec.maximum is not None else ""
+        lo = "" if spec.minimum is None else f"{spec.minimum:g}"
+        hi = "" if spec.maximum is None else f"{spec.maximum:g}"
+        rng = f" Range {lo or '-inf'}..{hi or 'inf'}." if (lo or hi) else ""
         help_text = f"{spec.tooltip}{rng} Default: {spec.default}."
         help_text = help_text.replace("%", "%%")
         if spec.type is bool:
@@ -110,6 +110,9 @@ def cmd_clean(args: argparse.Namespace) -> int:
     data = read_mesh(args.mesh)
     result = clean_mesh(data.V, data.F)
     after = validate_mesh(result.V, result.F)
+    if after.errors:
+        raise InvalidMeshError("Clean could not fix everything, so nothing was written:\n"
+                               + "\n".join(result.actions) + "\n" + after.summary())
     write_mesh(args.output, result.V, result.F)
     if args.json:
         _print_json({"input": args.mesh, "output": args.output, "actions": list(result.actions),

@@ -115,3 +115,19 @@ def test_gui_opens_bundled_sample_and_screenshots(tmp_path):
 
     img = QImage(str(shot))
     assert not img.isNull() and img.width() >= 400
+
+
+@pytest.mark.parametrize("kind, code", [("nan", 4), ("out_of_range", 4), ("garbage", 2)])
+def test_clean_refuses_what_it_cannot_fix_and_writes_nothing(bad_files, tmp_path, kind, code):
+    out = tmp_path / "c.obj"
+    r = stylize3d("clean", bad_files[kind], "-o", out)
+    assert r.returncode == code and "Traceback" not in r.stderr and r.stderr.strip()
+    assert not out.exists()
+
+
+def test_clean_nonmanifold_removes_the_extra_triangle(bad_files, tmp_path):
+    out = tmp_path / "c.obj"
+    r = stylize3d("clean", bad_files["nonmanifold"], "-o", out)
+    assert r.returncode == 0, r.stderr
+    assert read_mesh(out).F.shape == (2, 3)
+    assert stylize3d("info", out).returncode == 0
