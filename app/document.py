@@ -3,7 +3,7 @@
 Every change goes through :meth:`Document.set_state` with a :class:`MeshState` snapshot, so an undo
 command is just "state before" / "state after" (app/commands.py wraps that in a QUndoCommand).
 Listeners registered with :meth:`subscribe` are told what changed ("mesh" for a newly opened
-mesh, "topology" when an edit changed the triangles, "positions", "fields", "selection", "path"); the GUI redraws from that. Arrays stored here are never modified in place:
+mesh, "topology" when an edit changed the triangles, "positions", "fields", "selection", "handles", "path"); the GUI redraws from that. Arrays stored here are never modified in place:
 each state owns read-only copies.
 """
 
@@ -30,13 +30,19 @@ class MeshState:
 
     V : (n, 3) float64 positions; F : (m, 3) int64 triangles;
     fields : name -> (n,) float64 per-vertex scalar field (λ, masks, ...);
-    selection : (n,) bool or None.
+    selection : (n,) bool or None;
+    handles : tuple of (vertex, (x, y, z)) point handles with their target positions.
     """
 
     V: np.ndarray
     F: np.ndarray
     fields: dict = field(default_factory=dict)
     selection: np.ndarray | None = None
+    handles: tuple = ()
+
+    @property
+    def handle_dict(self) -> dict[int, tuple[float, float, float]]:
+        return dict(self.handles)
 
     @staticmethod
     def make(V, F, fields=None, selection=None) -> "MeshState":
@@ -73,6 +79,15 @@ class MeshState:
 
     def with_selection(self, selection) -> "MeshState":
         return replace(self, selection=_frozen(selection, bool))
+
+    def with_handles(self, handles: dict) -> "MeshState":
+        n = len(self.V)
+        items = []
+        for v, t in sorted(dict(handles).items()):
+            if not 0 <= int(v) < n:
+                raise ValueError(f"handle vertex {v} out of range")
+            items.append((int(v), tuple(float(x) for x in t)))
+        return replace(self, handles=tuple(items))
 
 
 class Document:
@@ -140,11 +155,14 @@ class Document:
                 self._notify("fields")
             if old.selection is not state.selection:
                 self._notify("selection")
+            if old.handles != state.handles:
+                self._notify("handles")
 
     def remapped(self, V, F, vertex_map: np.ndarray) -> MeshState:
         """A new state on (V, F) whose per-vertex fields and selection follow ``vertex_map``
         (old vertex -> new vertex, -1 deleted). New vertices without a preimage (copies made by
-        splitting a vertex) take the field's mean value and are not selected."""
+        splitting a vertex) take the field's mean value and are not selected. Handles follow
+        their vertex (dropped with it)."""
         old = self.state
         vmap = np.asarray(vertex_map, dtype=np.int64)
         keep = vmap >= 0
@@ -157,7 +175,8 @@ class Document:
 
         fields = {k: move(v, float(np.mean(v)) if len(v) else 0.0) for k, v in old.fields.items()}
         sel = None if old.selection is None else move(old.selection, False)
-        return MeshState.make(V, F, fields, sel)
+        new = MeshState.make(V, F, fields, sel)
+        return new.with_handles({int(vmap[v]): t for v, t in old.handles if vmap[v] >= 0})
 
     def mark_saved(self, path: str | Path) -> None:
         self.path = Path(path)

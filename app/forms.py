@@ -1,8 +1,9 @@
 """A parameter form generated from a Params dataclass (label, range, step, tooltip from metadata).
 
 Numbers get a spin box plus a slider (logarithmic where the field says so) for immediate feedback;
-booleans a check box; strings with choices a drop-down. ``changed`` fires on every edit with the
-new Params instance; ``params()`` returns the current one; ``set_params`` loads one.
+booleans a check box; strings with choices a drop-down. Fields marked ``advanced`` go into a
+collapsed "Advanced" group. ``changed`` fires on every edit with the new Params instance;
+``params()`` returns the current one; ``set_params`` loads one.
 """
 
 from __future__ import annotations
@@ -13,7 +14,8 @@ from typing import Any
 
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (QAbstractSpinBox, QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout,
-                               QHBoxLayout, QLabel, QSlider, QSpinBox, QWidget)
+                               QGroupBox, QHBoxLayout, QLabel, QSlider, QSpinBox, QVBoxLayout,
+                               QWidget)
 
 from algorithms.params import ParamSpec, describe
 
@@ -111,14 +113,34 @@ class ParamsForm(QWidget):
 
     changed = Signal(object)
 
-    def __init__(self, params_cls: type, parent: QWidget | None = None, values: Any = None):
+    def __init__(self, params_cls: type, parent: QWidget | None = None, values: Any = None,
+                 exclude: tuple[str, ...] = ()):
         super().__init__(parent)
         self.params_cls = params_cls
-        self.specs = describe(params_cls)
+        self.specs = [s for s in describe(params_cls) if s.name not in exclude]
+        self._excluded = {s.name: s.default for s in describe(params_cls) if s.name in exclude}
         self.editors: dict[str, QWidget] = {}
-        form = QFormLayout(self)
-        form.setContentsMargins(0, 0, 0, 0)
+        outer = QVBoxLayout(self)
+        outer.setContentsMargins(0, 0, 0, 0)
+        main = QFormLayout()
+        outer.addLayout(main)
+        self.advanced_box = QGroupBox("Advanced")
+        self.advanced_box.setCheckable(True)
+        self.advanced_box.setChecked(False)
+        self.advanced_box.setToolTip("Settings most users never need to change.")
+        adv_body = QWidget()
+        adv = QFormLayout(adv_body)
+        adv.setContentsMargins(0, 0, 0, 0)
+        box_lay = QVBoxLayout(self.advanced_box)
+        box_lay.addWidget(adv_body)
+        adv_body.setVisible(False)
+        self.advanced_box.toggled.connect(adv_body.setVisible)
+        if any(s.advanced for s in self.specs):
+            outer.addWidget(self.advanced_box)
+        else:
+            self.advanced_box.setVisible(False)
         for spec in self.specs:
+            form = adv if spec.advanced else main
             if spec.type is bool:
                 w = QCheckBox()
                 w.toggled.connect(self._emit)
@@ -145,7 +167,7 @@ class ParamsForm(QWidget):
             self.changed.emit(self.params())
 
     def params(self) -> Any:
-        values = {}
+        values = dict(self._excluded)
         for spec in self.specs:
             w = self.editors[spec.name]
             if spec.type is bool:
@@ -170,6 +192,17 @@ class ParamsForm(QWidget):
                     w.setValue(v)
         finally:
             self._loading = False
+
+    def set_value(self, name: str, value) -> None:
+        """Set one field as if the user had edited it (emits ``changed``)."""
+        spec = next(s for s in self.specs if s.name == name)
+        w = self.editors[name]
+        if spec.type is bool:
+            w.setChecked(bool(value))
+        elif spec.type is str:
+            w.setCurrentText(str(value))
+        else:
+            w.spin.setValue(value)
 
     def reset_defaults(self) -> None:
         self.set_params(self.params_cls())

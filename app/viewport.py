@@ -8,11 +8,15 @@ original mesh, edges (wireframe overlay), flat or smooth shading, a per-vertex s
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Protocol
+
 import numpy as np
 import pyvista as pv
 from pyvistaqt import QtInteractor
-from PySide6.QtCore import Signal
+from PySide6.QtCore import QEvent, QObject, Qt, Signal
 from PySide6.QtWidgets import QVBoxLayout, QWidget
+from vtkmodules.vtkRenderingCore import vtkCellPicker
 
 from algorithms.mesh.operators import vertex_normals
 
@@ -26,6 +30,58 @@ HOME_VIEW_DIRECTION = (0.55, 0.35, 1.0)
 def _faces_vtk(F: np.ndarray) -> np.ndarray:
     F = np.asarray(F, dtype=np.int64)
     return np.hstack([np.full((len(F), 1), 3, dtype=np.int64), F]).ravel()
+
+
+@dataclass(frozen=True)
+class PickResult:
+    """A point of the mesh under the mouse: world ``position`` (3,), triangle index ``face``,
+    the widget pixel ``screen`` (x, y) and the modifiers held."""
+
+    position: np.ndarray
+    face: int
+    screen: tuple[int, int]
+    modifiers: Qt.KeyboardModifier = Qt.KeyboardModifier.NoModifier
+
+
+class InteractionHandler(Protocol):
+    """A viewport tool (brush, handle placement, ...). While one is active, left-button drags on
+    the mesh go to it instead of rotating the camera (right/middle buttons and the wheel still
+    move the camera). ``press`` returns False to let the camera have the drag after all."""
+
+    def press(self, hit: PickResult) -> bool: ...
+    def drag(self, hit: PickResult | None) -> None: ...
+    def release(self) -> None: ...
+
+
+class _MouseFilter(QObject):
+    def __init__(self, viewport: "Viewport"):
+        super().__init__(viewport)
+        self.vp = viewport
+        self.dragging = False
+
+    def eventFilter(self, obj, event) -> bool:  # noqa: N802 (Qt API)
+        h = self.vp.handler
+        t = event.type()
+        if h is None:
+            self.dragging = False
+            return False
+        if t == QEvent.Type.MouseButtonPress and event.button() == Qt.MouseButton.LeftButton:
+            hit = self.vp.pick(event.position().x(), event.position().y(), event.modifiers())
+            if hit is not None and h.press(hit):
+                self.dragging = True
+                return True
+            return False
+        if t in (QEvent.Type.MouseMove, QEvent.Type.MouseButtonPress):
+            self.vp.last_mouse = (event.position().x(), event.position().y())
+        if t == QEvent.Type.MouseMove and self.dragging:
+            h.drag(self.vp.pick(event.position().x(), event.position().y(), event.modifiers()))
+            return True
+        if t == QEvent.Type.MouseButtonRelease and self.dragging and \
+                event.button() == Qt.MouseButton.LeftButton:
+            self.dragging = False
+            h.release()
+            return True
+        return False
 
 
 class Viewport(QWidget):
@@ -48,6 +104,107 @@ class Viewport(QWidget):
         self._flat = False
         self._edges = False
         self._field_name: str | None = None
+        self.handler: InteractionHandler | None = None
+        self.last_mouse: tuple[float, float] = (0.0, 0.0)
+        self.handles_actor = None
+        self._picker = vtkCellPicker()
+        self._picker.SetTolerance(0.0005)
+        self._picker.PickFromListOn()
+        self._mouse_filter = _MouseFilter(self)
+        self.plotter.interactor.installEventFilter(self._mouse_filter)
+
+    # -- tools and picking -------------------------------------------------------------------
+    def set_handler(self, handler: InteractionHandler | None) -> None:
+        """Route left-button drags on the mesh to ``handler`` (None: back to camera control)."""
+        self.handler = handler
+        self.plotter.interactor.setCursor(Qt.CursorShape.CrossCursor if handler
+                                          else Qt.CursorShape.ArrowCursor)
+
+    def pick(self, x: float, y: float,
+             modifiers: Qt.KeyboardModifier = Qt.KeyboardModifier.NoModifier) -> PickResult | None:
+        """The visible mesh point under widget pixel (x, y) of the 3D view, or None.
+
+        A ray cast (vtkCellPicker) gives the triangle; it can slip through exactly at a shared
+        vertex and report a triangle behind. The depth buffer tells what is really visible there,
+        so a ray hit behind the visible surface is replaced by the visible point and a triangle
+        of its nearest vertex."""
+        if self.mesh_actor is None or self.poly is None:
+            return None
+        w = self.plotter.interactor
+        dpr = w.devicePixelRatioF()
+        xd, yd = x * dpr, (w.height() - 1 - y) * dpr
+        ren = self.plotter.renderer
+        self._picker.InitializePickList()
+        self._picker.AddPickList(self.mesh_actor)
+        ray_hit = self._picker.Pick(xd, yd, 0.0, ren) and self._picker.GetCellId() >= 0
+        pos = np.array(self._picker.GetPickPosition(), dtype=np.float64) if ray_hit else None
+        face = int(self._picker.GetCellId()) if ray_hit else -1
+        z = ren.GetZ(int(round(xd)), int(round(yd)))
+        if z < 1.0:
+            ren.SetDisplayPoint(xd, yd, z)
+            ren.DisplayToWorld()
+            hw = np.array(ren.GetWorldPoint(), dtype=np.float64)
+            visible = hw[:3] / (hw[3] if hw[3] != 0 else 1.0)
+            P = np.asarray(self.poly.points)
+            diag = float(np.linalg.norm(np.ptp(P, axis=0))) or 1.0
+            cam = np.array(self.plotter.camera.position)
+            d2 = ((P - visible) ** 2).sum(axis=1)
+            v = int(np.argmin(d2))
+            on_mesh = d2[v] < (0.05 * diag) ** 2
+            behind = pos is None or (np.linalg.norm(pos - cam) - np.linalg.norm(visible - cam)
+                                     > 1e-3 * diag)
+            if on_mesh and behind:
+                faces = np.flatnonzero((self._F == v).any(axis=1))
+                cent = P[self._F[faces]].mean(axis=1)
+                face = int(faces[np.argmin(((cent - visible) ** 2).sum(axis=1))])
+                pos = visible
+        if pos is None or face < 0:
+            return None
+        return PickResult(pos, face, (int(x), int(y)), modifiers)
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Widget pixel coordinates (k, 2) of world points (k, 3) (for tests and overlays)."""
+        ren = self.plotter.renderer
+        w = self.plotter.interactor
+        dpr = w.devicePixelRatioF()
+        out = np.empty((len(points), 2))
+        for i, p in enumerate(np.asarray(points, dtype=np.float64)):
+            ren.SetWorldPoint(p[0], p[1], p[2], 1.0)
+            ren.WorldToDisplay()
+            dx, dy, _ = ren.GetDisplayPoint()
+            out[i] = dx / dpr, w.height() - 1 - dy / dpr
+        return out
+
+    def screen_to_world(self, x: float, y: float, reference: np.ndarray) -> np.ndarray:
+        """The world point under widget pixel (x, y) on the plane through ``reference`` facing
+        the camera (dragging a handle moves it in the view plane)."""
+        ren = self.plotter.renderer
+        w = self.plotter.interactor
+        dpr = w.devicePixelRatioF()
+        ref = np.asarray(reference, dtype=np.float64)
+        ren.SetWorldPoint(ref[0], ref[1], ref[2], 1.0)
+        ren.WorldToDisplay()
+        depth = ren.GetDisplayPoint()[2]
+        ren.SetDisplayPoint(x * dpr, (w.height() - 1 - y) * dpr, depth)
+        ren.DisplayToWorld()
+        p = np.array(ren.GetWorldPoint(), dtype=np.float64)
+        return p[:3] / (p[3] if p[3] != 0 else 1.0)
+
+    def show_handles(self, handles: dict | None) -> None:
+        """Draw point handles: a sphere at each target, a line from its vertex to the target."""
+        self.plotter.remove_actor(["handles", "handle_lines"], render=False)
+        self.handles_actor = None
+        if handles and self.poly is not None:
+            verts = np.array(list(handles), dtype=np.int64)
+            targets = np.array([handles[v] for v in verts], dtype=np.float64)
+            self.handles_actor = self.plotter.add_mesh(
+                pv.PolyData(targets), name="handles", color="#d62728", point_size=14,
+                render_points_as_spheres=True, reset_camera=False, pickable=False)
+            src = np.asarray(self.poly.points)[verts]
+            lines = pv.line_segments_from_points(np.stack([src, targets], 1).reshape(-1, 3))
+            self.plotter.add_mesh(lines, name="handle_lines", color="#d62728", line_width=2,
+                                  reset_camera=False, pickable=False)
+        self.render()
 
     # -- geometry ----------------------------------------------------------------------------
     def set_mesh(self, V: np.ndarray, F: np.ndarray, *, reset_camera: bool = True) -> None:

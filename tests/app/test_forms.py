@@ -66,3 +66,26 @@ def test_smooth_form_round_trip(qtbot):
     p = SmoothParams(flow="cmcf", step_size=0.01, iterations=3, keep_size=False, fix_boundary=True)
     form.set_params(p)
     assert form.params() == p
+
+
+@dataclass(frozen=True)
+class AdvParams:
+    a: float = param(1.0, label="A", minimum=0.0, maximum=2.0, tooltip="a")
+    b: int = param(3, label="B", minimum=1, maximum=9, advanced=True, tooltip="b")
+    c: bool = param(False, label="C", tooltip="c")
+
+
+def test_advanced_fields_are_collapsed_and_excluded_fields_keep_defaults(qtbot):
+    from app.forms import ParamsForm
+
+    form = ParamsForm(AdvParams, exclude=("c",))
+    qtbot.addWidget(form)
+    form.show()
+    assert "c" not in form.editors and form.params().c is False
+    assert not form.editors["b"].isVisible() and form.editors["a"].isVisible()
+    form.advanced_box.setChecked(True)
+    assert form.editors["b"].isVisible()
+    got = []
+    form.changed.connect(got.append)
+    form.set_value("b", 7)
+    assert got[-1] == AdvParams(b=7)

@@ -1,0 +1,172 @@
+"""Viewport tools that edit the document: a brush that paints a per-vertex field, and point
+handles. They receive picks from :class:`app.viewport.Viewport` (which alone touches VTK) and end
+every stroke or drag as ONE undoable command.
+
+Brush falloff: vertices within ``radius`` (a fraction of the bounding-box diagonal, Euclidean
+distance to the picked point) move towards the target value by ``strength · (1 − (d/r)²)²``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable
+
+import numpy as np
+from PySide6.QtCore import QObject, Signal
+
+from app.commands import StateCommand
+from app.viewport import PickResult
+
+if TYPE_CHECKING:  # pragma: no cover
+    from app.main_window import MainWindow
+
+
+@dataclass
+class BrushSettings:
+    radius: float = 0.08     # fraction of the bounding-box diagonal
+    strength: float = 0.5    # 0..1 per drag event
+    erase: bool = False      # move towards ``low`` instead of ``high``
+
+
+class FieldBrush(QObject):
+    """Paints ``field`` (per-vertex float) between ``low`` and ``high``; starts from ``default``
+    where the field does not exist yet. ``changed`` is emitted with the live values while
+    painting (the panel redraws its colour map); the document changes only on release."""
+
+    changed = Signal(object)
+
+    def __init__(self, window: "MainWindow", field: str, *, low: float, high: float,
+                 default: float, label: str, settings: BrushSettings | None = None,
+                 cmap: str = "coolwarm"):
+        super().__init__(window)
+        self.window_ = window
+        self.field = field
+        self.low, self.high, self.default = low, high, default
+        self.label = label
+        self.settings = settings or BrushSettings()
+        self.cmap = cmap
+        self._values: np.ndarray | None = None
+        self._before = None
+
+    def current(self) -> np.ndarray:
+        st = self.window_.document.state
+        if st is None:
+            return np.zeros(0)
+        v = st.fields.get(self.field)
+        return np.full(len(st.V), self.default) if v is None else np.array(v)
+
+    def show(self) -> None:
+        """Colour the mesh by this field."""
+        if not self.window_.document.is_empty:
+            self.window_.viewport.show_field(self.field, self.current(), self.cmap,
+                                             (self.low, self.high))
+
+    # -- InteractionHandler -----------------------------------------------------------------
+    def press(self, hit: PickResult) -> bool:
+        doc = self.window_.document
+        if doc.is_empty or self.window_.runner.busy:
+            return False
+        self._before = doc.state
+        self._values = self.current()
+        self._dab(hit)
+        return True
+
+    def drag(self, hit: PickResult | None) -> None:
+        if hit is not None and self._values is not None:
+            self._dab(hit)
+
+    def release(self) -> None:
+        if self._values is None:
+            return
+        before, values = self._before, self._values
+        self._values = self._before = None
+        old = before.fields.get(self.field)
+        if old is not None and np.array_equal(old, values):
+            return
+        after = before.with_field(self.field, values)
+        self.window_.undo_stack.push(StateCommand(self.window_.document, before, after,
+                                                  f"Paint {self.label}"))
+
+    def _dab(self, hit: PickResult) -> None:
+        V = self.window_.document.V
+        diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+        r = max(self.settings.radius * diag, 1e-12)
+        d2 = ((V - hit.position) ** 2).sum(axis=1)
+        near = d2 < r * r
+        w = self.settings.strength * (1.0 - d2[near] / (r * r)) ** 2
+        target = self.low if self.settings.erase else self.high
+        self._values[near] += w * (target - self._values[near])
+        self.window_.viewport.show_field(self.field, self._values, self.cmap, (self.low, self.high))
+        self.changed.emit(self._values)
+
+
+class HandleTool(QObject):
+    """Click a mesh point to add a handle at its nearest vertex; drag to move the handle's target
+    in the view plane; Ctrl+click removes the nearest handle. Handles live in the document state
+    (``MeshState.handles``: vertex -> target), so each add / move / removal is undoable."""
+
+    changed = Signal()
+
+    def __init__(self, window: "MainWindow"):
+        super().__init__(window)
+        self.window_ = window
+        self._before = None
+        self._vertex: int | None = None
+        self._target: np.ndarray | None = None
+        self._anchor: np.ndarray | None = None
+
+    def press(self, hit: PickResult) -> bool:
+        from PySide6.QtCore import Qt
+
+        doc = self.window_.document
+        if doc.is_empty or self.window_.runner.busy:
+            return False
+        st = doc.state
+        F = st.F
+        corners = F[hit.face]
+        vi = int(corners[np.argmin(((st.V[corners] - hit.position) ** 2).sum(axis=1))])
+        handles = dict(st.handles)
+        if hit.modifiers & Qt.KeyboardModifier.ControlModifier:
+            if handles:
+                keys = np.array(list(handles))
+                tgt = np.array([handles[k] for k in keys])
+                k = int(keys[np.argmin(((tgt - hit.position) ** 2).sum(axis=1))])
+                del handles[k]
+                self.window_.undo_stack.push(StateCommand(doc, st, st.with_handles(handles),
+                                                          "Remove handle"))
+                self.changed.emit()
+            return True
+        self._before = st
+        self._vertex = vi
+        self._target = np.array(handles.get(vi, st.V[vi]), dtype=np.float64)
+        self._anchor = hit.position
+        self._press_screen = hit.screen
+        self.window_.viewport.show_handles(self._preview(handles))
+        return True
+
+    def _preview(self, handles: dict) -> dict:
+        h = dict(handles)
+        h[self._vertex] = tuple(self._target)
+        return h
+
+    def drag(self, hit: PickResult | None) -> None:
+        # hit may be None when the mouse leaves the mesh: the move is computed from the screen
+        if self._vertex is None:
+            return
+        vp = self.window_.viewport
+        pos = vp.last_mouse
+        start = np.array(self.window_.document.V[self._vertex] if self._vertex not in
+                         self._before.handles else self._before.handles[self._vertex])
+        self._target = vp.screen_to_world(pos[0], pos[1], start)
+        vp.show_handles(self._preview(dict(self._before.handles)))
+
+    def release(self) -> None:
+        if self._vertex is None:
+            return
+        st = self._before
+        handles = self._preview(dict(st.handles))
+        text = "Move handle" if self._vertex in st.handles else "Add handle"
+        self._vertex = self._before = None
+        self.window_.undo_stack.push(StateCommand(self.window_.document, st,
+                                                  st.with_handles(handles), text))
+        self.changed.emit()
