@@ -41,6 +41,7 @@ def param(
     choices: Sequence[str] | None = None,
     log_scale: bool = False,
     advanced: bool = False,
+    cli_aliases: Sequence[str] = (),
 ) -> Any:
     """A dataclass field carrying the metadata the CLI and the GUI need.
 
@@ -55,10 +56,11 @@ def param(
     choices : allowed values for a string parameter (a drop-down in the GUI).
     log_scale : the GUI slider moves logarithmically (for values spanning decades).
     advanced : hidden behind "Advanced" in the GUI.
+    cli_aliases : extra CLI flags for the same field (e.g. ``("--lambda",)`` for ``lam``).
     """
     meta = dict(label=label, tooltip=tooltip, minimum=minimum, maximum=maximum, step=step,
                 decimals=decimals, choices=tuple(choices) if choices else None,
-                log_scale=log_scale, advanced=advanced)
+                log_scale=log_scale, advanced=advanced, cli_aliases=tuple(cli_aliases))
     return field(default=default, metadata={"stylize3d": meta})
 
 
@@ -78,6 +80,7 @@ class ParamSpec:
     choices: tuple[str, ...] | None
     log_scale: bool
     advanced: bool
+    cli_aliases: tuple[str, ...] = ()
 
     @property
     def flag(self) -> str:

@@ -116,6 +116,7 @@ class JobRunner(QObject):
         self._timer.timeout.connect(self._publish)
         self.started_at = 0.0
         self.last_duration = 0.0
+        self._closed = False
 
     @property
     def busy(self) -> bool:
@@ -127,6 +128,8 @@ class JobRunner(QObject):
 
     def start(self, name: str, factory: Callable[[], Iterator[Step]]) -> None:
         """Run ``factory()``'s steps; if a job is running, cancel it and queue this one."""
+        if self._closed:
+            return
         if self._thread is not None:
             self._pending = (name, factory)
             self._thread.cancel_requested.set()
@@ -138,6 +141,17 @@ class JobRunner(QObject):
         self._pending = None
         if self._thread is not None:
             self._thread.cancel_requested.set()
+
+    def shutdown(self, timeout_ms: int = 30000) -> None:
+        """Cancel the running job, wait for its thread to end, and refuse new jobs (app exit)."""
+        self._closed = True
+        self.cancel()
+        t = self._thread
+        if t is not None:
+            t.wait(timeout_ms)
+            self._timer.stop()
+            self._thread = None
+            t.deleteLater()
 
     def wait(self, timeout_ms: int = 60000) -> bool:
         """Block until the worker thread ends (tests, shutdown). Signals still need the event loop."""

@@ -45,6 +45,8 @@ class MainWindow(QMainWindow):
     """See the module docstring. ``mesh_shown`` is emitted after a mesh is opened and drawn."""
 
     mesh_shown = Signal()
+    #: (job name, the document state the job's result created) after a job's command is pushed
+    job_committed = Signal(str, object)
 
     def __init__(self, settings: QSettings | None = None):
         super().__init__()
@@ -174,14 +176,19 @@ class MainWindow(QMainWindow):
         self._esc.activated.connect(self.cancel_job)
 
     def _build_panels(self) -> None:
+        from app.panels.cubic import CubicPanel
         from app.panels.smooth import SmoothPanel
 
         self.panels = {}
-        for cls in (SmoothPanel,):
+        for cls in (CubicPanel, SmoothPanel):
             panel = cls(self)
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, panel)
             self.panels[cls.title] = panel
             self.panels_menu.addAction(panel.toggleViewAction())
+        docks = list(self.panels.values())
+        for other in docks[1:]:
+            self.tabifyDockWidget(docks[0], other)
+        docks[0].raise_()
 
     # ------------------------------------------------------------------------------ files
     def _last_dir(self) -> str:
@@ -387,12 +394,15 @@ class MainWindow(QMainWindow):
         return True
 
     # ------------------------------------------------------------------------------ jobs
-    def start_positions_job(self, name: str, factory) -> None:
-        """Run a Step generator whose vertices replace the document's positions when it ends."""
+    def start_positions_job(self, name: str, factory, merge_id: int = -1) -> None:
+        """Run a Step generator whose vertices replace the document's positions when it ends.
+        With ``merge_id`` > 0, the result merges with a directly preceding command of the same id
+        into one undo step (live re-runs)."""
         if self.document.is_empty:
             return
         self.last_job_name = name
         self._job_before = self.document.state
+        self._job_merge_id = merge_id
         self.runner.start(name, factory)
 
     def cancel_job(self) -> None:
@@ -439,8 +449,10 @@ class MainWindow(QMainWindow):
                           "The method returned an invalid result; your mesh was not changed.")
             return
         after = before.with_positions(step.V)
-        self.undo_stack.push(StateCommand(self.document, before, after, self.last_job_name))
+        self.undo_stack.push(StateCommand(self.document, before, after, self.last_job_name,
+                                          merge_id=getattr(self, "_job_merge_id", -1)))
         self._job_before = None
+        self.job_committed.emit(self.last_job_name, after)
         self.statusBar().showMessage(
             f"{self.last_job_name} finished in {self.runner.last_duration:.2f} s "
             f"({step.iteration} iterations). Undo with Ctrl+Z.", 8000)
@@ -538,10 +550,12 @@ class MainWindow(QMainWindow):
         if not self._confirm_discard():
             event.ignore()
             return
-        self.runner.cancel()
-        self.runner.wait(10000)
+        for panel in self.panels.values():
+            panel.shutdown()
+        self.runner.shutdown()
         self.settings.setValue("window/geometry", self.saveGeometry())
         self.settings.setValue("window/state", self.saveState())
         self.settings.sync()
-        self.viewport.close_plotter()
+        for vp in self.findChildren(Viewport):  # the main view and panel views (Gauss map)
+            vp.close_plotter()
         event.accept()

@@ -87,15 +87,19 @@ class FieldBrush(QObject):
         self.window_.undo_stack.push(StateCommand(self.window_.document, before, after,
                                                   f"Paint {self.label}"))
 
-    def _dab(self, hit: PickResult) -> None:
+    def weights(self, hit: PickResult) -> tuple[np.ndarray, np.ndarray]:
+        """Vertices touched by a dab at ``hit`` and their falloff weights in (0, 1]."""
         V = self.window_.document.V
         diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
         r = max(self.settings.radius * diag, 1e-12)
         d2 = ((V - hit.position) ** 2).sum(axis=1)
-        near = d2 < r * r
-        w = self.settings.strength * (1.0 - d2[near] / (r * r)) ** 2
+        near = np.flatnonzero(d2 < r * r)
+        return near, (1.0 - d2[near] / (r * r)) ** 2
+
+    def _dab(self, hit: PickResult) -> None:
+        idx, w = self.weights(hit)
         target = self.low if self.settings.erase else self.high
-        self._values[near] += w * (target - self._values[near])
+        self._values[idx] += self.settings.strength * w * (target - self._values[idx])
         self.window_.viewport.show_field(self.field, self._values, self.cmap, (self.low, self.high))
         self.changed.emit(self._values)
 

@@ -31,6 +31,9 @@ class MethodPanel(QDockWidget):
     plot_title = ""
     plot_log_y = False
     live_debounce_ms = 300
+    live_by_default = False
+    #: undo-merge id of live re-runs (one per panel class)
+    _merge_ids: dict = {}
 
     def __init__(self, window: "MainWindow"):
         super().__init__(self.title, window)
@@ -70,11 +73,15 @@ class MethodPanel(QDockWidget):
         lay.addStretch(1)
         self.setWidget(body)
 
+        self._last: tuple[MeshState, MeshState] | None = None  # (input, result) of last run
+        self._pending_input: MeshState | None = None
+        window.job_committed.connect(self._on_committed)
         self._debounce = QTimer(self)
         self._debounce.setSingleShot(True)
         self._debounce.setInterval(self.live_debounce_ms)
-        self._debounce.timeout.connect(self.run)
-        self.run_button.clicked.connect(self.run)
+        self._debounce.timeout.connect(lambda: self.run(live=True))
+        self.live_box.setChecked(self.live_by_default)
+        self.run_button.clicked.connect(lambda: self.run())
         self.stop_button.clicked.connect(window.cancel_job)
         self.defaults_button.clicked.connect(self.form.reset_defaults)
         self.form.changed.connect(self._on_params_changed)
@@ -91,19 +98,43 @@ class MethodPanel(QDockWidget):
     def build_steps(self, state: MeshState, params: Any) -> Iterator[Step]:
         raise NotImplementedError
 
+    @property
+    def merge_id(self) -> int:
+        return MethodPanel._merge_ids.setdefault(type(self).__name__,
+                                                 1000 + len(MethodPanel._merge_ids))
+
     # -- behaviour ----------------------------------------------------------------------------
     def _mine(self) -> bool:
         return self.window_.runner.name == self.title
 
-    def run(self) -> None:
+    def run(self, live: bool = False) -> None:
+        """Start the method; ``live`` runs (from parameter changes) merge into one undo step."""
         state = self.window_.document.state
         if state is None:
             self.status_label.setText("Open a mesh first (File > Open).")
             return
         params = self.form.params()
+        start = state
+        # A live re-run replaces the previous live result: it starts from the positions that
+        # result was computed from (with the current painted fields and handles), so moving a
+        # slider back and forth never compounds the effect. A click on Run starts from the mesh
+        # as it is (run again to apply the method again).
+        if live and self._last is not None and state.V is self._last[1].V:
+            start = state.with_positions(self._last[0].V)
+        self._pending_input = start
         self.plot.clear()
         self.status_label.setText("Starting…")
-        self.window_.start_positions_job(self.title, lambda: self.build_steps(state, params))
+        self.window_.start_positions_job(self.title, lambda: self.build_steps(start, params),
+                                         merge_id=self.merge_id if live else -1)
+
+    def shutdown(self) -> None:
+        """Stop pending live re-runs (window closing)."""
+        self._debounce.stop()
+        self.live_box.setChecked(False)
+
+    def _on_committed(self, name: str, after: MeshState) -> None:
+        if name == self.title and self._pending_input is not None:
+            self._last = (self._pending_input, after)
 
     def _on_params_changed(self, _params) -> None:
         if self.live_box.isChecked() and not self.window_.document.is_empty:

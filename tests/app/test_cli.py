@@ -131,3 +131,27 @@ def test_clean_nonmanifold_removes_the_extra_triangle(bad_files, tmp_path):
     assert r.returncode == 0, r.stderr
     assert read_mesh(out).F.shape == (2, 3)
     assert stylize3d("info", out).returncode == 0
+
+
+def test_cubic_json_reports_cubier_normals(tmp_path):
+    out = tmp_path / "c.obj"
+    r = stylize3d("cubic", shared_mesh("spot_lowres.obj"), "-o", out, "--lambda", "0.4",
+                  "--max-iters", "40", "--json")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert 1 <= d["iterations"] <= 40 and d["seconds"] > 0
+    assert d["l1_normals_after"] < d["l1_normals_before"] - 0.02
+    assert 0 <= d["final_relative_displacement"]
+    data = read_mesh(out)
+    assert data.F.shape == (1654, 3)
+
+
+def test_cubic_lambda_xyz_and_bad_values(tmp_path):
+    out = tmp_path / "c.obj"
+    r = stylize3d("cubic", SAMPLES / "blob.obj", "-o", out, "--lambda-xyz", "1", "0", "0",
+                  "--max-iters", "5", "--json")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["params"]["per_axis"] and d["params"]["axis_factor_y"] == 0.0
+    r = stylize3d("cubic", SAMPLES / "blob.obj", "-o", tmp_path / "x.obj", "--lambda", "-1")
+    assert r.returncode == 5 and "at least 0" in r.stderr

@@ -1,0 +1,539 @@
+"""The one local-global as-rigid-as-possible (ARAP) core (thesis ch. 5 Eq. 5.1, ch. 6 2112-2159).
+
+Energy (Sorkine & Alexa 2007 with the "spokes and rims" cells of Chao et al. 2010)::
+
+    E(U, {R_i}) = sum_i sum_{(j,k) in cell(i)} w_jk / 2 * || R_i d_jk - d~_jk ||^2
+
+* ``cell(i)`` holds **every edge of every triangle incident to vertex i** (spokes and rims), so
+  each triangle edge appears in the cells of the three corners of that triangle.
+* ``w_jk`` is the cotangent weight of the edge *within that triangle*: ``cot`` of the angle
+  opposite the edge in that triangle (twice libigl's ``cotmatrix_entries``). It is not summed
+  over the two triangles of the edge: the two triangles contribute two separate cell entries.
+* ``d_jk = v_k - v_j`` is the rest edge, ``d~_jk = u_k - u_j`` the deformed one.
+
+Everything is precomputed once per mesh and constraint set:
+
+* ``K`` (3n x n sparse): the per-vertex covariance ``S_i = sum w d d~^T`` of all vertices at once is
+  ``(K @ U).reshape(n, 3, 3)``; the same ``K`` transposed gives the global right-hand side
+  ``b = K^T [R_1^T; ...; R_n^T]``.
+* ``Q = G^T W G`` (n x n): the global system matrix. With these weights ``Q = 6 * (-L)`` where ``L``
+  is the cotangent Laplacian (each triangle edge sits in three cells, and ``cot = 2 * cot/2``).
+* The global step ``Q U = b`` decouples into the three coordinates. Hard constraints are Dirichlet
+  unknowns eliminated by :class:`algorithms.linalg.SPDSolver`: fixed vertices (all three
+  coordinates) and per-coordinate constraints (coordinate ``d`` of vertex ``i`` equals ``c``; the
+  thesis's plane constraints ``(U_i)_x = c``). Each coordinate whose constrained set differs gets
+  its own factorization; coordinates sharing the same set share one. Soft point handles add
+  ``sum_h k_h / 2 ||u_h - p_h||^2`` (a diagonal term, factored in too).
+
+Choices written down here:
+
+* The overall scale of the weights does not change ARAP deformations (rotations and positions
+  are invariant to it) and makes libigl's SPOKES_AND_RIMS (weights ``cot/2 / 3``) a direct peer.
+  It does matter once another term is added (cubic stylization's ``lambda``). ``w = cot`` per
+  triangle gives every spoke ``ij`` the total weight ``cot a + cot b = 2 L_ij`` and every rim
+  ``jk`` about ``L_jk`` (exactly when its two opposite angles are equal), which is what the
+  authors' cubic-stylization code uses in its local step (``L_ij`` per half-edge of each incident
+  face), so the thesis's ``lambda`` values (0.2 typical) keep their meaning. Unlike that code,
+  the local and the global step here minimize the same energy.
+* Rotations are the orthogonal Procrustes maximizers of ``tr(R S)``: ``S = U Sigma V^T``,
+  ``R = V U^T``, with the sign of the last column of ``U`` (smallest singular value) flipped when
+  ``det(V U^T) < 0`` (thesis Eq. 5.8). :func:`procrustes_rotations` is a separate function so a
+  faster batched kernel can replace it.
+* ``rotations(U, extra)`` adds an ``(n, 3, 3)`` term to the covariances before Procrustes: the
+  hook through which cubic stylization (ADMM, ``rho n (z - u)^T``) and shape analogies
+  (``lambda a n t^T``) enter.
+* Vertices that no triangle uses have no energy; they are always held where the given values put
+  them (all three coordinates are Dirichlet), so the system stays definite.
+* A connected component with no hard or soft constraint in some coordinate leaves the global
+  system singular (the energy does not see translations). :class:`ArapSystem` refuses it with a
+  message; callers pin a vertex (cubic stylization does) or add handles.
+* Only axis-aligned plane constraints are supported (one coordinate = constant). A plane with a
+  general normal would couple the three coordinates into one 3n system.
+* ``arap_iter`` stops when the largest vertex move of an iteration, relative to the largest
+  total move from the input so far, is below ``rel_displacement_tol`` (the same definition as
+  cubic stylization uses).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterator
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import InvalidMeshError, ParameterError
+from ..linalg import SPDSolver
+from ..mesh.topology import connected_components
+from ..params import param, validate_params
+from ..steps import Step, run_to_end
+
+__all__ = [
+    "ArapSystem",
+    "ArapParams",
+    "arap_iter",
+    "arap",
+    "procrustes_rotations",
+    "spokes_and_rims_cells",
+    "relative_displacement",
+]
+
+HANDLE_MODES = ("hard", "soft")
+
+
+def procrustes_rotations(S: np.ndarray) -> np.ndarray:
+    """Batched orthogonal Procrustes: the rotation maximizing ``tr(R_i S_i)`` for every ``i``.
+
+    Parameters
+    ----------
+    S : (n, 3, 3) float array
+        Covariance-like matrices (``S_i = sum w d d~^T`` for ARAP).
+
+    Returns
+    -------
+    R : (n, 3, 3) float64 array
+        Proper rotations (``det = +1``): with ``S_i = U Sigma V^T``, ``R_i = V U^T``, and the sign
+        of the singular vector of the smallest singular value flipped where ``det(V U^T) < 0``.
+        For ``S_i = 0`` the result is some rotation (the identity for exact zeros).
+    """
+    S = np.asarray(S, dtype=np.float64)
+    if S.ndim != 3 or S.shape[1:] != (3, 3):
+        raise ValueError(f"S must have shape (n, 3, 3), got {S.shape}")
+    if S.shape[0] == 0:
+        return np.zeros((0, 3, 3))
+    U, _, Vt = np.linalg.svd(S)
+    # R = V U^T = (U V^T)^T
+    R = np.matmul(Vt.transpose(0, 2, 1), U.transpose(0, 2, 1))
+    det = np.linalg.det(R)
+    bad = det < 0
+    if bad.any():
+        Ub = U[bad].copy()
+        Ub[:, :, 2] *= -1.0
+        R[bad] = np.matmul(Vt[bad].transpose(0, 2, 1), Ub.transpose(0, 2, 1))
+    return R
+
+
+def spokes_and_rims_cells(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                               np.ndarray, np.ndarray]:
+    """The spokes-and-rims cell entries of every vertex.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest positions.
+    F : (m, 3) int64 triangles.
+
+    Returns
+    -------
+    cell : (9m,) int64, the vertex whose cell the entry belongs to.
+    tail, head : (9m,) int64, the edge's endpoints (the edge vector is ``V[head] - V[tail]``).
+    weight : (9m,) float64, ``cot(angle opposite the edge in its triangle)``.
+
+    Notes
+    -----
+    Entry ``9 f + 3 k + l`` is edge ``k`` (opposite corner ``k``) of triangle ``f`` in the cell
+    of corner ``l`` of that triangle.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    m = len(F)
+    P = V[F]  # (m, 3, 3)
+    # corner k: edges to the two other corners
+    a = P[:, [1, 2, 0]] - P  # (m, 3, 3): corner k -> k+1
+    b = P[:, [2, 0, 1]] - P  # corner k -> k+2
+    dot = np.einsum("fkc,fkc->fk", a, b)
+    crs = np.linalg.norm(np.cross(a, b), axis=2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = dot / crs  # (m, 3): cot of the angle at corner k
+    tail_fk = F[:, [1, 2, 0]]  # edge opposite corner k goes from corner k+1 ...
+    head_fk = F[:, [2, 0, 1]]  # ... to corner k+2
+    cell = np.broadcast_to(F[:, None, :], (m, 3, 3)).reshape(-1)
+    tail = np.broadcast_to(tail_fk[:, :, None], (m, 3, 3)).reshape(-1)
+    head = np.broadcast_to(head_fk[:, :, None], (m, 3, 3)).reshape(-1)
+    weight = np.broadcast_to(w[:, :, None], (m, 3, 3)).reshape(-1)
+    return (np.ascontiguousarray(cell), np.ascontiguousarray(tail),
+            np.ascontiguousarray(head), np.ascontiguousarray(weight))
+
+
+def relative_displacement(U_new: np.ndarray, U_old: np.ndarray, U_rest: np.ndarray,
+                          floor: float = 1e-9) -> float:
+    """Largest vertex move of one iteration relative to the largest total move from the rest.
+
+    Parameters
+    ----------
+    U_new, U_old, U_rest : (n, 3) float arrays.
+    floor : float
+        The total move counts as at least ``floor`` times the bounding-box diagonal of
+        ``U_rest``, so round-off moves of a shape that does not deform give a small ratio.
+
+    Returns
+    -------
+    float
+        ``max_i |U_new_i - U_old_i| / max(max_i |U_new_i - U_rest_i|, floor * diag)``.
+    """
+    step = float(np.linalg.norm(U_new - U_old, axis=1).max(initial=0.0))
+    if step == 0.0:
+        return 0.0
+    total = float(np.linalg.norm(U_new - U_rest, axis=1).max(initial=0.0))
+    diag = float(np.linalg.norm(np.ptp(U_rest, axis=0))) if len(U_rest) else 0.0
+    total = max(total, floor * diag)
+    return step / total if total > 0 else np.inf
+
+
+def _as_index_array(x, n: int, what: str) -> np.ndarray:
+    idx = np.asarray([] if x is None else x, dtype=np.int64).reshape(-1)
+    if idx.size and (idx.min() < 0 or idx.max() >= n):
+        raise ParameterError(f"Some {what} refer to vertices that do not exist "
+                             f"(the mesh has {n} vertices).")
+    return idx
+
+
+class ArapSystem:
+    """Precomputed ARAP local-global machinery for one mesh and one set of constraints.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest positions.
+    F : (m, 3) int64 triangles.
+    fixed : (k,) int, optional
+        Vertices whose three coordinates are prescribed at solve time (fixed parts, hard handles).
+    coord_constraints : tuple (indices (c,), axes (c,)), optional
+        Hard per-coordinate constraints: coordinate ``axes[j]`` (0, 1, 2 for x, y, z) of vertex
+        ``indices[j]`` is prescribed at solve time (plane constraints ``(U_i)_x = c``).
+    soft_handles : tuple (indices (h,), weights (h,) or scalar), optional
+        Soft point handles adding ``weights_h / 2 ||u_h - p_h||^2`` to the energy; targets ``p`` are
+        given at solve time. Weights are absolute (compare with ``Q.diagonal()``).
+    backend : str
+        SPDSolver backend ("auto", "cholmod", "superlu").
+
+    Attributes
+    ----------
+    n : int, number of vertices.
+    K : (3n, n) csr_matrix, covariance operator (``S = (K @ U).reshape(n, 3, 3)``).
+    Q : (n, n) csc_matrix, global system matrix ``G^T W G`` (without soft-handle terms).
+    rest_covariance : (n, 3, 3), ``C_i = sum w d d^T``.
+    constrained : (n, 3) bool, which coordinates are hard-constrained.
+    referenced : (n,) bool, vertices used by at least one triangle.
+    backend : str, the SPDSolver backend in use ("cholmod" or "superlu").
+    """
+
+    def __init__(self, V, F, *, fixed=None, coord_constraints=None, soft_handles=None,
+                 backend: str = "auto"):
+        V = np.array(V, dtype=np.float64, copy=True)
+        F = np.asarray(F, dtype=np.int64)
+        if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
+            raise InvalidMeshError("ARAP needs a triangle mesh with at least one triangle.")
+        if not np.isfinite(V).all():
+            raise InvalidMeshError("The mesh has NaN or infinite coordinates; run Clean first.")
+        n = len(V)
+        if F.min() < 0 or F.max() >= n:
+            raise InvalidMeshError("Some faces refer to vertices that do not exist. "
+                                   "Validate the mesh to see which.")
+        self.V, self.F, self.n = V, F, n
+        cell, tail, head, w = spokes_and_rims_cells(V, F)
+        if not np.isfinite(w).all():
+            raise InvalidMeshError("The mesh has degenerate (zero-area) triangles, so the "
+                                   "cotangent weights are undefined. Run Clean first.")
+        self._cell, self._tail, self._head, self._w = cell, tail, head, w
+        d = V[head] - V[tail]  # (T, 3) rest edges
+        self._rest_edges = d
+        T = len(cell)
+
+        # K[3 i + alpha, v] = sum_{t in cell i} w_t d_t[alpha] (G_t v), G_t = e_head - e_tail
+        wd = w[:, None] * d  # (T, 3)
+        rows = (3 * cell[:, None] + np.arange(3)[None, :])  # (T, 3)
+        rows = np.concatenate([rows.ravel(), rows.ravel()])
+        cols = np.concatenate([np.repeat(head, 3), np.repeat(tail, 3)])
+        vals = np.concatenate([wd.ravel(), -wd.ravel()])
+        self.K = sp.csr_matrix((vals, (rows, cols)), shape=(3 * n, n))
+        self.K.sum_duplicates()
+        self._KT = self.K.T.tocsr()
+
+        # C_i = sum_{t in cell i} w d d^T
+        outer = (wd[:, :, None] * d[:, None, :]).reshape(T, 9)
+        self.rest_covariance = np.column_stack(
+            [np.bincount(cell, weights=outer[:, k], minlength=n) for k in range(9)]
+        ).reshape(n, 3, 3)
+
+        # Q = G^T W G
+        qr = np.concatenate([tail, head, tail, head])
+        qc = np.concatenate([tail, head, head, tail])
+        qv = np.concatenate([w, w, -w, -w])
+        self.Q = sp.csc_matrix((qv, (qr, qc)), shape=(n, n))
+        self.Q.sum_duplicates()
+
+        self.referenced = np.zeros(n, dtype=bool)
+        self.referenced[F.ravel()] = True
+
+        # constraints
+        constrained = np.zeros((n, 3), dtype=bool)
+        fixed = _as_index_array(fixed, n, "fixed vertices")
+        constrained[fixed] = True
+        constrained[~self.referenced] = True
+        if coord_constraints is not None:
+            ci, ca = coord_constraints
+            ci = _as_index_array(ci, n, "coordinate constraints")
+            ca = np.asarray(ca, dtype=np.int64).reshape(-1)
+            if ca.shape != ci.shape:
+                raise ParameterError("Coordinate constraints need one axis per vertex index.")
+            if ca.size and (ca.min() < 0 or ca.max() > 2):
+                raise ParameterError("Coordinate constraint axes must be 0 (x), 1 (y) or 2 (z).")
+            constrained[ci, ca] = True
+        self.constrained = constrained
+
+        soft_diag = np.zeros(n)
+        self._soft_idx = np.zeros(0, dtype=np.int64)
+        self._soft_w = np.zeros(0)
+        if soft_handles is not None:
+            si, sw = soft_handles
+            si = _as_index_array(si, n, "soft handles")
+            sw = np.broadcast_to(np.asarray(sw, dtype=np.float64), si.shape).copy()
+            if (sw < 0).any() or not np.isfinite(sw).all():
+                raise ParameterError("Soft handle weights must be finite and non-negative.")
+            self._soft_idx, self._soft_w = si, sw
+            np.add.at(soft_diag, si, sw)
+        self._soft_diag = soft_diag
+
+        self._check_definite()
+        A = (self.Q + sp.diags(soft_diag)).tocsc() if soft_diag.any() else self.Q
+        # group coordinates with identical constrained sets: one factorization per group
+        self._groups: list[tuple[list[int], np.ndarray, SPDSolver]] = []
+        done: list[int] = []
+        for dim in range(3):
+            if dim in done:
+                continue
+            same = [e for e in range(3) if e not in done
+                    and np.array_equal(constrained[:, e], constrained[:, dim])]
+            done += same
+            fx = np.flatnonzero(constrained[:, dim])
+            self._groups.append((same, fx, SPDSolver(A, fx, backend=backend)))
+        self.backend = self._groups[0][2].backend
+
+    def _check_definite(self) -> None:
+        ncomp, lab = connected_components(self.F, self.n, over="vertices")
+        anchored = self.constrained.copy()
+        anchored[self._soft_idx[self._soft_w > 0]] = True
+        for c in range(ncomp):
+            verts = np.flatnonzero((lab == c) & self.referenced)
+            if verts.size == 0:
+                continue
+            for dim in range(3):
+                if not anchored[verts, dim].any():
+                    raise ParameterError(
+                        f"Part {c + 1} of the mesh (vertex {verts[0]} and {verts.size - 1} "
+                        f"others) has nothing holding it in {'xyz'[dim]}: it could slide freely, "
+                        "so the deformation is undefined. Fix a vertex or add a handle on it.")
+
+    # ---------------------------------------------------------------- local step
+    def covariances(self, U: np.ndarray) -> np.ndarray:
+        """Per-vertex covariances ``S_i = sum_{cell i} w d d~^T``.
+
+        Parameters
+        ----------
+        U : (n, 3) float64 deformed positions.
+
+        Returns
+        -------
+        (n, 3, 3) float64; ``S_i[a, b] = sum w d[a] d~[b]``.
+        """
+        return np.asarray(self.K @ np.asarray(U, dtype=np.float64)).reshape(self.n, 3, 3)
+
+    def rotations(self, U: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
+        """Optimal rotations of the local step.
+
+        Parameters
+        ----------
+        U : (n, 3) float64 deformed positions.
+        extra : (n, 3, 3) float array, optional
+            Added to the covariances before Procrustes (extra per-vertex Procrustes terms: the
+            maximized objective becomes ``tr(R_i (S_i + extra_i))``).
+
+        Returns
+        -------
+        (n, 3, 3) float64 proper rotations.
+        """
+        S = self.covariances(U)
+        if extra is not None:
+            S = S + np.asarray(extra, dtype=np.float64).reshape(self.n, 3, 3)
+        return procrustes_rotations(S)
+
+    # ---------------------------------------------------------------- global step
+    def rhs(self, R: np.ndarray) -> np.ndarray:
+        """Right-hand side of the global step, ``b = K^T [R_1^T; ...; R_n^T]``.
+
+        Parameters
+        ----------
+        R : (n, 3, 3) float array (rotations, or any per-vertex linear maps).
+
+        Returns
+        -------
+        (n, 3) float64 ``b`` with ``Q U = b`` the unconstrained minimizer condition.
+        """
+        R = np.asarray(R, dtype=np.float64).reshape(self.n, 3, 3)
+        return np.asarray(self._KT @ R.transpose(0, 2, 1).reshape(3 * self.n, 3))
+
+    def solve(self, rhs: np.ndarray, fixed_values: np.ndarray | None = None,
+              soft_targets: np.ndarray | None = None) -> np.ndarray:
+        """Global step: minimize the energy over ``U`` subject to the hard constraints.
+
+        Parameters
+        ----------
+        rhs : (n, 3) float64, usually ``self.rhs(R)`` (plus any extra linear terms).
+        fixed_values : (n, 3) float array
+            Prescribed positions; only the entries where ``self.constrained`` is True are read
+            (fixed vertices, coordinate constraints, vertices used by no triangle). May be None
+            only when nothing is constrained.
+        soft_targets : (h, 3) float array, optional
+            Targets of the soft handles, in the order given at construction.
+
+        Returns
+        -------
+        U : (n, 3) float64; constrained entries equal ``fixed_values`` exactly.
+        """
+        b = np.array(rhs, dtype=np.float64, copy=True).reshape(self.n, 3)
+        if self._soft_idx.size:
+            if soft_targets is None:
+                raise ValueError("soft_targets is required when the system has soft handles")
+            tgt = np.asarray(soft_targets, dtype=np.float64).reshape(-1, 3)
+            np.add.at(b, self._soft_idx, self._soft_w[:, None] * tgt)
+        if self.constrained.any():
+            if fixed_values is None:
+                raise ValueError("fixed_values is required when the system has constraints")
+            fv = np.asarray(fixed_values, dtype=np.float64).reshape(self.n, 3)
+        U = np.empty((self.n, 3))
+        for dims, fx, solver in self._groups:
+            U[:, dims] = solver.solve(b[:, dims], fv[fx][:, dims] if fx.size else None)
+        return U
+
+    # ---------------------------------------------------------------- energy
+    def energy(self, U: np.ndarray, R: np.ndarray, *, exact: bool = True) -> float:
+        """ARAP energy ``sum_i sum_{cell i} w/2 ||R_i d - d~||^2`` (soft handle terms excluded).
+
+        Parameters
+        ----------
+        U : (n, 3) float64 deformed positions.
+        R : (n, 3, 3) float array of per-vertex rotations (or linear maps).
+        exact : bool
+            True (default): sum the residual of every cell entry (9 per triangle). False: the
+            same value from the precomputed operators,
+            ``1/2 sum tr(R C R^T) - sum tr(R S) + 1/2 tr(U^T Q U)``, several times faster but
+            with an absolute round-off of about ``1e-16 * sum w |d|^2`` (it can read ~1e-15
+            instead of 0 at the rest state); good for plotting.
+
+        Returns
+        -------
+        float
+        """
+        U = np.asarray(U, dtype=np.float64)
+        R = np.asarray(R, dtype=np.float64).reshape(self.n, 3, 3)
+        if not exact:
+            e = (0.5 * np.einsum("nij,nij->", R @ self.rest_covariance, R)
+                 - np.einsum("nij,nji->", R, self.covariances(U))
+                 + 0.5 * float(np.einsum("ij,ij->", U, self.Q @ U)))
+            return float(e)
+        dt = U[self._head] - U[self._tail]
+        Rd = np.einsum("tab,tb->ta", R[self._cell], self._rest_edges)
+        return float(0.5 * (self._w * ((Rd - dt) ** 2).sum(axis=1)).sum())
+
+    def soft_energy(self, U: np.ndarray, soft_targets: np.ndarray) -> float:
+        """``sum_h k_h / 2 ||u_h - p_h||^2`` of the soft handles (0 when there are none)."""
+        if not self._soft_idx.size:
+            return 0.0
+        diff = np.asarray(U)[self._soft_idx] - np.asarray(soft_targets).reshape(-1, 3)
+        return float(0.5 * (self._soft_w * (diff ** 2).sum(axis=1)).sum())
+
+
+@dataclass(frozen=True)
+class ArapParams:
+    """Parameters of plain ARAP deformation with point handles (see the module docstring)."""
+
+    max_iterations: int = param(
+        100, label="Max iterations", minimum=1, maximum=10000, step=1,
+        tooltip="Upper bound on local-global iterations. Each one fits rotations, then solves "
+                "for the positions.")
+    rel_displacement_tol: float = param(
+        1e-3, label="Stop at relative move", minimum=0.0, maximum=1.0, step=1e-4, decimals=5,
+        log_scale=True,
+        tooltip="Stop when the largest vertex move of an iteration is this fraction of the largest "
+                "total move so far. 0 runs all iterations.")
+    handle_mode: str = param(
+        "hard", label="Handles", choices=HANDLE_MODES,
+        tooltip="hard: handle vertices land exactly on their targets. soft: they are pulled "
+                "towards them with the strength below.")
+    soft_weight: float = param(
+        1e3, label="Soft handle strength", minimum=1e-6, maximum=1e9, step=10.0, log_scale=True,
+        advanced=True,
+        tooltip="Stiffness of soft handles relative to the mesh's average stiffness per vertex. "
+                "Larger values pull the handles closer to their targets.")
+
+
+def arap_iter(V: np.ndarray, F: np.ndarray, handles, params: ArapParams = ArapParams(), *,
+              fixed=None, initial: np.ndarray | None = None) -> Iterator[Step]:
+    """ARAP deformation with point handles, one :class:`~algorithms.steps.Step` per iteration.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest positions (not modified).
+    F : (m, 3) int64 triangles.
+    handles : tuple (indices (k,) int, targets (k, 3) float)
+        Handle vertices and where they should go.
+    params : ArapParams.
+    fixed : (f,) int, optional
+        Vertices held at their rest positions.
+    initial : (n, 3) float, optional
+        Starting guess (default ``V`` with the handles moved to their targets).
+
+    Yields
+    ------
+    Step with ``V`` (n, 3) and metrics ``energy`` (ARAP + soft-handle terms), ``arap`` and
+    ``displacement`` (:func:`relative_displacement`); ``total`` is None while the run stops on
+    ``rel_displacement_tol`` (> 0), else ``max_iterations``.
+    """
+    validate_params(params)
+    V = np.array(V, dtype=np.float64, copy=True)
+    n = len(V)
+    hidx, htgt = handles if handles is not None else (np.zeros(0, np.int64), np.zeros((0, 3)))
+    hidx = _as_index_array(hidx, n, "handles")
+    htgt = np.asarray(htgt, dtype=np.float64).reshape(-1, 3)
+    if len(htgt) != len(hidx):
+        raise ParameterError("Each handle needs exactly one target position.")
+    fixed = _as_index_array(fixed, n, "fixed vertices")
+    known = V.copy()
+    if params.handle_mode == "hard":
+        known[hidx] = htgt
+        system = ArapSystem(V, F, fixed=np.union1d(fixed, hidx))
+        soft_targets = None
+    else:
+        # the stiffness scale: mean diagonal of Q over the vertices in use
+        _, tail, head, w = spokes_and_rims_cells(V, np.asarray(F, np.int64))
+        used = np.unique(np.asarray(F).ravel())
+        qdiag = np.bincount(np.concatenate([tail, head]), weights=np.concatenate([w, w]),
+                            minlength=n)
+        k = params.soft_weight * float(np.mean(qdiag[used]))
+        system = ArapSystem(V, F, fixed=fixed, soft_handles=(hidx, k))
+        soft_targets = htgt
+    if initial is None:
+        U = V.copy()
+        U[hidx] = htgt  # soft handles start at their targets too
+    else:
+        U = np.array(initial, dtype=np.float64, copy=True).reshape(n, 3)
+    U[system.constrained] = known[system.constrained]
+    # the run stops on the tolerance: the number of iterations is not known in advance
+    total = None if params.rel_displacement_tol > 0 else params.max_iterations
+    for it in range(1, params.max_iterations + 1):
+        R = system.rotations(U)
+        Un = system.solve(system.rhs(R), known, soft_targets)
+        disp = relative_displacement(Un, U, V)
+        U = Un
+        e_arap = system.energy(U, R)
+        e_soft = system.soft_energy(U, soft_targets) if soft_targets is not None else 0.0
+        yield Step(iteration=it, total=total, V=U.copy(),
+                   metrics={"energy": e_arap + e_soft, "arap": e_arap, "displacement": disp},
+                   message=f"ARAP iteration {it}")
+        if disp < params.rel_displacement_tol:
+            break
+
+
+def arap(V: np.ndarray, F: np.ndarray, handles, params: ArapParams = ArapParams(),
+         **kwargs) -> np.ndarray:
+    """Run :func:`arap_iter` to the end and return the final (n, 3) positions."""
+    return run_to_end(arap_iter(V, F, handles, params, **kwargs)).V

@@ -1,0 +1,216 @@
+"""Panel "Cubic": cubic (and polyhedral) stylization with every artistic control (thesis ch. 5).
+
+* the Params form (λ slider; style; per-axis λ; cube orientation; tolerances; Advanced);
+* Live (on by default): every parameter change restarts the solve from the document after a
+  short pause; the precomputation (normalization, ARAP factorizations) is cached and reused
+  while only λ, the style or the orientation change;
+* viewport tools, one undoable step per stroke: a λ brush (paints a per-vertex λ *scale* in
+  [0, 2], 1 = the slider's λ), a Gauss-map painter (the same field, painted by normal
+  direction), a fix brush (painted region stays put), point handles (click, drag; Ctrl+click
+  removes), and a plane brush (the painted region keeps its mean coordinate along an axis);
+* the finished run is one undoable command (the pattern of :mod:`app.panels.base`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtWidgets import (QButtonGroup, QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout,
+                               QGroupBox, QHBoxLayout, QLabel, QPushButton, QRadioButton,
+                               QVBoxLayout)
+
+from algorithms.deform.cubic import CubicParams, CubicStylizer, rotation_from_degrees
+from app.commands import StateCommand
+from app.gaussmap import GaussMapPainter
+from app.panels.base import MethodPanel
+from app.tools import BrushSettings, FieldBrush, HandleTool
+
+LAMBDA_FIELD = "lambda_scale"
+FIXED_FIELD = "fixed"
+PLANE_FIELD = "plane"
+
+
+def constraints_of(state, plane_axis: int):
+    """(fixed vertices, (handle indices, targets), (plane indices, axes, values)) of a state."""
+    n = len(state.V)
+    fixed = np.flatnonzero(state.fields.get(FIXED_FIELD, np.zeros(n)) > 0.5)
+    h = state.handle_dict
+    handles = None
+    if h:
+        idx = np.array(sorted(h), dtype=np.int64)
+        handles = (idx, np.array([h[i] for i in idx], dtype=np.float64))
+    plane = None
+    pv = np.flatnonzero(state.fields.get(PLANE_FIELD, np.zeros(n)) > 0.5)
+    if pv.size:
+        value = float(state.V[pv, plane_axis].mean())
+        plane = (pv, np.full(pv.size, plane_axis), np.full(pv.size, value))
+    return fixed, handles, plane
+
+
+class CubicPanel(MethodPanel):
+    title = "Cubic"
+    description = ("Makes the shape look cubic while keeping its details (cubic stylization). "
+                   "Move the λ slider: the result updates live. Paint where it should be more or "
+                   "less cubic, pin regions, or drag handles with the tools below.")
+    params_cls = CubicParams
+    plot_metrics = ("energy",)
+    plot_title = "Energy (ARAP + λ·L1) per iteration"
+    live_by_default = True
+
+    def __init__(self, window):
+        super().__init__(window)
+        self._cache: tuple | None = None
+        self.brush_settings = BrushSettings(radius=0.06, strength=0.5)
+        self.lambda_brush = FieldBrush(window, LAMBDA_FIELD, low=0.0, high=2.0, default=1.0,
+                                       label="λ", settings=self.brush_settings, cmap="coolwarm")
+        self.fix_brush = FieldBrush(window, FIXED_FIELD, low=0.0, high=1.0, default=0.0,
+                                    label="fixed region", settings=self.brush_settings,
+                                    cmap="Reds")
+        self.plane_brush = FieldBrush(window, PLANE_FIELD, low=0.0, high=1.0, default=0.0,
+                                      label="plane region", settings=self.brush_settings,
+                                      cmap="Greens")
+        self.handle_tool = HandleTool(window)
+        self._build_tools()
+        window.document.subscribe(self._on_doc)
+
+    # -- widgets -------------------------------------------------------------------------------
+    def _build_tools(self) -> None:
+        lay: QVBoxLayout = self.widget().layout()
+        box = QGroupBox("Tools")
+        v = QVBoxLayout(box)
+        self.tool_group = QButtonGroup(self)
+        row1, row2 = QHBoxLayout(), QHBoxLayout()
+        specs = [("camera", "Camera", "Left drag rotates the view (no painting)."),
+                 ("lambda", "λ brush", "Paint where the shape should be more cubic (drag) or "
+                  "less cubic (tick 'Erase'). Red = more, blue = less."),
+                 ("fix", "Fix", "Paint a region that must not move."),
+                 ("handle", "Handles", "Click the surface to add a handle, drag to move it; "
+                  "Ctrl+click removes the nearest handle."),
+                 ("plane", "Plane", "Paint a region that keeps its average coordinate along the "
+                  "chosen axis (it becomes flat in that direction).")]
+        self.tool_buttons = {}
+        for i, (key, text, tip) in enumerate(specs):
+            b = QRadioButton(text)
+            b.setToolTip(tip)
+            self.tool_group.addButton(b, i)
+            self.tool_buttons[key] = b
+            (row1 if i < 3 else row2).addWidget(b)
+            b.toggled.connect(lambda on, key=key: on and self.set_tool(key))
+        v.addLayout(row1)
+        v.addLayout(row2)
+        form = QFormLayout()
+        self.radius_spin = QDoubleSpinBox()
+        self.radius_spin.setRange(0.005, 0.5)
+        self.radius_spin.setSingleStep(0.01)
+        self.radius_spin.setDecimals(3)
+        self.radius_spin.setValue(self.brush_settings.radius)
+        self.radius_spin.setToolTip("Brush radius as a fraction of the model size (on the Gauss "
+                                    "map: of 180°).")
+        self.radius_spin.valueChanged.connect(lambda x: setattr(self.brush_settings, "radius", x))
+        self.strength_spin = QDoubleSpinBox()
+        self.strength_spin.setRange(0.01, 1.0)
+        self.strength_spin.setSingleStep(0.05)
+        self.strength_spin.setValue(self.brush_settings.strength)
+        self.strength_spin.setToolTip("How much one dab changes the painted value (1 = fully).")
+        self.strength_spin.valueChanged.connect(
+            lambda x: setattr(self.brush_settings, "strength", x))
+        self.erase_box = QCheckBox("Erase")
+        self.erase_box.setToolTip("Paint towards 'less' (λ brush: less cubic; Fix/Plane: remove).")
+        self.erase_box.toggled.connect(lambda on: setattr(self.brush_settings, "erase", on))
+        self.plane_axis = QComboBox()
+        self.plane_axis.addItems(["x", "y", "z"])
+        self.plane_axis.setToolTip("The coordinate the plane region keeps (its current mean).")
+        form.addRow("Radius", self.radius_spin)
+        form.addRow("Strength", self.strength_spin)
+        form.addRow(self.erase_box)
+        form.addRow("Plane axis", self.plane_axis)
+        v.addLayout(form)
+        row = QHBoxLayout()
+        self.show_combo = QComboBox()
+        self.show_combo.addItems(["Shape only", "λ scale", "Fixed region", "Plane region"])
+        self.show_combo.setToolTip("Colour the mesh by a painted field.")
+        self.show_combo.currentIndexChanged.connect(self._show_field)
+        self.clear_button = QPushButton("Clear painting")
+        self.clear_button.setToolTip("Remove painted λ, fixed and plane regions and all handles "
+                                     "(undoable).")
+        self.clear_button.clicked.connect(self.clear_constraints)
+        row.addWidget(QLabel("Show"))
+        row.addWidget(self.show_combo, 1)
+        row.addWidget(self.clear_button)
+        v.addLayout(row)
+        self.gauss = GaussMapPainter(self.window_, LAMBDA_FIELD, low=0.0, high=2.0, default=1.0,
+                                     label="λ", settings=self.brush_settings)
+        self.gauss.setMinimumHeight(220)
+        v.addWidget(self.gauss)
+        lay.insertWidget(lay.count() - 1, box)
+        self.tool_buttons["camera"].setChecked(True)
+        self.plane_axis.currentIndexChanged.connect(lambda _i: self._on_params_changed(None))
+        self.gauss.brush.changed.connect(lambda _v: self.show_combo.setCurrentIndex(1))
+
+    def set_tool(self, key: str) -> None:
+        tool = {"camera": None, "lambda": self.lambda_brush, "fix": self.fix_brush,
+                "handle": self.handle_tool, "plane": self.plane_brush}[key]
+        self.window_.viewport.set_handler(tool)
+        show = {"lambda": 1, "fix": 2, "plane": 3}.get(key)
+        if show is not None:
+            self.show_combo.setCurrentIndex(show)
+        if not self.tool_buttons[key].isChecked():
+            self.tool_buttons[key].setChecked(True)
+
+    def _show_field(self, index: int) -> None:
+        brush = {1: self.lambda_brush, 2: self.fix_brush, 3: self.plane_brush}.get(index)
+        if brush is None:
+            self.window_.viewport.show_field(None)
+        else:
+            brush.show()
+
+    def _on_doc(self, what: str) -> None:
+        if what in ("fields", "mesh", "topology"):
+            self._show_field(self.show_combo.currentIndex())
+        if what in ("handles", "mesh", "topology"):
+            st = self.window_.document.state
+            self.window_.viewport.show_handles(st.handle_dict if st is not None else None)
+        # painting re-runs a live result (only this panel's fields, only once it has a result)
+        st = self.window_.document.state
+        key = None if st is None else (tuple(id(st.fields.get(f)) for f in
+                                             (LAMBDA_FIELD, FIXED_FIELD, PLANE_FIELD)), st.handles)
+        changed, self._constraint_key = key != getattr(self, "_constraint_key", None), key
+        if (what in ("fields", "handles") and changed and self.live_box.isChecked()
+                and self._last is not None and st is not None and st.V is self._last[1].V):
+            self._debounce.start()
+
+    def clear_constraints(self) -> None:
+        doc = self.window_.document
+        if doc.is_empty:
+            return
+        st = doc.state
+        after = st
+        for f in (LAMBDA_FIELD, FIXED_FIELD, PLANE_FIELD):
+            after = after.with_field(f, None)
+        after = after.with_handles({})
+        if after.fields != st.fields or after.handles != st.handles:
+            self.window_.undo_stack.push(StateCommand(doc, st, after, "Clear painting"))
+
+    # -- the method ------------------------------------------------------------------------------
+    def build_steps(self, state, params):
+        fixed, handles, plane = constraints_of(state, self._plane_axis)
+        key = (id(state.V), id(state.F), fixed.tobytes(),
+               None if handles is None else (handles[0].tobytes(), handles[1].tobytes()),
+               None if plane is None else (plane[0].tobytes(), plane[1].tobytes(),
+                                           plane[2].tobytes()),
+               params.normalize, params.pin_one_vertex)
+        if self._cache is not None and self._cache[0] == key:
+            stylizer = self._cache[1]
+        else:
+            stylizer = CubicStylizer(state.V, state.F, fixed=fixed, handles=handles,
+                                     coord_constraints=plane, normalize=params.normalize,
+                                     pin_one_vertex=params.pin_one_vertex)
+            self._cache = (key, stylizer)
+        scale = state.fields.get(LAMBDA_FIELD)
+        lam_v = None if scale is None else params.lam * np.asarray(scale)
+        return stylizer.steps(params, lam_per_vertex=lam_v,
+                              rotation=rotation_from_degrees(params.rot_x, params.rot_y,
+                                                             params.rot_z))
+
+    def run(self, live: bool = False) -> None:
+        self._plane_axis = self.plane_axis.currentIndex()  # read on the GUI thread
+        super().run(live)

@@ -1,0 +1,101 @@
+"""The Cubic panel with real widgets and the real viewport."""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtCore import QPoint, Qt
+
+from algorithms.mesh.operators import vertex_normals
+from tests.conftest import SAMPLES
+
+
+def l1_of_normals(V, F):
+    from algorithms.mesh.operators import barycentric_vertex_areas
+
+    N = vertex_normals(V, F)
+    a = barycentric_vertex_areas(V, F)
+    return float((a * np.abs(N).sum(axis=1)).sum() / a.sum())
+
+
+def open_cubic(window):
+    assert window.open_path(SAMPLES / "blob.obj")
+    panel = window.panels["Cubic"]
+    panel.live_box.setChecked(False)
+    panel.form.editors["max_iterations"].setValue(30)
+    return panel
+
+
+def test_run_streams_and_is_one_undoable_command(window, dialogs, qtbot):
+    panel = open_cubic(window)
+    V0 = window.document.V.copy()
+    F = window.document.F
+    panel.form.editors["lam"].setValue(0.4)
+    previews = []
+    window.runner.preview.connect(lambda s: previews.append(s.iteration))
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    assert previews
+    V1 = window.document.V
+    assert l1_of_normals(V1, F) < l1_of_normals(V0, F) - 0.01  # cubier
+    assert window.undo_stack.count() == 1 and window.undo_stack.undoText() == "Cubic"
+    assert len(panel.plot.series["energy"]) >= 2
+    window.undo_stack.undo()
+    np.testing.assert_array_equal(window.document.V, V0)
+    np.testing.assert_array_equal(window.viewport.points, V0)
+
+
+def test_cancel_restores(window, dialogs, qtbot):
+    panel = open_cubic(window)
+    V0 = window.document.V.copy()
+    panel.form.editors["max_iterations"].setValue(100000)
+    panel.form.editors["rel_displacement_tol"].setValue(0.0)
+    with qtbot.waitSignal(window.runner.preview, timeout=60000):
+        panel.run_button.click()
+    with qtbot.waitSignal(window.runner.cancelled, timeout=60000):
+        window.cancel_button.click()
+    qtbot.waitUntil(lambda: not window.runner.busy)
+    np.testing.assert_array_equal(window.viewport.points, V0)
+    assert window.undo_stack.count() == 0
+
+
+def test_live_slider_restarts_from_the_input_and_merges_undo(window, dialogs, qtbot):
+    panel = open_cubic(window)
+    V0 = window.document.V.copy()
+    panel.live_box.setChecked(True)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.form.set_value("lam", 0.3)
+    V_a = window.document.V.copy()
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.form.set_value("lam", 0.0)
+    # λ = 0 from the *input* gives the input back (no compounding of the previous result)
+    np.testing.assert_allclose(window.document.V, V0, atol=1e-8)
+    assert np.abs(V_a - V0).max() > 1e-3
+    assert window.undo_stack.count() == 1  # both live runs are one undo step
+    window.undo_stack.undo()
+    np.testing.assert_array_equal(window.document.V, V0)
+
+
+def test_gauss_map_painting_changes_lambda_of_matching_normals(window, dialogs, qtbot):
+    panel = open_cubic(window)
+    gm = panel.gauss.view
+    # paint the direction that faces the sphere view's camera
+    cam = np.array(gm.plotter.camera.position)
+    d = cam / np.linalg.norm(cam)
+    x, y = gm.project(d[None, :] * 1.0)[0]
+    w = gm.plotter.interactor
+    qtbot.mousePress(w, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
+                     QPoint(int(x), int(y)))
+    qtbot.mouseRelease(w, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
+                       QPoint(int(x), int(y)))
+    lam = window.document.state.fields["lambda_scale"]
+    N = vertex_normals(window.document.V, window.document.F)
+    angle = np.degrees(np.arccos(np.clip(N @ d, -1, 1)))
+    changed = lam != 1.0
+    assert changed.any()
+    theta_r = panel.brush_settings.radius * 180.0
+    assert angle[changed].max() <= theta_r + 1.0  # only vertices whose normals match
+    assert (changed[angle < 0.5 * theta_r]).all()
+    assert window.undo_stack.undoText() == "Paint λ"
+    # the sphere shows the painted field
+    sv = panel.gauss.sphere_values()
+    assert np.nanmax(sv) > 1.0
