@@ -3,8 +3,9 @@
 Painting a direction on the sphere changes the per-vertex field (e.g. the λ scale of cubic
 stylization) of every mesh vertex whose unit normal points near that direction: the weight falls
 off with the angle, ``(1 − (θ/θ_r)²)²`` for θ < θ_r = ``radius`` × 180°. The mesh shows the
-resulting field at once, and the sphere shows it too: each sphere vertex is coloured by the mean
-field value of the mesh vertices whose normals are closest to it (grey where no normal points).
+resulting field at once, and the sphere shows it too: each sphere direction is coloured by the
+mean field value of the mesh vertices whose normals are closest to it, or, where no normal is
+closest, by the mesh vertex whose normal is nearest within 20° (grey: no surface faces that way).
 One stroke is one undoable command, exactly like the surface brush (it is one, with a different
 notion of "near").
 """
@@ -86,7 +87,8 @@ class GaussMapPainter(QWidget):
             self.refresh()
 
     def sphere_values(self, values: np.ndarray | None = None) -> np.ndarray:
-        """Mean field value per sphere vertex over the mesh normals nearest to it (NaN: none)."""
+        """Field value per sphere vertex (see the module docstring; NaN: no surface faces
+        that way)."""
         doc = self.window_.document
         out = np.full(len(self.sphere_V), np.nan)
         if doc.is_empty:
@@ -99,6 +101,12 @@ class GaussMapPainter(QWidget):
         counts = np.bincount(nearest, minlength=len(self.sphere_V))
         has = counts > 0
         out[has] = sums[has] / counts[has]
+        gaps = np.flatnonzero(~has)
+        if gaps.size:
+            Nu = N[ok] / np.linalg.norm(N[ok], axis=1, keepdims=True)
+            dist, j = cKDTree(Nu).query(self.sphere_V[gaps])
+            close = dist < 2 * np.sin(np.radians(20) / 2)  # chord of 20°
+            out[gaps[close]] = vals[ok][j[close]]
         return out
 
     def refresh(self, values: np.ndarray | None = None) -> None:

@@ -293,7 +293,7 @@ class Viewport(QWidget):
         else:
             self.poly.point_data[name] = np.asarray(values, dtype=np.float64)
             self.poly.point_data.active_scalars_name = name
-            mapper.lookup_table = pv.LookupTable(cmap)
+            mapper.lookup_table = pv.LookupTable(cmap, nan_color="#9a9a9a")
             lo, hi = clim if clim else (float(np.min(values)), float(np.max(values)))
             mapper.scalar_range = (lo, hi if hi > lo else lo + 1.0)
             mapper.scalar_visibility = True

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any, Iterator
 
 from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import (QCheckBox, QDockWidget, QHBoxLayout, QLabel, QPushButton,
-                               QVBoxLayout, QWidget)
+                               QScrollArea, QVBoxLayout, QWidget)
 
 from algorithms.steps import Step
 from app.document import MeshState
@@ -41,6 +41,7 @@ class MethodPanel(QDockWidget):
         self.window_ = window
         body = QWidget()
         lay = QVBoxLayout(body)
+        self.body_layout = lay
         if self.description:
             desc = QLabel(self.description)
             desc.setWordWrap(True)
@@ -71,7 +72,12 @@ class MethodPanel(QDockWidget):
         self.plot = LinePlot(self.plot_title or ", ".join(self.plot_metrics), log_y=self.plot_log_y)
         lay.addWidget(self.plot)
         lay.addStretch(1)
-        self.setWidget(body)
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setFrameShape(QScrollArea.Shape.NoFrame)
+        scroll.setWidget(body)
+        scroll.setMinimumWidth(body.sizeHint().width() + 24)
+        self.setWidget(scroll)
 
         self._last: tuple[MeshState, MeshState] | None = None  # (input, result) of last run
         self._pending_input: MeshState | None = None

@@ -74,7 +74,7 @@ class CubicPanel(MethodPanel):
 
     # -- widgets -------------------------------------------------------------------------------
     def _build_tools(self) -> None:
-        lay: QVBoxLayout = self.widget().layout()
+        lay: QVBoxLayout = self.body_layout
         box = QGroupBox("Tools")
         v = QVBoxLayout(box)
         self.tool_group = QButtonGroup(self)
