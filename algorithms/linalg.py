@@ -76,13 +76,13 @@ class SPDSolver:
         b = np.asarray(b, dtype=np.float64)
         if b.shape[0] != self.n:
             raise ValueError(f"b has {b.shape[0]} rows, expected {self.n}")
-        rhs = b[self.free]
-        x = np.empty_like(b)
+        rhs = b.take(self.free, axis=0)  # a fresh array, modified in place below
+        x = np.empty(b.shape)
         if self.fixed.size:
             if x_fixed is None:
                 raise ValueError("x_fixed is required when the solver has fixed unknowns")
             x_fixed = np.asarray(x_fixed, dtype=np.float64).reshape((self.fixed.size,) + b.shape[1:])
-            rhs = rhs - self.A_fc @ x_fixed
+            rhs -= self.A_fc @ x_fixed
             x[self.fixed] = x_fixed
         x[self.free] = np.asarray(self._solve(np.ascontiguousarray(rhs))).reshape(rhs.shape)
         return x

@@ -1,18 +1,27 @@
-"""Cubic stylization: iterations per second, local/global split, and libigl's ARAP as the peer.
+"""Cubic stylization: ms per local-global iteration, local/global split, libigl's ARAP as the peer.
 
-For each mesh (default: armadillo.obj, 14.6k vertices / 29k faces):
-  precompute    CubicStylizer construction (normalization, normals, areas, K, factorizations)
-  run           a whole cubic_stylization run with the thesis defaults (lambda 0.2, stop at
-                relative move 3e-3): iterations, seconds, iterations per second
-  split         the same run re-timed step by step: local = covariances + per-vertex ADMM,
-                global = right-hand side + prefactored solve (plus the mean ADMM inner iterations)
-  peer          libigl's ARAP (spokes and rims) on the same mesh: igl.arap_precomputation, then
-                igl.arap_solve with max_iter = N, timed per iteration (libigl has no cubic
-                stylization; its ARAP iteration is the same local-global loop without the L1 term
-                and with single-precision rotation fitting)
-Ratio = our seconds per iteration / libigl's seconds per ARAP iteration (> 1: ours slower).
+Meshes (default): spot_lowres, bob, rocker-arm, armadillo (../shared/meshes) and a procedural
+~20k-vertex mesh ("bumpy20k": organic_sample("bumpy") after one Loop subdivision, 19,722
+vertices). For each mesh, with the thesis defaults (lambda 0.2, stop at relative move 3e-3):
 
-Usage: .venv/bin/python benchmarks/cubic.py [--lam 0.2] [--repeat 3] [mesh names...]
+  V, its        vertices, and local-global iterations the stopping rule gives
+  run s         a whole run of CubicStylizer.steps (construction excluded; precompute column)
+  ms/it         run s / its
+  local, global, other
+                the same loop re-timed part by part, ms per iteration: local = per-vertex ADMM
+                (compiled kernel or NumPy), global = right-hand side + prefactored solve,
+                other = covariances at the new positions, energy, metrics and output copy
+  numpy ms/it   the same run with the compiled kernels switched off (the NumPy path; --no-numpy
+                skips it)
+  igl ms/it     libigl's ARAP (igl.arap_precomputation / igl.arap_solve, SPOKES_AND_RIMS, one
+                pinned vertex, max_iter = its, started from our result), per iteration
+  ratio         ours / igl per iteration (> 1: ours slower). libigl has no cubic stylization;
+                its ARAP iteration is the same local-global loop without the L1 term (no ADMM).
+
+The first line reports the one-off cost of the compiled kernels (Numba import + cache load, or
+compilation when the cache is cold).
+
+Usage: .venv/bin/python benchmarks/cubic.py [--lam 0.2] [--repeat 3] [--no-numpy] [mesh names...]
 """
 
 from __future__ import annotations
@@ -31,43 +40,71 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from _timing import median_seconds  # noqa: E402
 
 import igl  # noqa: E402
+from algorithms.deform.arap import (  # noqa: E402
+    compiled_kernels,
+    relative_displacement,
+    set_compiled_kernels,
+)
 from algorithms.deform.cubic import (  # noqa: E402
     AdmmState,
     CubicParams,
     CubicStylizer,
     admm_local_step,
 )
-from algorithms.deform.arap import relative_displacement  # noqa: E402
-from algorithms.mesh import read_mesh  # noqa: E402
+from algorithms.mesh import loop_subdivide, organic_sample, read_mesh  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "meshes"
-DEFAULT = ["armadillo.obj"]
+DEFAULT = ["spot_lowres.obj", "bob.obj", "rocker-arm.obj", "armadillo.obj", "bumpy20k"]
+
+
+def load(name: str):
+    if name == "bumpy20k":
+        V, F = organic_sample("bumpy")
+        return loop_subdivide(V, F, 1)
+    path = SHARED / name
+    if not path.exists():
+        return None
+    m = read_mesh(path)
+    return m.V, m.F
 
 
 def split_run(st: CubicStylizer, params: CubicParams, iterations: int) -> dict[str, float]:
-    """Re-run the stylizer's loop with timers around the local and the global step."""
+    """Re-run CubicStylizer.steps' loop with timers around its parts (seconds in total)."""
     system, known, Vn = st.system, st.known, st.V_normalized
     prox = st.style_prox(params)
     lam_a = params.lam * st.areas
     state = AdmmState.initial(st.n, params.rho0)
     U = Vn.copy()
     U[system.constrained] = known[system.constrained]
-    t_local = t_global = 0.0
-    inner = []
+    t_local = t_global = t_other = 0.0
+    S = system.covariances(U)
     for _ in range(iterations):
         t0 = time.perf_counter()
-        S = system.covariances(U)
         R, iters = admm_local_step(S, st.normals, lam_a, prox, state, params)
         t1 = time.perf_counter()
         Un = system.solve(system.rhs(R), known)
         t2 = time.perf_counter()
-        t_local += t1 - t0
-        t_global += t2 - t1
-        inner.append(iters[iters > 0].mean())
         relative_displacement(Un, U, Vn)
         U = Un
-    return {"local": t_local, "global": t_global, "inner_first": float(inner[0]),
-            "inner_rest": float(np.mean(inner[1:])) if len(inner) > 1 else float("nan")}
+        S = system.covariances(U)
+        system.energy(U, R, exact=False, covariances=S)
+        float((lam_a * prox.norm(np.einsum("kab,kb->ka", R, st.normals))).sum())
+        st._to_output(U)
+        t3 = time.perf_counter()
+        t_local += t1 - t0
+        t_global += t2 - t1
+        t_other += t3 - t2
+    return {"local": t_local, "global": t_global, "other": t_other}
+
+
+def timed_run(st: CubicStylizer, params: CubicParams, repeat: int) -> tuple[int, float, np.ndarray]:
+    times, n_it, V = [], 0, None
+    for _ in range(max(1, repeat)):
+        t0 = time.perf_counter()
+        steps = list(st.steps(params))
+        times.append(time.perf_counter() - t0)
+        n_it, V = len(steps), steps[-1].V
+    return n_it, float(np.median(times)), V
 
 
 def main() -> None:
@@ -75,57 +112,61 @@ def main() -> None:
     ap.add_argument("meshes", nargs="*", default=DEFAULT)
     ap.add_argument("--lam", type=float, default=0.2)
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--peer-iterations", type=int, default=20)
+    ap.add_argument("--no-numpy", action="store_true", help="skip the NumPy-path run")
     args = ap.parse_args()
     params = CubicParams(lam=args.lam)
+
+    t0 = time.perf_counter()
+    kern = compiled_kernels()
+    if kern is not None:  # first call: Numba import + cache load (or compilation)
+        from algorithms.mesh import icosphere
+
+        Vs, Fs = icosphere(1)
+        list(CubicStylizer(Vs, Fs).steps(CubicParams(max_iterations=2)))
+    print(f"compiled kernels: {'numba' if kern is not None else 'unavailable (NumPy path)'}, "
+          f"first use {time.perf_counter() - t0:.2f} s")
+    print(f"lambda {params.lam}, stop at relative move {params.rel_displacement_tol}; "
+          f"times are medians of {args.repeat} runs")
+    head = (f"{'mesh':<16}{'V':>7}{'its':>5}{'precomp s':>10}{'run s':>8}{'ms/it':>8}"
+            f"{'local':>8}{'global':>8}{'other':>8}{'numpy ms/it':>12}{'igl ms/it':>10}"
+            f"{'ratio':>7}")
+    print(head)
+    print("-" * len(head))
     for name in args.meshes:
-        path = SHARED / name
-        if not path.exists():
+        mesh = load(name)
+        if mesh is None:
             print(f"{name}: not in {SHARED}, skipped")
             continue
-        m = read_mesh(path)
-        V, F = m.V, m.F
-        print(f"== {name}: {len(V)} vertices, {len(F)} faces, lambda {params.lam}")
-
+        V, F = mesh
         t_pre = median_seconds(lambda: CubicStylizer(V, F), args.repeat)
         st = CubicStylizer(V, F)
-        t0 = time.perf_counter()
-        steps = list(st.steps(params))
-        t_run = time.perf_counter() - t0
-        n_it = len(steps)
-        print(f"precompute           {t_pre:8.3f} s   (backend {st.system.backend})")
-        print(f"run                  {t_run:8.3f} s   {n_it} iterations, "
-              f"{n_it / t_run:6.2f} it/s, {1e3 * t_run / n_it:7.2f} ms/it")
-
+        n_it, t_run, U_ours = timed_run(st, params, args.repeat)
         sp_ = split_run(st, params, n_it)
-        tot = sp_["local"] + sp_["global"]
-        print(f"split (re-run)       local {sp_['local']:7.3f} s ({100 * sp_['local'] / tot:4.1f}%)"
-              f"   global {sp_['global']:7.3f} s ({100 * sp_['global'] / tot:4.1f}%)")
-        print(f"ADMM inner its/vertex first iteration {sp_['inner_first']:.2f}, "
-              f"later mean {sp_['inner_rest']:.2f}")
 
-        # peer: libigl ARAP (spokes and rims), one pinned vertex, started from our result
+        numpy_ms = float("nan")
+        if not args.no_numpy and kern is not None:
+            previous = set_compiled_kernels(False)
+            try:
+                n_np, t_np, _ = timed_run(st, params, 1)
+            finally:
+                set_compiled_kernels(previous)
+            numpy_ms = 1e3 * t_np / n_np
+
+        # peer: libigl ARAP (spokes and rims), one pinned vertex, the same iteration count
         b = np.array([0], dtype=np.int32)
-        U0 = np.ascontiguousarray(steps[-1].V)
+        U0 = np.ascontiguousarray(U_ours)
         bc = U0[b.astype(np.int64)]
-
-        def peer_pre():
-            d = igl.ARAPData()
-            d.energy = igl.ARAP_ENERGY_TYPE_SPOKES_AND_RIMS
-            d.max_iter = args.peer_iterations
-            igl.arap_precomputation(V, F, 3, b, d)
-            return d
-
-        t_peer_pre = median_seconds(peer_pre, args.repeat)
-        data = peer_pre()
+        data = igl.ARAPData()
+        data.energy = igl.ARAP_ENERGY_TYPE_SPOKES_AND_RIMS
+        data.max_iter = n_it
+        igl.arap_precomputation(V, F, 3, b, data)
         t_peer = median_seconds(lambda: igl.arap_solve(bc, data, U0), args.repeat)
-        per_peer = t_peer / args.peer_iterations
+        per_peer = t_peer / n_it
         per_ours = t_run / n_it
-        print(f"peer libigl ARAP     precompute {t_peer_pre:7.3f} s   "
-              f"{1e3 * per_peer:7.2f} ms/it ({args.peer_iterations} its, median of "
-              f"{args.repeat})")
-        print(f"ratio ours/peer      per iteration {per_ours / per_peer:6.2f}   "
-              f"precompute {t_pre / t_peer_pre:6.2f}")
+        print(f"{name.rsplit('.', 1)[0]:<16}{len(V):>7}{n_it:>5}{t_pre:>10.3f}{t_run:>8.3f}"
+              f"{1e3 * per_ours:>8.2f}{1e3 * sp_['local'] / n_it:>8.2f}"
+              f"{1e3 * sp_['global'] / n_it:>8.2f}{1e3 * sp_['other'] / n_it:>8.2f}"
+              f"{numpy_ms:>12.2f}{1e3 * per_peer:>10.2f}{per_ours / per_peer:>7.2f}")
 
 
 if __name__ == "__main__":

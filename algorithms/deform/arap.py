@@ -37,8 +37,10 @@ Choices written down here:
   the local and the global step here minimize the same energy.
 * Rotations are the orthogonal Procrustes maximizers of ``tr(R S)``: ``S = U Sigma V^T``,
   ``R = V U^T``, with the sign of the last column of ``U`` (smallest singular value) flipped when
-  ``det(V U^T) < 0`` (thesis Eq. 5.8). :func:`procrustes_rotations` is a separate function so a
-  faster batched kernel can replace it.
+  ``det(V U^T) < 0`` (thesis Eq. 5.8). :func:`procrustes_rotations` runs a compiled one-sided
+  Jacobi SVD (:mod:`algorithms.deform.kernels`, Numba) when Numba is installed and NumPy's
+  batched SVD (:func:`procrustes_rotations_numpy`) otherwise; the two agree to round-off
+  (tested). ``STYLIZE3D_NUMBA=0`` or :func:`set_compiled_kernels` switches the kernels off.
 * ``rotations(U, extra)`` adds an ``(n, 3, 3)`` term to the covariances before Procrustes: the
   hook through which cubic stylization (ADMM, ``rho n (z - u)^T``) and shape analogies
   (``lambda a n t^T``) enter.
@@ -56,6 +58,7 @@ Choices written down here:
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Iterator
 
@@ -74,11 +77,49 @@ __all__ = [
     "arap_iter",
     "arap",
     "procrustes_rotations",
+    "procrustes_rotations_numpy",
+    "compiled_kernels",
+    "set_compiled_kernels",
     "spokes_and_rims_cells",
     "relative_displacement",
 ]
 
 HANDLE_MODES = ("hard", "soft")
+
+
+_KERNELS_STATE: dict[str, object] = {"enabled": None, "module": None}
+
+
+def compiled_kernels():
+    """The compiled kernels module (:mod:`algorithms.deform.kernels`), or None.
+
+    None when Numba cannot be imported, when the environment variable ``STYLIZE3D_NUMBA`` is
+    ``0``, or after :func:`set_compiled_kernels` (False). Imported lazily on first use, so that
+    importing this module does not import Numba.
+    """
+    st = _KERNELS_STATE
+    if st["enabled"] is None:
+        st["enabled"] = os.environ.get("STYLIZE3D_NUMBA", "1").strip() not in ("0", "false", "no")
+    if not st["enabled"]:
+        return None
+    if st["module"] is None:
+        try:
+            from . import kernels
+        except ImportError:
+            st["enabled"] = False
+            return None
+        st["module"] = kernels
+    return st["module"]
+
+
+def set_compiled_kernels(enabled: bool) -> bool:
+    """Switch the compiled kernels on or off (for comparisons); returns the previous setting.
+
+    Switching on where Numba is missing leaves them off (:func:`compiled_kernels` returns None).
+    """
+    previous = compiled_kernels() is not None
+    _KERNELS_STATE["enabled"] = bool(enabled)
+    return previous
 
 
 def procrustes_rotations(S: np.ndarray) -> np.ndarray:
@@ -94,8 +135,30 @@ def procrustes_rotations(S: np.ndarray) -> np.ndarray:
     R : (n, 3, 3) float64 array
         Proper rotations (``det = +1``): with ``S_i = U Sigma V^T``, ``R_i = V U^T``, and the sign
         of the singular vector of the smallest singular value flipped where ``det(V U^T) < 0``.
-        For ``S_i = 0`` the result is some rotation (the identity for exact zeros).
+        For ``S_i = 0`` the identity.
+
+    Notes
+    -----
+    Uses the compiled one-sided Jacobi kernel (:func:`algorithms.deform.kernels.procrustes_batch`)
+    when Numba is available, else :func:`procrustes_rotations_numpy` (batched LAPACK SVD). The
+    two agree to round-off wherever the maximizer is unique; where it is not (rank <= 1, or
+    ``det S < 0`` with the two smallest singular values equal) both return a maximizer.
     """
+    S = np.asarray(S, dtype=np.float64)
+    if S.ndim != 3 or S.shape[1:] != (3, 3):
+        raise ValueError(f"S must have shape (n, 3, 3), got {S.shape}")
+    kern = compiled_kernels()
+    if kern is None:
+        return procrustes_rotations_numpy(S)
+    S = np.ascontiguousarray(S)
+    R = np.empty_like(S)
+    if len(S):
+        kern.procrustes_batch(S, R)
+    return R
+
+
+def procrustes_rotations_numpy(S: np.ndarray) -> np.ndarray:
+    """:func:`procrustes_rotations` by NumPy's batched SVD (the reference and the fallback)."""
     S = np.asarray(S, dtype=np.float64)
     if S.ndim != 3 or S.shape[1:] != (3, 3):
         raise ValueError(f"S must have shape (n, 3, 3), got {S.shape}")
@@ -170,11 +233,20 @@ def relative_displacement(U_new: np.ndarray, U_old: np.ndarray, U_rest: np.ndarr
     float
         ``max_i |U_new_i - U_old_i| / max(max_i |U_new_i - U_rest_i|, floor * diag)``.
     """
-    step = float(np.linalg.norm(U_new - U_old, axis=1).max(initial=0.0))
+    U_new, U_old, U_rest = (np.asarray(a, dtype=np.float64) for a in (U_new, U_old, U_rest))
+    kern = compiled_kernels()
+    if (kern is not None and U_new.ndim == 2 and U_new.shape[1] == 3
+            and U_new.shape == U_old.shape == U_rest.shape):
+        step, total, diag = kern.displacement_maxima(*(np.ascontiguousarray(a)
+                                                       for a in (U_new, U_old, U_rest)))
+    else:
+        step = float(np.linalg.norm(U_new - U_old, axis=1).max(initial=0.0))
+        total = float(np.linalg.norm(U_new - U_rest, axis=1).max(initial=0.0))
+        diag = None
     if step == 0.0:
         return 0.0
-    total = float(np.linalg.norm(U_new - U_rest, axis=1).max(initial=0.0))
-    diag = float(np.linalg.norm(np.ptp(U_rest, axis=0))) if len(U_rest) else 0.0
+    if diag is None:
+        diag = float(np.linalg.norm(np.ptp(U_rest, axis=0))) if len(U_rest) else 0.0
     total = max(total, floor * diag)
     return step / total if total > 0 else np.inf
 
@@ -247,6 +319,7 @@ class ArapSystem:
         self.K = sp.csr_matrix((vals, (rows, cols)), shape=(3 * n, n))
         self.K.sum_duplicates()
         self._KT = self.K.T.tocsr()
+        self._blocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
         # C_i = sum_{t in cell i} w d d^T
         outer = (wd[:, :, None] * d[:, None, :]).reshape(T, 9)
@@ -335,7 +408,31 @@ class ArapSystem:
         -------
         (n, 3, 3) float64; ``S_i[a, b] = sum w d[a] d~[b]``.
         """
-        return np.asarray(self.K @ np.asarray(U, dtype=np.float64)).reshape(self.n, 3, 3)
+        U = np.asarray(U, dtype=np.float64)
+        kern = compiled_kernels()
+        if kern is None:
+            return np.asarray(self.K @ U).reshape(self.n, 3, 3)
+        ptr, col, val = self._k_blocks()
+        S = np.empty((self.n, 3, 3))
+        kern.block_covariances(ptr, col, val, np.ascontiguousarray(U).reshape(self.n, 3), S)
+        return S
+
+    def _k_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``K`` stored by 3x1 blocks for the compiled kernels: for vertex i, blocks
+        ``ptr[i]:ptr[i+1]`` hold ``K[3 i + a, col[k]] = val[k, a]`` (built on first use)."""
+        if self._blocks is None:
+            n = self.n
+            wd = self._w[:, None] * self._rest_edges
+            keys = np.concatenate([self._cell * n + self._head, self._cell * n + self._tail])
+            vals = np.concatenate([wd, -wd])
+            uniq, inv = np.unique(keys, return_inverse=True)
+            val = np.column_stack([np.bincount(inv, weights=vals[:, a], minlength=len(uniq))
+                                   for a in range(3)])
+            cell = uniq // n
+            ptr = np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=n))])
+            self._blocks = (ptr.astype(np.int64), (uniq % n).astype(np.int64),
+                            np.ascontiguousarray(val))
+        return self._blocks
 
     def rotations(self, U: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
         """Optimal rotations of the local step.
@@ -369,7 +466,13 @@ class ArapSystem:
         (n, 3) float64 ``b`` with ``Q U = b`` the unconstrained minimizer condition.
         """
         R = np.asarray(R, dtype=np.float64).reshape(self.n, 3, 3)
-        return np.asarray(self._KT @ R.transpose(0, 2, 1).reshape(3 * self.n, 3))
+        kern = compiled_kernels()
+        if kern is None:
+            return np.asarray(self._KT @ R.transpose(0, 2, 1).reshape(3 * self.n, 3))
+        ptr, col, val = self._k_blocks()
+        b = np.empty((self.n, 3))
+        kern.block_rhs(ptr, col, val, np.ascontiguousarray(R), b)
+        return b
 
     def solve(self, rhs: np.ndarray, fixed_values: np.ndarray | None = None,
               soft_targets: np.ndarray | None = None) -> np.ndarray:
@@ -389,23 +492,29 @@ class ArapSystem:
         -------
         U : (n, 3) float64; constrained entries equal ``fixed_values`` exactly.
         """
-        b = np.array(rhs, dtype=np.float64, copy=True).reshape(self.n, 3)
+        b = np.asarray(rhs, dtype=np.float64).reshape(self.n, 3)
         if self._soft_idx.size:
             if soft_targets is None:
                 raise ValueError("soft_targets is required when the system has soft handles")
             tgt = np.asarray(soft_targets, dtype=np.float64).reshape(-1, 3)
+            b = b.copy()
             np.add.at(b, self._soft_idx, self._soft_w[:, None] * tgt)
+        fv = None
         if self.constrained.any():
             if fixed_values is None:
                 raise ValueError("fixed_values is required when the system has constraints")
             fv = np.asarray(fixed_values, dtype=np.float64).reshape(self.n, 3)
+        if len(self._groups) == 1:  # the common case: one factorization, three right-hand sides
+            _, fx, solver = self._groups[0]
+            return solver.solve(b, fv[fx] if fx.size else None)
         U = np.empty((self.n, 3))
         for dims, fx, solver in self._groups:
             U[:, dims] = solver.solve(b[:, dims], fv[fx][:, dims] if fx.size else None)
         return U
 
     # ---------------------------------------------------------------- energy
-    def energy(self, U: np.ndarray, R: np.ndarray, *, exact: bool = True) -> float:
+    def energy(self, U: np.ndarray, R: np.ndarray, *, exact: bool = True,
+               covariances: np.ndarray | None = None) -> float:
         """ARAP energy ``sum_i sum_{cell i} w/2 ||R_i d - d~||^2`` (soft handle terms excluded).
 
         Parameters
@@ -418,6 +527,9 @@ class ArapSystem:
             ``1/2 sum tr(R C R^T) - sum tr(R S) + 1/2 tr(U^T Q U)``, several times faster but
             with an absolute round-off of about ``1e-16 * sum w |d|^2`` (it can read ~1e-15
             instead of 0 at the rest state); good for plotting.
+        covariances : (n, 3, 3) float array, optional
+            ``self.covariances(U)`` when the caller has it already (used when ``exact`` is
+            False).
 
         Returns
         -------
@@ -426,9 +538,17 @@ class ArapSystem:
         U = np.asarray(U, dtype=np.float64)
         R = np.asarray(R, dtype=np.float64).reshape(self.n, 3, 3)
         if not exact:
+            S = self.covariances(U) if covariances is None else covariances
+            quad_u = 0.5 * float(np.einsum("ij,ij->", U, self.Q @ U))
+            kern = compiled_kernels()
+            if kern is not None:
+                quad, lin = kern.arap_energy_terms(np.ascontiguousarray(R),
+                                                   self.rest_covariance,
+                                                   np.ascontiguousarray(S, dtype=np.float64))
+                return float(0.5 * quad - lin + quad_u)
             e = (0.5 * np.einsum("nij,nij->", R @ self.rest_covariance, R)
-                 - np.einsum("nij,nji->", R, self.covariances(U))
-                 + 0.5 * float(np.einsum("ij,ij->", U, self.Q @ U)))
+                 - np.einsum("nij,nji->", R, S)
+                 + quad_u)
             return float(e)
         dt = U[self._head] - U[self._tail]
         Rd = np.einsum("tab,tb->ta", R[self._cell], self._rest_edges)

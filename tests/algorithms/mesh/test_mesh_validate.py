@@ -457,7 +457,8 @@ def corrupted_meshes(draw):
         elif kind == "fin":  # an extra face on an existing edge
             f = int(rng.integers(0, m))
             a, b = Fc[f, 0], Fc[f, 1]
-            V_list.append(((V[a] + V[b]) / 2 + rng.normal(size=3))[None])
+            Vc = np.vstack(V_list)  # a or b may be a copy made by an earlier "dupv"
+            V_list.append(((Vc[a] + Vc[b]) / 2 + rng.normal(size=3))[None])
             F_list.append(np.array([[a, b, nv]]))
             nv += 1
         elif kind == "flip":
