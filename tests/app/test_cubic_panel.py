@@ -99,3 +99,31 @@ def test_gauss_map_painting_changes_lambda_of_matching_normals(window, dialogs, 
     # the sphere shows the painted field
     sv = panel.gauss.sphere_values()
     assert np.nanmax(sv) > 1.0
+
+
+def test_lambda_brush_from_the_panel_paints_near_the_stroke_only(window, dialogs, qtbot):
+    panel = open_cubic(window)
+    panel.tool_buttons["lambda"].click()
+    assert window.viewport.handler is panel.lambda_brush
+    assert panel.show_combo.currentText() == "λ scale"
+    V = window.document.V
+    cam = np.array(window.viewport.plotter.camera.position)
+    v = int(np.argmin(((V - cam) ** 2).sum(axis=1)))
+    x, y = window.viewport.project(V[[v]])[0]
+    w = window.viewport.plotter.interactor
+    qtbot.mousePress(w, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
+                     QPoint(int(x), int(y)))
+    qtbot.mouseMove(w, QPoint(int(x) + 10, int(y)))
+    qtbot.mouseRelease(w, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
+                       QPoint(int(x) + 10, int(y)))
+    lam = window.document.state.fields["lambda_scale"]
+    changed = np.flatnonzero(lam != 1.0)
+    diag = np.linalg.norm(np.ptp(V, axis=0))
+    assert changed.size and np.linalg.norm(V[changed] - V[v], axis=1).max() < 0.2 * diag
+    panel.tool_buttons["camera"].click()
+    assert window.viewport.handler is None
+    # Clear painting is one undoable step
+    panel.clear_button.click()
+    assert "lambda_scale" not in window.document.state.fields
+    window.undo_stack.undo()
+    assert "lambda_scale" in window.document.state.fields

@@ -260,7 +260,7 @@ def test_inputs_and_faces_are_not_changed():
     assert [s.iteration for s in fixed_count] == [1, 2, 3] and fixed_count[-1].fraction == 1.0
 
 
-@pytest.mark.parametrize("name", ["spot_lowres.obj", "bob.obj"])
+@pytest.mark.parametrize("name", ["spot_lowres.obj", "bob.obj", "camelhead.off", "fandisk.off"])
 def test_l1_of_normals_falls_as_lambda_grows(name):
     m = read_mesh(shared_mesh(name))
     values = []
