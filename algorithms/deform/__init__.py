@@ -6,7 +6,7 @@ deformation with handles; ``cubic``: cubic (and polyhedral) stylization.
 
 from __future__ import annotations
 
-from . import arap, cubic
+from . import arap, cubic, progressive
 from .arap import ArapParams, ArapSystem, arap_iter, procrustes_rotations
 from .cubic import (
     STYLE_PRESETS,
@@ -18,10 +18,12 @@ from .cubic import (
     rotation_from_degrees,
     shrinkage,
 )
+from .progressive import ProgressiveCubic, ProgressiveParams, progressive_cubic_iter
 
 __all__ = [
     "arap", "cubic",
     "ArapSystem", "ArapParams", "arap_iter", "procrustes_rotations",
     "CubicParams", "CubicStylizer", "cubic_stylization_iter", "cubic_stylization",
-    "STYLE_PRESETS", "L1Prox", "shrinkage", "rotation_from_degrees",
+    "STYLE_PRESETS", "L1Prox", "shrinkage",
+    "progressive", "ProgressiveCubic", "ProgressiveParams", "progressive_cubic_iter", "rotation_from_degrees",
 ]  # fmt: skip

@@ -83,3 +83,10 @@ __all__ = [
     # samples
     "SAMPLES_DIR", "sample_path",
 ]  # fmt: skip
+
+# decimation with recorded collapses (progressive meshes); ``decimate`` is the submodule, its
+# function is ``decimate.decimate``
+from . import decimate  # noqa: E402
+from .decimate import CollapseRecord, Decimation  # noqa: E402
+
+__all__ += ["decimate", "Decimation", "CollapseRecord"]

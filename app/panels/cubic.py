@@ -8,6 +8,9 @@
   [0, 2], 1 = the slider's λ), a Gauss-map painter (the same field, painted by normal
   direction), a fix brush (painted region stays put), point handles (click, drag; Ctrl+click
   removes), and a plane brush (the painted region keeps its mean coordinate along an axis);
+* "Progressive meshes" (thesis Alg. 4) for big meshes: stylize a decimated copy with m triangles
+  and put the details back with fitted affine maps; switched on by itself for meshes above
+  ``AUTO_PROGRESSIVE_FACES`` triangles. The decimation is cached like the rest;
 * the finished run is one undoable command (the pattern of :mod:`app.panels.base`).
 """
 
@@ -19,6 +22,8 @@ from PySide6.QtWidgets import (QButtonGroup, QCheckBox, QComboBox, QDoubleSpinBo
                                QVBoxLayout)
 
 from algorithms.deform.cubic import CubicParams, CubicStylizer, rotation_from_degrees
+from algorithms.deform.progressive import ProgressiveCubic, ProgressiveParams
+from app.forms import ParamsForm
 from app.commands import StateCommand
 from app.gaussmap import GaussMapPainter
 from app.panels.base import MethodPanel
@@ -27,6 +32,7 @@ from app.tools import BrushSettings, FieldBrush, HandleTool
 LAMBDA_FIELD = "lambda_scale"
 FIXED_FIELD = "fixed"
 PLANE_FIELD = "plane"
+AUTO_PROGRESSIVE_FACES = 300_000
 
 
 def constraints_of(state, plane_axis: int):
@@ -75,6 +81,20 @@ class CubicPanel(MethodPanel):
     # -- widgets -------------------------------------------------------------------------------
     def _build_tools(self) -> None:
         lay: QVBoxLayout = self.body_layout
+        self.progressive_box = QGroupBox("Progressive meshes (for big meshes)")
+        self.progressive_box.setCheckable(True)
+        self.progressive_box.setChecked(False)
+        self.progressive_box.setToolTip(
+            "Stylize a simplified copy and put the details back (thesis Alg. 4): seconds instead "
+            "of minutes on meshes with millions of triangles. The simplification is computed "
+            "once and reused while you change λ. Fewer coarse triangles make it less cubic at "
+            "the same λ.")
+        pl = QVBoxLayout(self.progressive_box)
+        self.progressive_form = ParamsForm(ProgressiveParams)
+        pl.addWidget(self.progressive_form)
+        self.progressive_box.toggled.connect(lambda _on: self._on_params_changed(None))
+        self.progressive_form.changed.connect(self._on_params_changed)
+        lay.insertWidget(lay.indexOf(self.form) + 1, self.progressive_box)
         box = QGroupBox("Tools")
         v = QVBoxLayout(box)
         self.tool_group = QButtonGroup(self)
@@ -164,6 +184,14 @@ class CubicPanel(MethodPanel):
             brush.show()
 
     def _on_doc(self, what: str) -> None:
+        if what == "mesh":
+            st = self.window_.document.state
+            big = st is not None and len(st.F) > AUTO_PROGRESSIVE_FACES
+            self.progressive_box.setChecked(big)
+            if big:
+                self.status_label.setText(
+                    f"This mesh has {len(st.F):,} triangles: progressive meshes are on, so λ "
+                    "changes take about a second after a one-time preparation.")
         if what in ("fields", "mesh", "topology"):
             self._show_field(self.show_combo.currentIndex())
         if what in ("handles", "mesh", "topology"):
@@ -193,24 +221,36 @@ class CubicPanel(MethodPanel):
     # -- the method ------------------------------------------------------------------------------
     def build_steps(self, state, params):
         fixed, handles, plane = constraints_of(state, self._plane_axis)
+        prog = self._progressive  # read on the GUI thread in run()
         key = (id(state.V), id(state.F), fixed.tobytes(),
                None if handles is None else (handles[0].tobytes(), handles[1].tobytes()),
                None if plane is None else (plane[0].tobytes(), plane[1].tobytes(),
                                            plane[2].tobytes()),
-               params.normalize, params.pin_one_vertex)
+               params.normalize, params.pin_one_vertex,
+               None if prog is None else (prog.target_faces, prog.strategy, prog.tikhonov))
         if self._cache is not None and self._cache[0] == key:
-            stylizer = self._cache[1]
+            solver = self._cache[1]
+        elif prog is None:
+            solver = CubicStylizer(state.V, state.F, fixed=fixed, handles=handles,
+                                   coord_constraints=plane, normalize=params.normalize,
+                                   pin_one_vertex=params.pin_one_vertex)
         else:
-            stylizer = CubicStylizer(state.V, state.F, fixed=fixed, handles=handles,
-                                     coord_constraints=plane, normalize=params.normalize,
-                                     pin_one_vertex=params.pin_one_vertex)
-            self._cache = (key, stylizer)
+            solver = ProgressiveCubic(state.V, state.F, target_faces=prog.target_faces,
+                                      strategy=prog.strategy, tikhonov=prog.tikhonov,
+                                      fixed=fixed, handles=handles, coord_constraints=plane,
+                                      normalize=params.normalize,
+                                      pin_one_vertex=params.pin_one_vertex)
+        self._cache = (key, solver)
         scale = state.fields.get(LAMBDA_FIELD)
         lam_v = None if scale is None else params.lam * np.asarray(scale)
-        return stylizer.steps(params, lam_per_vertex=lam_v,
-                              rotation=rotation_from_degrees(params.rot_x, params.rot_y,
-                                                             params.rot_z))
+        rotation = rotation_from_degrees(params.rot_x, params.rot_y, params.rot_z)
+        if prog is None:
+            return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation)
+        return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation,
+                            preview_every=prog.preview_every)
 
     def run(self, live: bool = False) -> None:
         self._plane_axis = self.plane_axis.currentIndex()  # read on the GUI thread
+        self._progressive = (self.progressive_form.params() if self.progressive_box.isChecked()
+                             else None)
         super().run(live)

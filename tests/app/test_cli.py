@@ -155,3 +155,17 @@ def test_cubic_lambda_xyz_and_bad_values(tmp_path):
     assert d["params"]["per_axis"] and d["params"]["axis_factor_y"] == 0.0
     r = stylize3d("cubic", SAMPLES / "blob.obj", "-o", tmp_path / "x.obj", "--lambda", "-1")
     assert r.returncode == 5 and "at least 0" in r.stderr
+
+
+def test_cubic_progressive_faces(tmp_path):
+    out = tmp_path / "p.obj"
+    r = stylize3d("cubic", shared_mesh("bob.obj"), "-o", out, "--progressive-faces", "2000",
+                  "--json")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["progressive_faces"] == 2000
+    assert d["l1_normals_after"] < d["l1_normals_before"] - 0.03
+    assert read_mesh(out).F.shape == (10688, 3)
+    r = stylize3d("cubic", shared_mesh("bob.obj"), "-o", tmp_path / "q.obj",
+                  "--progressive-faces", "50000")
+    assert r.returncode == 5 and "larger than the mesh" in r.stderr

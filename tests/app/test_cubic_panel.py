@@ -127,3 +127,26 @@ def test_lambda_brush_from_the_panel_paints_near_the_stroke_only(window, dialogs
     assert "lambda_scale" not in window.document.state.fields
     window.undo_stack.undo()
     assert "lambda_scale" in window.document.state.fields
+
+
+def test_progressive_mode_runs_and_reuses_its_preprocessing(window, dialogs, qtbot):
+    panel = open_cubic(window)
+    assert not panel.progressive_box.isChecked()  # small mesh: off by default
+    V0 = window.document.V.copy()
+    F = window.document.F
+    panel.progressive_box.setChecked(True)
+    panel.progressive_form.editors["target_faces"].setValue(1500)
+    panel.form.editors["lam"].setValue(0.5)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.run_button.click()
+    from algorithms.deform.progressive import ProgressiveCubic
+
+    solver = panel._cache[1]
+    assert isinstance(solver, ProgressiveCubic)
+    assert l1_of_normals(window.document.V, F) < l1_of_normals(V0, F) - 0.01
+    np.testing.assert_array_equal(window.document.F, F)  # faces never change
+    window.undo_stack.undo()
+    panel.form.editors["lam"].setValue(0.3)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.run_button.click()
+    assert panel._cache[1] is solver  # λ changed: decimation reused

@@ -1,0 +1,671 @@
+"""Affine progressive meshes: cubic stylization of big meshes (thesis §5.3.2, Alg. 4).
+
+Pre-processing (once per mesh and constraint set, :class:`ProgressiveCubic`):
+
+1. ``V_c, F_c <- edge collapses(V, F, m)``: QSlim decimation to ``m`` triangles with every
+   collapse recorded (:func:`algorithms.mesh.decimate.decimate`).
+2. Per vertex split, the affine-fit weights (below) and a schedule of the splits in independent
+   batches (:class:`AffineSplits`).
+3. A :class:`~algorithms.deform.cubic.CubicStylizer` of the coarse mesh (its factorizations).
+
+Online (every λ, style, orientation, painted λ): run cubic stylization on the coarse mesh
+(Alg. 4 lines 3-6), then replay the vertex splits with affine maps (line 7).
+
+Affine vertex splits
+--------------------
+Collapse ``k`` merged ``p_j`` (removed) into ``p_i`` (kept) at ``p_c`` (the merged position);
+``N`` are the neighbours of the merged vertex just after the collapse and ``Q`` the ``3 x |N|``
+matrix of rest vectors ``p_n - p_c`` (rest positions of that level). At the split, with the
+current deformed positions ``~p_c``, ``~p_n`` (``~Q`` the deformed vectors), the linear part ``A``
+of the affine map is the regularized least-squares fit ::
+
+    A = argmin_A ||A Q - ~Q||_F^2 + ||A Gamma||_F^2 = ~Q Q^T (Q Q^T + Gamma Gamma^T)^-1
+
+(``Gamma``: the Tikhonov term, below) and the translation makes the merged vertex map exactly
+onto its deformed position (``t = ~p_c - A p_c``): this is the thesis's
+``~p_j - ~p_c = ~Q A^T (p_j - p_c)`` with ``A^T = Q^T (Q Q^T + Gamma Gamma^T)^-1``. Both
+endpoints are placed by the same map::
+
+    ~p_i = ~p_c + A (p_i - p_c),      ~p_j = ~p_c + A (p_j - p_c).
+
+Since ``A (p - p_c) = sum_n w_n (~p_n - ~p_c)`` with
+``w = Q^T (Q Q^T + Gamma Gamma^T)^-1 (p - p_c)``,
+the weights depend only on the rest mesh: they are computed once, for all splits at once
+(vectorized), and a split costs one weighted sum over its 1-ring online.
+
+Tikhonov regularization (the thesis: "if Q Q^T is singular, e.g. in planar regions"). With
+``Q Q^T = U diag(s) U^T`` (``s_max`` its largest eigenvalue), the penalty
+``(A - A_0) E (A - A_0)^T`` with ``E = Gamma Gamma^T = U diag(e) U^T``,
+``e_a = max(0, tikhonov * s_max - s_a)``, is added: eigenvalues below ``tikhonov * s_max`` are
+lifted to it, the others are left alone, so ::
+
+    A = (~Q Q^T + A_0 E) (Q Q^T + E)^-1,
+    A (p - p_c) = sum_n w_n (~p_n - ~p_c) + A_0 g,   g = E (Q Q^T + E)^-1 (p - p_c).
+
+``tikhonov`` is dimensionless (default 1e-6) and ``s_max`` is a squared ring size, so the
+regularization is scale-aware: it does not depend on the model's size or position, and it acts
+only where the ring is flat to within ``sqrt(tikhonov) = 1e-3`` of its extent (``Q Q^T``
+singular or nearly so: the fit's response along the ring's normal is undetermined or noise).
+Where it acts, the undetermined part is taken from ``A_0``, the least-squares *similarity*
+``s R`` of the ring (``R`` the Procrustes rotation of ``Q`` onto ``~Q`` via
+:func:`~algorithms.deform.arap.procrustes_rotations`, ``s = tr(R Q ~Q^T) / ||Q||^2``), computed
+online for the (few) regularized splits only. The thesis's plain Tikhonov pulls towards
+``A_0 = 0`` instead, which shrinks every re-inserted vertex's offset along its ring's normal --
+its detail -- at every level; measured on fandisk (CAD, flat faces, λ = 1, m = 2,000) the
+largest edge stretch of the result was 1.71 with ``A_0 = 0`` and tikhonov 1e-2, and 1.23 / 1.18
+/ 1.18 with the similarity prior and 1e-8 / 1e-6 / 1e-2 (direct full-resolution result 1.15,
+no regularization 1.36: noise amplified by the near-singular fits). Properties (tested):
+
+* identity, rotations, uniform scaling and translations of the coarse mesh are reproduced
+  exactly on every mesh (the prior is then the map itself);
+* general affine maps are reproduced exactly wherever no ring is flat to 1e-3 (no split
+  regularized: bob, armadillo, spot, camelhead at the tested sizes, whose rings have
+  ``s_min / s_max`` >= 1e-6); on meshes with flat regions (fandisk: 2,456 of 6,700 splits) a
+  shear costs about 1.6e-5 of the diagonal there (0 with ``tikhonov = 0``).
+
+Schedule: split ``k`` reads the current positions of ``c`` and ``N`` and writes ``i`` (= ``c``)
+and ``j``. The splits are grouped into *waves* (a longest-path layering of the read/write
+dependencies, in replay order: a split comes after every split that last wrote one of its
+inputs, and not before a replay-earlier split that reads the value it overwrites); all splits of
+a wave read first and then write, so each wave is a few NumPy operations. The result is
+identical (to round-off) to replaying the splits one by one (tested).
+
+Steps (:meth:`ProgressiveCubic.steps`, :func:`progressive_cubic_iter`): mapping coarse positions
+to the full mesh costs one replay (0.34 s at 1.07M triangles, measured), more than a coarse
+iteration, so the coarse iterations are streamed as full-resolution previews only every
+``preview_every`` iterations (default 10; 0 = none): those Steps carry ``V`` = the replayed fine
+positions of that coarse iterate and the coarse metrics. The last Step is always the
+full-resolution result of the converged coarse run (its iteration number is the coarse run's
+last; no earlier Step repeats it). :func:`progressive_cubic_iter` first yields an
+``iteration = 0`` Step with the input positions once pre-processing is done (its message says
+what the decimation did).
+
+Other choices:
+
+* Constraints (``fixed``, ``handles``, ``coord_constraints``) are kept through the decimation
+  (those vertices are never removed nor moved), so they act on the coarse mesh exactly and the
+  replay leaves them where the coarse solve put them.
+* Painted λ (``lam_per_vertex``, one value per input vertex) goes to the coarse mesh as the
+  area-weighted mean over the input vertices merged into each coarse vertex.
+* ``normalize`` / ``pin_one_vertex`` are the coarse stylizer's (see :mod:`.cubic`); the coarse
+  mesh has nearly the same bounding box, so λ keeps its meaning.
+* The faces are never changed: the output uses the input ``F``.
+
+Speed (``benchmarks/progressive.py``, igea Loop-subdivided to 1.07M triangles, λ = 0.2, 2 shared
+cores): pre-processing 89 s (m = 2,000) / 92 s (m = 20,000), of which decimation 82 / 85 s;
+online 0.72 s (51 coarse iterations) / 0.97 s (95), of which the replay 0.33 s (119 / 90
+waves); direct full-resolution stylization extrapolated to 59 / 81 s for the same iteration
+counts.
+
+Resolution (measured, λ = 0.2, thesis defaults otherwise): the replay keeps the coarse result's
+cubeness (the area-weighted mean L1 norm of the unit vertex normals of the full-resolution
+result equals the coarse one's to about 0.005), but cubic stylization itself is stiffer on
+coarser meshes (the thesis's Fig. 5.27 caveat), so a small ``m`` gives a less cubic result at
+the same λ. Bob (10.7k triangles): input 1.466, direct 1.290; m = 5.3k 1.311 (rigidly aligned RMS
+distance to the direct result 0.0030 of the diagonal, against 0.0130 for direct vs input);
+m = 2.7k 1.373 (0.0067). Armadillo (29k): input 1.489, direct 1.368; m = 14.6k 1.410 (0.0027);
+m = 7k 1.444 (0.0064); m = 3k 1.464 (0.011, and a 6 degree different overall turn). Raise λ or m
+to get closer to the direct result.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable, Iterator
+
+import numpy as np
+
+from ..errors import InvalidMeshError, ParameterError
+from ..mesh.decimate import STRATEGIES, Decimation, decimate
+from ..mesh.operators import barycentric_vertex_areas
+from ..params import param, validate_params
+from ..steps import Step, run_to_end
+from .arap import procrustes_rotations
+from .cubic import CubicParams, CubicStylizer
+
+__all__ = [
+    "ProgressiveParams",
+    "AffineSplits",
+    "ProgressiveCubic",
+    "progressive_cubic_iter",
+    "progressive_cubic",
+]
+
+
+@dataclass(frozen=True)
+class ProgressiveParams:
+    """Parameters of affine progressive meshes (pre-processing; the cubic ones are separate)."""
+
+    target_faces: int = param(
+        20000, label="Coarse triangles (m)", minimum=4, maximum=100_000_000, step=1000,
+        cli_aliases=("--coarse-faces",),
+        tooltip="Triangles of the coarse mesh that is stylized; the details are then put back. "
+                "Fewer run faster and keep details of a wider size range (the paper uses "
+                "20,000). Must be below the mesh's own triangle count.")
+    strategy: str = param(
+        "qslim", label="Decimation", choices=STRATEGIES, advanced=True,
+        tooltip="How the coarse mesh is made: qslim (quadric error, keeps the shape best) or "
+                "midpoint (shortest edges first).")
+    tikhonov: float = param(
+        1e-6, label="Tikhonov weight", minimum=0.0, maximum=1.0, step=1e-8, decimals=12,
+        log_scale=True, advanced=True,
+        tooltip="Regularization of the affine fit at each vertex split, relative to the size of "
+                "the vertex's neighbourhood. Only matters where the neighbourhood is flat; "
+                "there the fit follows the neighbourhood's rotation and scale.")
+    preview_every: int = param(
+        10, label="Preview every", minimum=0, maximum=100000, step=1,
+        tooltip="Show the full-resolution shape every this many coarse iterations while "
+                "running (0: only the final result). Each preview costs one replay of the "
+                "details.")
+
+
+# ------------------------------------------------------------------------------ affine splits
+def _next_involvement(dec: Decimation, verts: np.ndarray, after: np.ndarray):
+    """For queries (vertex, collapse k): the first collapse k'' > k that involves the vertex.
+
+    Returns
+    -------
+    nxt : (q,) int64, k'' or -1 (the vertex is a coarse vertex from level k+1 on).
+    role : (q,) int64, 0 if the vertex is ``kept`` at k'', 1 if ``removed`` (undefined if -1).
+    """
+    K = len(dec)
+    ev_v = np.concatenate([dec.kept, dec.removed])
+    ev_k = np.concatenate([np.arange(K), np.arange(K)])
+    ev_r = np.concatenate([np.zeros(K, np.int64), np.ones(K, np.int64)])
+    key = ev_v * (K + 1) + ev_k
+    o = np.argsort(key, kind="stable")
+    key, ev_v, ev_k, ev_r = key[o], ev_v[o], ev_k[o], ev_r[o]
+    q = verts * (K + 1) + after + 1
+    pos = np.searchsorted(key, q, side="left")
+    ok = pos < len(key)
+    pos_c = np.minimum(pos, max(len(key) - 1, 0))
+    ok &= ev_v[pos_c] == verts if len(key) else ok
+    nxt = np.where(ok, ev_k[pos_c] if len(key) else -1, -1)
+    role = np.where(ok, ev_r[pos_c] if len(key) else 0, 0)
+    return nxt, role
+
+
+class AffineSplits:
+    """The affine vertex splits of a :class:`~algorithms.mesh.decimate.Decimation` (precomputed).
+
+    Parameters
+    ----------
+    decimation : the recorded collapses.
+    tikhonov : dimensionless Tikhonov weight (eigenvalues of ``Q Q^T`` below ``tikhonov * s_max``
+        are lifted to it; module docstring).
+
+    Attributes
+    ----------
+    weights : (S, 2) float64, per ring entry (CSR of ``decimation.ring``) the weights of
+        ``~p_n - ~p_c`` for the kept and the removed endpoint.
+    regularized : (K,) bool, splits whose ring was flat enough for the Tikhonov term to act (their
+        similarity prior is computed online).
+    wave : (K,) int64, the batch (1-based) in which each split runs.
+    n_waves : int.
+    """
+
+    def __init__(self, decimation: Decimation, tikhonov: float = 1e-6):
+        if not (tikhonov >= 0 and np.isfinite(tikhonov)):
+            raise ParameterError("The Tikhonov weight must be a finite number >= 0.")
+        dec = decimation
+        self.decimation = dec
+        self.tikhonov = float(tikhonov)
+        K = len(dec)
+        self.K = K
+        ptr = dec.ring_ptr
+        cnt = np.diff(ptr)
+        if K and cnt.min() < 1:
+            raise InvalidMeshError("A recorded collapse has an empty 1-ring; the decimation "
+                                   "record is inconsistent.")
+        split_of = np.repeat(np.arange(K), cnt)  # split of every ring entry
+        ring = dec.ring
+        # producers (next involvement after k, i.e. the split that last wrote the value) and
+        # rest positions at level k + 1
+        prod, role = _next_involvement(dec, ring, split_of)
+        cprod, crole = _next_involvement(dec, dec.kept, np.arange(K))
+        f2c = dec.fine_to_coarse
+        rest = np.empty((len(ring), 3))
+        coarse = prod < 0
+        rest[coarse] = dec.V[f2c[ring[coarse]]]
+        kp = ~coarse & (role == 0)
+        rm = ~coarse & (role == 1)
+        rest[kp] = dec.kept_position[prod[kp]]
+        rest[rm] = dec.removed_position[prod[rm]]
+        # weights
+        q = rest - dec.merged_position[split_of]
+        M = np.zeros((K, 9))
+        if K:
+            M = np.add.reduceat((q[:, :, None] * q[:, None, :]).reshape(-1, 9), ptr[:-1], axis=0)
+        M = M.reshape(K, 3, 3)
+        D = np.stack([dec.kept_position - dec.merged_position,
+                      dec.removed_position - dec.merged_position], axis=2)  # (K, 3, 2)
+        Y, G, self.regularized = _regularized_solve(M, D, self.tikhonov)
+        self.weights = np.einsum("ea,eab->eb", q, Y[split_of]) if K else np.zeros((0, 2))
+        # the similarity prior of the regularized splits: their rest ring vectors and the
+        # offsets G D = E (Q Q^T + E)^-1 D that the prior's map multiplies
+        reg_ids = np.flatnonzero(self.regularized)
+        self._reg_index = np.full(K, -1, dtype=np.int64)
+        self._reg_index[reg_ids] = np.arange(len(reg_ids))
+        self._reg_g = G[reg_ids]  # (nr, 3, 2)
+        self._reg_q = [q[ptr[k]:ptr[k + 1]] for k in reg_ids]
+        # schedule
+        self.wave = _waves(dec, ring, ptr, prod, cprod)
+        self.n_waves = int(self.wave.max()) if K else 0
+        order = np.argsort(self.wave, kind="stable")
+        self._order = order
+        bounds = np.searchsorted(self.wave[order], np.arange(1, self.n_waves + 2))
+        self._wave_bounds = bounds
+        # ring entries regrouped by wave
+        seg_len = cnt[order]
+        ent = np.zeros(0, np.int64)
+        if K:
+            starts = np.repeat(ptr[order], seg_len)
+            local = np.arange(len(ring)) - np.repeat(np.cumsum(seg_len) - seg_len, seg_len)
+            ent = starts + local
+        self._ent_vertex = ring[ent]
+        self._ent_w = self.weights[ent]
+        self._ent_ptr = np.concatenate([[0], np.cumsum(seg_len)])
+        self._kept = dec.kept[order]
+        self._removed = dec.removed[order]
+        # per wave: the regularized splits (position in the wave), their entries and prior data
+        rs_local, re_rel, rq, rg, rs_ptr, re_ptr = [], [], [], [], [0], [0]
+        for w in range(self.n_waves):
+            s0, s1 = bounds[w], bounds[w + 1]
+            loc = np.flatnonzero(self.regularized[order[s0:s1]])
+            for t in loc:
+                k = order[s0 + t]
+                r = self._reg_index[k]
+                a, b = self._ent_ptr[s0 + t], self._ent_ptr[s0 + t + 1]
+                re_rel.append(np.arange(a, b) - self._ent_ptr[s0])
+                rq.append(self._reg_q[r])
+                rg.append(self._reg_g[r])
+            rs_local.append(loc)
+            rs_ptr.append(rs_ptr[-1] + len(loc))
+            re_ptr.append(re_ptr[-1] + int(sum(len(x) for x in re_rel[len(re_rel) - len(loc):])
+                                           if len(loc) else 0))
+        self._rs_local = np.concatenate(rs_local) if rs_local else np.zeros(0, np.int64)
+        self._re_rel = np.concatenate(re_rel) if re_rel else np.zeros(0, np.int64)
+        self._re_len = np.array([len(x) for x in re_rel], dtype=np.int64)
+        self._rq = np.concatenate(rq) if rq else np.zeros((0, 3))
+        self._rg = np.stack(rg) if rg else np.zeros((0, 3, 2))
+        self._rs_ptr = np.array(rs_ptr, dtype=np.int64)
+        self._re_ptr = np.array(re_ptr, dtype=np.int64)
+
+    def apply(self, coarse_positions) -> np.ndarray:
+        """Replay every split with its affine map, starting from deformed coarse positions.
+
+        Parameters
+        ----------
+        coarse_positions : (nc, 3) float, positions of the coarse vertices
+            (``decimation.V`` order).
+
+        Returns
+        -------
+        (n_fine, 3) float64 positions of the input mesh's vertices.
+        """
+        dec = self.decimation
+        Pc = np.asarray(coarse_positions, dtype=np.float64)
+        if Pc.shape != dec.V.shape:
+            raise ParameterError(f"The coarse positions must have shape {dec.V.shape}, got "
+                                 f"{Pc.shape}.")
+        P = np.empty((dec.n_fine, 3))
+        P[dec.coarse_to_fine] = Pc
+        b, ep = self._wave_bounds, self._ent_ptr
+        kept, removed, ev, ew = self._kept, self._removed, self._ent_vertex, self._ent_w
+        for w in range(self.n_waves):
+            s0, s1 = b[w], b[w + 1]
+            e0, e1 = ep[s0], ep[s1]
+            c = kept[s0:s1]
+            pc = P[c]
+            cnt = np.diff(ep[s0:s1 + 1])
+            diff = P[ev[e0:e1]] - np.repeat(pc, cnt, axis=0)
+            ww = ew[e0:e1]
+            starts = ep[s0:s1] - e0
+            sk = np.add.reduceat(diff * ww[:, 0:1], starts, axis=0)
+            sr = np.add.reduceat(diff * ww[:, 1:2], starts, axis=0)
+            r0, r1 = self._rs_ptr[w], self._rs_ptr[w + 1]
+            if r1 > r0:
+                q0, q1 = self._re_ptr[w], self._re_ptr[w + 1]
+                lens = self._re_len[r0:r1]
+                seg = np.concatenate([[0], np.cumsum(lens)[:-1]])
+                add = _similarity_offsets(self._rq[q0:q1], diff[self._re_rel[q0:q1]], seg,
+                                          self._rg[r0:r1])
+                loc = self._rs_local[r0:r1]
+                sk[loc] += add[:, :, 0]
+                sr[loc] += add[:, :, 1]
+            P[removed[s0:s1]] = pc + sr
+            P[c] = pc + sk
+        return P
+
+    def apply_sequential(self, coarse_positions) -> np.ndarray:
+        """The same replay, one split at a time through
+        :meth:`~algorithms.mesh.decimate.Decimation.replay` (slow; the reference)."""
+        dec = self.decimation
+        W, ptr = self.weights, dec.ring_ptr
+
+        def fn(rec, P):
+            k = rec.index
+            pc = P[rec.kept]
+            diff = P[rec.ring] - pc
+            w = W[ptr[k]:ptr[k + 1]]
+            pk, pr = pc + w[:, 0] @ diff, pc + w[:, 1] @ diff
+            r = self._reg_index[k]
+            if r >= 0:
+                add = _similarity_offsets(self._reg_q[r], diff, np.zeros(1, np.int64),
+                                          self._reg_g[r:r + 1])[0]
+                pk, pr = pk + add[:, 0], pr + add[:, 1]
+            return pk, pr
+
+        return dec.replay(coarse_positions, fn)[0]
+
+
+def _regularized_solve(M: np.ndarray, D: np.ndarray, tikhonov: float):
+    """Solve the Tikhonov-regularized normal equations of the affine fits (module docstring).
+
+    Parameters
+    ----------
+    M : (K, 3, 3) symmetric PSD ``Q Q^T``.
+    D : (K, 3, r) right-hand sides (rest offsets of the endpoints).
+    tikhonov : dimensionless weight.
+
+    Returns
+    -------
+    Y : (K, 3, r) ``(M + E)^-1 D`` with ``E = U diag(max(s, tikhonov s_max) - s) U^T``.
+    G : (K, 3, r) ``E (M + E)^-1 D`` (zero where ``E = 0``).
+    regularized : (K,) bool, where ``E != 0``.
+    """
+    K = len(M)
+    if K == 0:
+        return np.zeros(D.shape), np.zeros(D.shape), np.zeros(0, dtype=bool)
+    s, U = np.linalg.eigh(M)
+    s = np.maximum(s, 0.0)
+    floor = tikhonov * s[:, 2:3]
+    s_reg = np.maximum(s, floor)
+    reg = (s < floor).any(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(s_reg > 0, 1.0 / s_reg, 0.0)  # all-zero rings (never on a valid mesh)
+        frac = np.where(s_reg > 0, (s_reg - s) / s_reg, 0.0)
+    UtD = np.matmul(U.transpose(0, 2, 1), D)
+    Y = np.matmul(U, inv[:, :, None] * UtD)
+    G = np.matmul(U, frac[:, :, None] * UtD)
+    G[~reg] = 0.0
+    return Y, G, reg
+
+
+def _similarity_offsets(q_rest: np.ndarray, q_def: np.ndarray, starts: np.ndarray,
+                        g: np.ndarray) -> np.ndarray:
+    """``s R g`` per regularized split: ``s R`` the least-squares similarity ring -> deformed ring.
+
+    Parameters
+    ----------
+    q_rest, q_def : (E, 3) rest and deformed ring vectors of the splits, concatenated.
+    starts : (r,) first entry of each split.
+    g : (r, 3, 2) the offsets ``E (Q Q^T + E)^-1 D``.
+
+    Returns
+    -------
+    (r, 3, 2) float64.
+    """
+    S = np.add.reduceat((q_rest[:, :, None] * q_def[:, None, :]).reshape(-1, 9), starts,
+                        axis=0).reshape(-1, 3, 3)  # sum q q~^T
+    R = procrustes_rotations(S)  # maximizes tr(R S) = sum q~ . R q
+    nrm = np.add.reduceat((q_rest ** 2).sum(axis=1), starts)
+    scale = np.einsum("kab,kba->k", R, S) / np.where(nrm > 0, nrm, 1.0)
+    return scale[:, None, None] * np.matmul(R, g)
+
+
+def _waves(dec: Decimation, ring, ptr, prod, cprod) -> np.ndarray:
+    """Longest-path layering of the split dependencies in replay order (module docstring)."""
+    K = len(dec)
+    wave = [0] * K
+    readmax = {}
+    kept = dec.kept.tolist()
+    removed = dec.removed.tolist()
+    ring_l = ring.tolist()
+    prod_l = prod.tolist()
+    cprod_l = cprod.tolist()
+    ptr_l = ptr.tolist()
+    for k in range(K - 1, -1, -1):
+        c = kept[k]
+        p = cprod_l[k]
+        w = wave[p] if p >= 0 else 0
+        a, b = ptr_l[k], ptr_l[k + 1]
+        for e in range(a, b):
+            p = prod_l[e]
+            if p >= 0:
+                pw = wave[p]
+                if pw > w:
+                    w = pw
+        w += 1
+        r = readmax.get(c, 0)
+        if r > w:
+            w = r
+        for e in range(a, b):
+            x = ring_l[e]
+            if readmax.get(x, 0) < w:
+                readmax[x] = w
+        readmax[c] = 0
+        readmax[removed[k]] = 0
+        wave[k] = w
+    return np.array(wave, dtype=np.int64)
+
+
+# ------------------------------------------------------------------------------ driver
+def _constraint_vertices(n: int, fixed, handles, coord_constraints):
+    """Validate the constraints (the stylizer re-checks them) and return the vertices they use."""
+    used = []
+    if fixed is not None:
+        used.append(np.asarray(fixed, dtype=np.int64).reshape(-1))
+    if handles is not None:
+        idx, _ = handles
+        used.append(np.asarray(idx, dtype=np.int64).reshape(-1))
+    if coord_constraints is not None:
+        used.append(np.asarray(coord_constraints[0], dtype=np.int64).reshape(-1))
+    ids = np.unique(np.concatenate(used)) if used else np.zeros(0, np.int64)
+    if ids.size and (ids.min() < 0 or ids.max() >= n):
+        raise ParameterError(f"Some constrained vertices do not exist (the mesh has {n} "
+                             f"vertices).")
+    return ids
+
+
+class ProgressiveCubic:
+    """Cubic stylization through an affine progressive mesh (thesis Alg. 4), precomputed once.
+
+    Construction does the pre-processing (decimation, split weights and schedule, the coarse
+    stylizer's factorizations); :meth:`stylize` / :meth:`steps` then run for any λ, style,
+    orientation or painted λ without redoing it.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 input positions.
+    F : (m, 3) int64 triangles (manifold; never changed).
+    target_faces : int, triangles of the coarse mesh (``m`` of Alg. 4), below ``len(F)``.
+    strategy : decimation strategy ("qslim" or "midpoint").
+    tikhonov : dimensionless Tikhonov weight of the affine fits (module docstring).
+    fixed, handles, coord_constraints : as :class:`~algorithms.deform.cubic.CubicStylizer`, in
+        input vertex ids; these vertices are kept in the coarse mesh.
+    normalize, pin_one_vertex, backend : passed to the coarse CubicStylizer.
+
+    Attributes
+    ----------
+    decimation : :class:`~algorithms.mesh.decimate.Decimation`.
+    splits : :class:`AffineSplits`.
+    stylizer : the coarse :class:`~algorithms.deform.cubic.CubicStylizer`.
+    timings : dict of pre-processing seconds: ``decimate``, ``splits``, ``stylizer``, ``total``.
+    notes : plain-language remarks (e.g. the decimation stopped early).
+    """
+
+    def __init__(self, V, F, *, target_faces: int = 20000, strategy: str = "qslim",
+                 tikhonov: float = 1e-6, fixed=None, handles=None, coord_constraints=None,
+                 normalize: bool = True, pin_one_vertex: bool = True, backend: str = "auto"):
+        t0 = time.perf_counter()
+        V = np.array(V, dtype=np.float64, copy=True)
+        F = np.asarray(F)
+        if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
+            raise InvalidMeshError("Cubic stylization needs a triangle mesh with at least one "
+                                   "triangle.")
+        F = np.ascontiguousarray(F, dtype=np.int64)
+        if not (tikhonov >= 0 and np.isfinite(tikhonov)):
+            raise ParameterError("The Tikhonov weight must be a finite number >= 0.")
+        n = len(V)
+        keep = _constraint_vertices(n, fixed, handles, coord_constraints)
+        self.V, self.F, self.n = V, F, n
+        self.decimation = dec = decimate(V, F, target_faces, strategy=strategy, keep=keep)
+        t1 = time.perf_counter()
+        self.splits = AffineSplits(dec, tikhonov)
+        t2 = time.perf_counter()
+        f2c = dec.fine_to_coarse
+        c_fixed = None if fixed is None else f2c[np.asarray(fixed, dtype=np.int64).reshape(-1)]
+        c_handles = None
+        if handles is not None:
+            idx, tgt = handles
+            c_handles = (f2c[np.asarray(idx, dtype=np.int64).reshape(-1)], tgt)
+        c_coord = None
+        if coord_constraints is not None:
+            ci, ca, cv = coord_constraints
+            c_coord = (f2c[np.asarray(ci, dtype=np.int64).reshape(-1)], ca, cv)
+        self.stylizer = CubicStylizer(dec.V, dec.F, fixed=c_fixed, handles=c_handles,
+                                      coord_constraints=c_coord, normalize=normalize,
+                                      pin_one_vertex=pin_one_vertex, backend=backend)
+        t3 = time.perf_counter()
+        # painted lambda: area-weighted mean over each coarse vertex's cluster
+        self.clusters = dec.clusters()
+        area = barycentric_vertex_areas(V, F)
+        nc = len(dec.V)
+        self._cluster_area = np.bincount(self.clusters, weights=area, minlength=nc)
+        self._area = area
+        t4 = time.perf_counter()
+        self.timings = {"decimate": t1 - t0, "splits": t2 - t1, "stylizer": t3 - t2,
+                        "total": t4 - t0}
+        self.notes = list(dec.notes)
+
+    @property
+    def n_coarse_faces(self) -> int:
+        """Triangles of the coarse mesh."""
+        return len(self.decimation.F)
+
+    def coarse_lambda(self, lam_per_vertex) -> np.ndarray:
+        """Per-vertex λ (n,) of the input mapped to the coarse mesh (nc,) (area-weighted means)."""
+        lam = np.asarray(lam_per_vertex, dtype=np.float64).reshape(-1)
+        if lam.shape != (self.n,):
+            raise ParameterError(f"Per-vertex λ needs one value per vertex ({self.n}), got "
+                                 f"{lam.size}.")
+        if (lam < 0).any() or not np.isfinite(lam).all():
+            raise ParameterError("Per-vertex λ must be finite and non-negative.")
+        nc = len(self.decimation.V)
+        num = np.bincount(self.clusters, weights=lam * self._area, minlength=nc)
+        cnt = np.bincount(self.clusters, weights=lam, minlength=nc)
+        size = np.bincount(self.clusters, minlength=nc)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = np.where(self._cluster_area > 0, num / self._cluster_area,
+                           cnt / np.maximum(size, 1))
+        return out
+
+    def prolong(self, coarse_positions) -> np.ndarray:
+        """Affine vertex splits (Alg. 4 line 7): coarse positions (nc, 3) -> input ones (n, 3)."""
+        return self.splits.apply(coarse_positions)
+
+    def steps(self, params: CubicParams = CubicParams(), *, lam_per_vertex=None, lam_axes=None,
+              rotation=None, style_matrix=None, preview_every: int = 10) -> Iterator[Step]:
+        """Stylize the coarse mesh and replay the splits, as Steps (module docstring).
+
+        Parameters
+        ----------
+        params : CubicParams.
+        lam_per_vertex : (n,) float, optional, painted λ on the input mesh.
+        lam_axes, rotation, style_matrix : as :meth:`CubicStylizer.steps`.
+        preview_every : int, yield a full-resolution preview every this many coarse iterations
+            (0: only the final Step).
+
+        Yields
+        ------
+        Step with ``V`` (n, 3): previews, then the final full-resolution result. ``metrics``
+        are the coarse run's (``energy``, ``arap``, ``l1``, ``displacement``, ...) plus
+        ``replay_seconds`` on the final Step.
+        """
+        validate_params(params)
+        preview_every = int(preview_every)
+        if preview_every < 0:
+            raise ParameterError("'Preview every' must be 0 or a positive number of iterations.")
+        lam_c = None if lam_per_vertex is None else self.coarse_lambda(lam_per_vertex)
+        prev = None
+        for st in self.stylizer.steps(params, lam_per_vertex=lam_c, lam_axes=lam_axes,
+                                      rotation=rotation, style_matrix=style_matrix):
+            if prev is not None and preview_every and prev.iteration % preview_every == 0:
+                yield Step(iteration=prev.iteration, total=prev.total,
+                           V=self.prolong(prev.V), metrics=dict(prev.metrics),
+                           message=f"coarse {prev.message} (full-resolution preview)")
+            prev = st
+        t = time.perf_counter()
+        Vf = self.prolong(prev.V)
+        metrics = dict(prev.metrics)
+        metrics["replay_seconds"] = time.perf_counter() - t
+        yield Step(iteration=prev.iteration, total=prev.total, V=Vf, metrics=metrics,
+                   message=f"converged after {prev.iteration} coarse iterations on "
+                           f"{self.n_coarse_faces:,} triangles; details restored on "
+                           f"{len(self.F):,} triangles")
+
+    def stylize(self, params: CubicParams = CubicParams(), *, lam_per_vertex=None,
+                lam_axes=None, rotation=None, style_matrix=None,
+                callback: Callable[[Step], None] | None = None) -> np.ndarray:
+        """Run :meth:`steps` to the end (no previews) and return the (n, 3) stylized positions.
+
+        ``callback(step)`` receives every coarse iteration's Step (coarse positions,
+        ``V`` (nc, 3)) and then the final full-resolution Step.
+        """
+        validate_params(params)
+        lam_c = None if lam_per_vertex is None else self.coarse_lambda(lam_per_vertex)
+        last = run_to_end(self.stylizer.steps(params, lam_per_vertex=lam_c, lam_axes=lam_axes,
+                                              rotation=rotation, style_matrix=style_matrix),
+                          callback)
+        Vf = self.prolong(last.V)
+        if callback is not None:
+            callback(Step(iteration=last.iteration, total=last.total, V=Vf,
+                          metrics=dict(last.metrics), message="details restored"))
+        return Vf
+
+
+def progressive_cubic_iter(V, F, params: CubicParams = CubicParams(),
+                           progressive: ProgressiveParams = ProgressiveParams(), *,
+                           lam_per_vertex=None, lam_axes=None, fixed=None, handles=None,
+                           coord_constraints=None, rotation=None,
+                           style_matrix=None) -> Iterator[Step]:
+    """Fast cubic stylization (thesis Alg. 4) as Steps.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 input positions (not modified).
+    F : (m, 3) int64 triangles (the output uses the same F).
+    params : CubicParams (λ, style, ADMM settings, stopping).
+    progressive : ProgressiveParams (coarse triangle count, decimation, Tikhonov, previews).
+    lam_per_vertex, lam_axes, fixed, handles, coord_constraints, rotation, style_matrix : as
+        :func:`~algorithms.deform.cubic.cubic_stylization_iter` (input vertex ids).
+
+    Yields
+    ------
+    Step: ``iteration = 0`` with the input positions once pre-processing is done, then
+    full-resolution previews every ``progressive.preview_every`` coarse iterations, then the
+    final result (see :meth:`ProgressiveCubic.steps`).
+    """
+    validate_params(params)
+    validate_params(progressive)
+    pc = ProgressiveCubic(V, F, target_faces=progressive.target_faces,
+                          strategy=progressive.strategy, tikhonov=progressive.tikhonov,
+                          fixed=fixed, handles=handles, coord_constraints=coord_constraints,
+                          normalize=params.normalize, pin_one_vertex=params.pin_one_vertex)
+    msg = (f"pre-processing done in {pc.timings['total']:.1f} s: {len(pc.F):,} -> "
+           f"{pc.n_coarse_faces:,} triangles")
+    if pc.notes:
+        msg += ". " + " ".join(pc.notes)
+    yield Step(iteration=0, total=None, V=pc.V.copy(),
+               metrics={"preprocess_seconds": pc.timings["total"]}, message=msg)
+    yield from pc.steps(params, lam_per_vertex=lam_per_vertex, lam_axes=lam_axes,
+                        rotation=rotation, style_matrix=style_matrix,
+                        preview_every=progressive.preview_every)
+
+
+def progressive_cubic(V, F, params: CubicParams = CubicParams(),
+                      progressive: ProgressiveParams = ProgressiveParams(), **kwargs) -> np.ndarray:
+    """Run :func:`progressive_cubic_iter` to the end and return the (n, 3) stylized positions."""
+    return run_to_end(progressive_cubic_iter(V, F, params, progressive, **kwargs)).V
