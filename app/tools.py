@@ -174,3 +174,75 @@ class HandleTool(QObject):
         self.window_.undo_stack.push(StateCommand(self.window_.document, st,
                                                   st.with_handles(handles), text))
         self.changed.emit()
+
+
+class StampBrush(QObject):
+    """Stamps fixed values into several per-vertex fields at once (no falloff): every vertex
+    within the brush radius gets ``values()`` (e.g. the three angles of a local cube frame);
+    with ``settings.erase`` it gets NaN ("not set"). One stroke is one undoable command."""
+
+    changed = Signal()
+
+    def __init__(self, window: "MainWindow", fields: tuple[str, ...], values: Callable[[], tuple],
+                 label: str, settings: BrushSettings | None = None):
+        super().__init__(window)
+        self.window_ = window
+        self.fields = fields
+        self.values = values
+        self.label = label
+        self.settings = settings or BrushSettings()
+        self._before = None
+        self._arrays: list[np.ndarray] | None = None
+        self._touched: np.ndarray | None = None
+
+    def mask(self) -> np.ndarray:
+        """(n,) bool: vertices where the fields are set (not NaN)."""
+        st = self.window_.document.state
+        if st is None:
+            return np.zeros(0, bool)
+        a = st.fields.get(self.fields[0])
+        return np.zeros(len(st.V), bool) if a is None else np.isfinite(a)
+
+    def press(self, hit: PickResult) -> bool:
+        doc = self.window_.document
+        if doc.is_empty or self.window_.runner.busy:
+            return False
+        st = doc.state
+        self._before = st
+        n = len(st.V)
+        self._arrays = [np.array(st.fields[f]) if f in st.fields else np.full(n, np.nan)
+                        for f in self.fields]
+        self._touched = np.zeros(n, bool)
+        self._dab(hit)
+        return True
+
+    def drag(self, hit: PickResult | None) -> None:
+        if hit is not None and self._arrays is not None:
+            self._dab(hit)
+
+    def _dab(self, hit: PickResult) -> None:
+        V = self.window_.document.V
+        diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+        r = max(self.settings.radius * diag, 1e-12)
+        near = ((V - hit.position) ** 2).sum(axis=1) < r * r
+        vals = (np.nan,) * len(self.fields) if self.settings.erase else tuple(self.values())
+        for arr, v in zip(self._arrays, vals):
+            arr[near] = v
+        self._touched |= near
+        self.window_.viewport.show_field(self.fields[0] + "_mask",
+                                         np.isfinite(self._arrays[0]).astype(float), "Purples",
+                                         (0.0, 1.0))
+
+    def release(self) -> None:
+        if self._arrays is None:
+            return
+        before, arrays = self._before, self._arrays
+        self._arrays = self._before = None
+        if not self._touched.any():
+            return
+        after = before
+        for f, arr in zip(self.fields, arrays):
+            after = after.with_field(f, None if np.isnan(arr).all() else arr)
+        self.window_.undo_stack.push(StateCommand(self.window_.document, before, after,
+                                                  f"Paint {self.label}"))
+        self.changed.emit()

@@ -21,7 +21,15 @@ vertices). For each mesh, with the thesis defaults (lambda 0.2, stop at relative
 The first line reports the one-off cost of the compiled kernels (Numba import + cache load, or
 compilation when the cache is cold).
 
-Usage: .venv/bin/python benchmarks/cubic.py [--lam 0.2] [--repeat 3] [--no-numpy] [mesh names...]
+The last line times per-vertex local frames (``frames=``, §5.4) on bumpy20k: ms per iteration of
+a fixed-length run (``--frames-iterations``, no stopping rule, so all runs do the same number of
+outer iterations) without frames, with identity frames (the same ADMM work: the frames' own
+overhead) and with two regions (frames turned 45 degrees about y where y > median; a different
+problem, so a different ADMM iteration count, shown as inner its/vertex), and the ratios to the
+run without frames. ``--no-frames`` skips it.
+
+Usage: .venv/bin/python benchmarks/cubic.py [--lam 0.2] [--repeat 3] [--no-numpy] [--no-frames]
+       [--frames-iterations 30] [mesh names...]
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -107,12 +116,42 @@ def timed_run(st: CubicStylizer, params: CubicParams, repeat: int) -> tuple[int,
     return n_it, float(np.median(times)), V
 
 
+def frames_line(params: CubicParams, iterations: int, repeat: int) -> str:
+    """ms/iteration on bumpy20k without frames, with identity frames and with two regions."""
+    from algorithms.deform.cubic import rotation_from_degrees
+
+    V, F = load("bumpy20k")
+    st = CubicStylizer(V, F)
+    p = replace(params, max_iterations=iterations, rel_displacement_tol=0.0)
+    n = st.n
+    upper = V[:, 1] > np.median(V[:, 1])
+    cases = {
+        "none": None,
+        "identity": np.tile(np.eye(3), (n, 1, 1)),
+        "two regions": np.where(upper[:, None, None], rotation_from_degrees(0, 45, 0), np.eye(3)),
+    }
+    ms, inner = {}, {}
+    for name, frames in cases.items():
+        steps = list(st.steps(p, frames=frames))
+        inner[name] = float(np.mean([s.metrics["admm_iterations"] for s in steps]))
+        ms[name] = 1e3 * median_seconds(lambda: list(st.steps(p, frames=frames)),
+                                        repeat) / iterations
+    base = ms["none"]
+    parts = [f"{name} {ms[name]:.2f} ms/it (x{ms[name] / base:.2f}, {inner[name]:.2f} its/vertex)"
+             for name in cases]
+    return (f"frames on bumpy20k ({n} V, {iterations} iterations, "
+            f"{'kernel' if compiled_kernels() is not None else 'NumPy'} path): " + "; ".join(parts))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("meshes", nargs="*", default=DEFAULT)
     ap.add_argument("--lam", type=float, default=0.2)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-numpy", action="store_true", help="skip the NumPy-path run")
+    ap.add_argument("--no-frames", action="store_true", help="skip the local-frames line")
+    ap.add_argument("--frames-iterations", type=int, default=30,
+                    help="outer iterations of the local-frames runs (default 30)")
     args = ap.parse_args()
     params = CubicParams(lam=args.lam)
 
@@ -167,6 +206,8 @@ def main() -> None:
               f"{1e3 * per_ours:>8.2f}{1e3 * sp_['local'] / n_it:>8.2f}"
               f"{1e3 * sp_['global'] / n_it:>8.2f}{1e3 * sp_['other'] / n_it:>8.2f}"
               f"{numpy_ms:>12.2f}{1e3 * per_peer:>10.2f}{per_ours / per_peer:>7.2f}")
+    if not args.no_frames:
+        print(frames_line(params, args.frames_iterations, args.repeat))
 
 
 if __name__ == "__main__":

@@ -14,6 +14,14 @@ Energy (Eq. 5.1, with the controls of §5.4 and the style matrix of §5.6.1)::
   :func:`rotation_from_degrees`) orients the cube: the norm is measured in that frame,
   ``||B Q^T R_i n_i||_1``. This equals rotating the mesh by ``Q^T``, stylizing, and rotating
   back (tested), which is what Fig. 5.14 does by rotating the input.
+* ``frames`` ((n, 3, 3) rotations, columns = vertex ``i``'s cube axes) are per-vertex
+  orientations, the thesis's ``n_i^local`` (§5.4, Fig. 5.23: different cube orientations for
+  different parts): the term at vertex ``i`` is ``lam_i a_i ||B Q_i^T R_i n_i||_1``. ``rotation``
+  is the special case ``Q_i = Q`` (tested to agree). **When both are given, the frames take
+  precedence**: ``rotation`` and ``rot_x/y/z`` are then ignored (to combine them, pass
+  ``Q @ Q_i``: frames given in the rotated cube's coordinates). Frames must be rotations:
+  finite, orthonormal to 1e-6, determinant +1 (a reflection would give the same L1 ball but is
+  refused as a likely mistake in the input). Progressive meshes (Alg. 4) do not take frames yet.
 
 Local step (§5.3.1), for every vertex at once, scaled-form ADMM on ``z = R_i n_i``. For a
 diagonal style matrix (cube, per-axis lambda) it runs as one compiled loop
@@ -28,6 +36,15 @@ shrinking set of not-yet-converged vertices. Both do, per vertex::
     rho *= tau, u /= tau  if r > mu s;  rho /= tau, u *= tau  if s > mu r   (Boyd et al. §3.4.1)
     stop when r < sqrt(3) eps_abs + eps_rel max(||R n_i||, ||z||)
           and s < sqrt(3) eps_abs + eps_rel ||rho u||   (Boyd et al. §3.3.1 with p = n = 3)
+
+With local frames the ADMM variable is ``z = Q_i^T R n_i`` (``z``, ``u`` live in the local frame;
+the L1 term is ``||B z||_1``): the R-step target becomes ``Q_i (z - u)``, i.e. Procrustes of
+``S_i + rho n_i (Q_i (z - u))^T`` (``tr(R n (Q y)^T) = (Q^T R n) . y``), the z-step is the same
+prox applied to ``Q_i^T R n_i + u``, and the u-step and the residuals are computed in the local
+frame (``||Q_i^T R n_i|| = ||R n_i||``, so the stopping test and the rho adaptation read the same
+numbers). ``rotation`` instead folds ``Q`` into the style matrix (``B Q^T``, world-frame z); the
+two agree up to round-off. With a diagonal B the frames run in the compiled kernel (no frames:
+unchanged code, same bits); otherwise in the NumPy loop.
 
 ``z``, ``u`` and ``rho`` start at 0, 0 and ``rho0`` and are warm-started per vertex across outer
 iterations. Vertices with ``lam_i a_i = 0`` take the plain ARAP rotation (the exact minimizer).
@@ -122,6 +139,7 @@ __all__ = [
     "shrinkage",
     "rotation_from_degrees",
     "admm_local_step",
+    "validate_frames",
     "cubic_stylization_iter",
     "cubic_stylization",
 ]
@@ -481,7 +499,8 @@ class AdmmState:
 
 
 def admm_local_step(S: np.ndarray, normals: np.ndarray, lam_a: np.ndarray, prox: L1Prox,
-                    state: AdmmState, params: CubicParams) -> tuple[np.ndarray, np.ndarray]:
+                    state: AdmmState, params: CubicParams,
+                    frames: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The local step of cubic stylization for all vertices (thesis §5.3.1, Eq. 5.4-5.9).
 
     Parameters
@@ -490,8 +509,12 @@ def admm_local_step(S: np.ndarray, normals: np.ndarray, lam_a: np.ndarray, prox:
     normals : (n, 3) unit normals of the input (the vectors inside the L1 norm).
     lam_a : (n,) ``lam_i * a_i``; vertices with 0 take the plain ARAP rotation.
     prox : L1Prox of the (weighted, oriented) style matrix.
-    state : AdmmState, updated in place (warm start).
+    state : AdmmState, updated in place (warm start); ``z``, ``u`` in the local frames when
+        ``frames`` is given.
     params : CubicParams (rho0 is not used here; eps_abs, eps_rel, mu, tau, admm_max_iter are).
+    frames : (n, 3, 3) rotations, optional, per-vertex local frames (columns = cube axes; see
+        :func:`validate_frames`): the L1 term becomes ``||B Q_i^T R_i n_i||_1``. Not validated
+        here.
 
     Returns
     -------
@@ -507,6 +530,8 @@ def admm_local_step(S: np.ndarray, normals: np.ndarray, lam_a: np.ndarray, prox:
     n = len(S)
     R = np.empty((n, 3, 3))
     iters = np.zeros(n, dtype=np.int64)
+    if frames is not None:
+        frames = np.ascontiguousarray(frames, dtype=np.float64)
     use = (lam_a > 0) & (np.abs(normals).sum(axis=1) > 0)
     kern = compiled_kernels() if prox.diagonal is not None else None
     if kern is not None:
@@ -521,7 +546,7 @@ def admm_local_step(S: np.ndarray, normals: np.ndarray, lam_a: np.ndarray, prox:
             np.ascontiguousarray(lam_a, dtype=np.float64), use,
             np.ascontiguousarray(prox.diagonal, dtype=np.float64),
             state.z, state.u, state.rho, float(params.eps_abs), float(params.eps_rel),
-            float(params.mu), float(params.tau), int(params.admm_max_iter), R, iters)
+            float(params.mu), float(params.tau), int(params.admm_max_iter), R, iters, frames)
         return R, iters
     plain = ~use
     if plain.any():
@@ -533,9 +558,16 @@ def admm_local_step(S: np.ndarray, normals: np.ndarray, lam_a: np.ndarray, prox:
             break
         z, u, rho = state.z[active], state.u[active], state.rho[active]
         nn = normals[active]
-        M = S[active] + rho[:, None, None] * nn[:, :, None] * (z - u)[:, None, :]
-        Ri = procrustes_rotations(M)
-        Rn = np.einsum("kab,kb->ka", Ri, nn)
+        if frames is None:
+            M = S[active] + rho[:, None, None] * nn[:, :, None] * (z - u)[:, None, :]
+            Ri = procrustes_rotations(M)
+            Rn = np.einsum("kab,kb->ka", Ri, nn)
+        else:  # z, u in the local frames: target Q (z - u), z-step on Q^T R n
+            Qa = frames[active]
+            y = np.einsum("kab,kb->ka", Qa, z - u)
+            M = S[active] + rho[:, None, None] * nn[:, :, None] * y[:, None, :]
+            Ri = procrustes_rotations(M)
+            Rn = np.einsum("kba,kb->ka", Qa, np.einsum("kab,kb->ka", Ri, nn))
         z_new = prox(Rn + u, lam_a[active] / rho)
         u = u + Rn - z_new
         r = np.linalg.norm(Rn - z_new, axis=1)
@@ -557,6 +589,65 @@ def admm_local_step(S: np.ndarray, normals: np.ndarray, lam_a: np.ndarray, prox:
 
 
 # ------------------------------------------------------------------------------ driver
+FRAME_TOLERANCE = 1e-6
+"""Largest entry of ``|Q_i^T Q_i - I|`` accepted for a local frame (whose determinant must then
+be +1, not -1)."""
+
+
+def validate_frames(frames, n: int) -> np.ndarray:
+    """Check per-vertex local frames and return them as a C-contiguous (n, 3, 3) float64 array.
+
+    Parameters
+    ----------
+    frames : (n, 3, 3) array-like, rotation matrices (columns = the cube axes at each vertex).
+    n : int, number of vertices.
+
+    Raises
+    ------
+    ParameterError
+        Wrong shape, NaN / infinity, columns not orthonormal to :data:`FRAME_TOLERANCE`, or a
+        reflection (determinant -1).
+    """
+    try:
+        Q = np.array(frames, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ParameterError("Local frames must be an array of numbers: one 3×3 rotation "
+                             "matrix per vertex.") from None
+    if Q.shape != (n, 3, 3):
+        raise ParameterError(f"Local frames need one 3×3 rotation matrix per vertex, shape "
+                             f"({n}, 3, 3); got shape {Q.shape}.")
+
+    def which(bad: np.ndarray, singular: str, plural: str) -> str:
+        idx = np.flatnonzero(bad)
+        if idx.size == 1:
+            return f"The local frame of vertex {idx[0]} {singular}"
+        return f"The local frames of {idx.size} vertices (the first is vertex {idx[0]}) {plural}"
+
+    bad = ~np.isfinite(Q.reshape(n, 9)).all(axis=1)
+    if bad.any():
+        raise ParameterError(which(bad, "has", "have") + " NaN or infinite entries.")
+    cols = [Q[:, :, k] for k in range(3)]
+    err = np.zeros(n)  # max |Q^T Q - I| per frame, from the six column dot products
+    for a in range(3):
+        for b in range(a, 3):
+            np.maximum(err, np.abs((cols[a] * cols[b]).sum(axis=1) - (a == b)), out=err)
+    bad = err > FRAME_TOLERANCE
+    if bad.any():
+        raise ParameterError(
+            which(bad, "is not a rotation", "are not rotations") + ": the columns are not "
+            f"unit length and perpendicular (off by up to {err.max():.1e}; allowed "
+            f"{FRAME_TOLERANCE:g}). Orthonormalize the frames first.")
+    # orthonormal to 1e-6 leaves det = +-(1 +- 2e-6): the sign tells rotation from reflection
+    det = (cols[0] * np.cross(cols[1], cols[2])).sum(axis=1)
+    bad = det < 0.0
+    if bad.any():
+        raise ParameterError(
+            which(bad, "is a reflection (determinant -1), not a rotation",
+                  "are reflections (determinant -1), not rotations")
+            + ". Negate one axis (column) of each reflection.")
+    return np.ascontiguousarray(Q)
+
+
 def _normalize_handles(handles, n: int):
     if handles is None:
         return np.zeros(0, np.int64), np.zeros((0, 3))
@@ -690,8 +781,13 @@ class CubicStylizer:
         return out
 
     def style_prox(self, params: CubicParams, *, lam_axes=None, rotation=None,
-                   style_matrix=None) -> L1Prox:
-        """The z-step operator for the weighted, oriented style matrix ``diag(s) B Q^T``."""
+                   style_matrix=None, frames=None) -> L1Prox:
+        """The z-step operator for the weighted, oriented style matrix ``diag(s) B Q^T``.
+
+        With ``frames`` (not None) the orientation is per vertex and handled by the local step:
+        ``rotation`` and ``params.rot_x/y/z`` are ignored and the operator is for
+        ``diag(s) B`` (the frames themselves are not used or checked here).
+        """
         B = np.asarray(STYLE_PRESETS[params.style] if style_matrix is None else style_matrix,
                        dtype=np.float64)
         if B.ndim != 2 or B.shape[1] != 3 or len(B) == 0:
@@ -711,6 +807,8 @@ class CubicStylizer:
         if (s < 0).any() or not np.isfinite(s).all():
             raise ParameterError("Per-axis λ factors must be finite and non-negative.")
         B = s[:, None] * B
+        if frames is not None:  # the frames take precedence over any global orientation
+            return L1Prox(B)
         if rotation is None and (params.rot_x or params.rot_y or params.rot_z):
             rotation = rotation_from_degrees(params.rot_x, params.rot_y, params.rot_z)
         if rotation is not None:
@@ -721,7 +819,7 @@ class CubicStylizer:
         return L1Prox(B)
 
     def steps(self, params: CubicParams = CubicParams(), *, lam_per_vertex=None, lam_axes=None,
-              rotation=None, style_matrix=None) -> Iterator[Step]:
+              rotation=None, style_matrix=None, frames=None) -> Iterator[Step]:
         """Run Alg. 3, one :class:`~algorithms.steps.Step` per local-global iteration.
 
         Parameters
@@ -733,6 +831,11 @@ class CubicStylizer:
         rotation : (3, 3) float, optional, the cube's axes as columns (overrides
             ``params.rot_x/y/z``).
         style_matrix : (m, 3) float, optional, overrides ``params.style``.
+        frames : (n, 3, 3) float, optional, per-vertex local frames (rotation matrices, columns
+            = the cube's axes at vertex i; thesis §5.4 ``n_i^local``): the L1 term at vertex i
+            is ``||B Q_i^T R_i n_i||_1``. Takes precedence over ``rotation`` and
+            ``params.rot_x/y/z``, which are then ignored. Must be finite, orthonormal to 1e-6
+            and have determinant +1 (:func:`validate_frames`).
 
         Yields
         ------
@@ -751,8 +854,24 @@ class CubicStylizer:
                                      f"got {lam.size}.")
             if (lam < 0).any() or not np.isfinite(lam).all():
                 raise ParameterError("Per-vertex λ must be finite and non-negative.")
+        if frames is not None:
+            frames = validate_frames(frames, n)
+        else:
+            # A global orientation of a cube-like (diagonal) style is the special case "every
+            # frame = Q": the compiled cube kernel handles that, while folding Q into B would
+            # send the z-step to the general polyhedral solver (about 12x slower). The two give
+            # the same optimum (equal to round-off; tested).
+            Q = rotation
+            if Q is None and (params.rot_x or params.rot_y or params.rot_z):
+                Q = rotation_from_degrees(params.rot_x, params.rot_y, params.rot_z)
+            B0 = np.asarray(STYLE_PRESETS[params.style] if style_matrix is None
+                            else style_matrix, dtype=np.float64)
+            if (Q is not None and B0.shape == (3, 3) and np.count_nonzero(B0 - np.diag(np.diag(B0))) == 0
+                    and not np.allclose(Q, np.eye(3), atol=0, rtol=0)):
+                frames = validate_frames(np.broadcast_to(np.asarray(Q, dtype=np.float64),
+                                                         (n, 3, 3)), n)
         prox = self.style_prox(params, lam_axes=lam_axes, rotation=rotation,
-                               style_matrix=style_matrix)
+                               style_matrix=style_matrix, frames=frames)
         lam_a = lam * self.areas
         system, known, Vn = self.system, self.known, self.V_normalized
         state = AdmmState.initial(n, params.rho0)
@@ -765,7 +884,7 @@ class CubicStylizer:
         for it in range(1, params.max_iterations + 1):
             if not params.warm_start:
                 state = AdmmState.initial(n, params.rho0)
-            R, iters = admm_local_step(S, self.normals, lam_a, prox, state, params)
+            R, iters = admm_local_step(S, self.normals, lam_a, prox, state, params, frames)
             Un = system.solve(system.rhs(R), known)
             for verts, w, dims in self._recenter:
                 shift = w @ (Vn[verts][:, dims] - Un[verts][:, dims])
@@ -777,9 +896,14 @@ class CubicStylizer:
             e_arap = max(system.energy(U, R, exact=False, covariances=S), 0.0)
             if kern is not None:
                 Rn = np.empty((n, 3))
-                kern.rotate_normals(R, self.normals, Rn)
+                if frames is None:
+                    kern.rotate_normals(R, self.normals, Rn)
+                else:
+                    kern.frame_normals(R, self.normals, frames, Rn)
             else:
                 Rn = np.einsum("kab,kb->ka", R, self.normals)
+                if frames is not None:  # in the local frames
+                    Rn = np.einsum("kba,kb->ka", frames, Rn)
             e_l1 = float((lam_a * prox.norm(Rn)).sum())
             ran = iters[iters > 0]
             metrics = {
@@ -798,7 +922,7 @@ class CubicStylizer:
 
 def cubic_stylization_iter(V, F, params: CubicParams = CubicParams(), *, lam_per_vertex=None,
                            lam_axes=None, fixed=None, handles=None, coord_constraints=None,
-                           rotation=None, style_matrix=None) -> Iterator[Step]:
+                           rotation=None, style_matrix=None, frames=None) -> Iterator[Step]:
     """Cubic stylization (thesis Alg. 3), one :class:`~algorithms.steps.Step` per iteration.
 
     Parameters
@@ -813,6 +937,8 @@ def cubic_stylization_iter(V, F, params: CubicParams = CubicParams(), *, lam_per
     coord_constraints : tuple (indices, axes, values), optional, plane constraints.
     rotation : (3, 3), optional, the cube's axes as columns.
     style_matrix : (m, 3), optional, overrides ``params.style``.
+    frames : (n, 3, 3), optional, per-vertex cube orientations (rotation matrices, columns =
+        axes); take precedence over ``rotation`` (see :meth:`CubicStylizer.steps`).
 
     Yields
     ------
@@ -822,7 +948,7 @@ def cubic_stylization_iter(V, F, params: CubicParams = CubicParams(), *, lam_per
     st = CubicStylizer(V, F, fixed=fixed, handles=handles, coord_constraints=coord_constraints,
                        normalize=params.normalize, pin_one_vertex=params.pin_one_vertex)
     yield from st.steps(params, lam_per_vertex=lam_per_vertex, lam_axes=lam_axes,
-                        rotation=rotation, style_matrix=style_matrix)
+                        rotation=rotation, style_matrix=style_matrix, frames=frames)
 
 
 def cubic_stylization(V, F, params: CubicParams = CubicParams(), **kwargs) -> np.ndarray:

@@ -41,6 +41,12 @@ lambda), compiled. It runs in waves like the NumPy code: wave ``k`` does ADMM it
 every vertex that has not stopped yet (their R-steps as blocked Procrustes, then each vertex's
 z-step, u-step, residuals, rho adaptation and stopping test), so each vertex's sequence of
 updates is exactly the one of the NumPy code (see the docstring of :mod:`algorithms.deform.cubic`).
+
+Local frames (``frames``, §5.4): the same kernel with ``z``, ``u`` in vertex ``i``'s frame ``Q_i``;
+the R-step target becomes ``Q_i (z - u)`` and the z-step shrinks ``Q_i^T R n_i + u``. ``frames``
+is ``None`` or an (n, 3, 3) array. Numba compiles one specialization per case and prunes the
+``frames is None`` branches at compile time, so the run without frames is the same machine code
+(and the same bits) as before frames existed.
 """
 
 from __future__ import annotations
@@ -58,6 +64,7 @@ __all__ = [
     "admm_cube_local_step",
     "arap_energy_terms",
     "rotate_normals",
+    "frame_normals",
     "displacement_maxima",
     "block_covariances",
     "block_rhs",
@@ -255,7 +262,7 @@ def _shrink(v, k):
 
 @njit(**_OPTS)
 def admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_rel, mu, tau,
-                         max_iter, R, iters):
+                         max_iter, R, iters, frames=None):
     """Cubic stylization's local step for a diagonal style matrix, all vertices.
 
     Parameters
@@ -263,9 +270,12 @@ def admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_r
     S : (n, 3, 3) covariances. normals : (n, 3). lam_a : (n,) ``lam_i a_i``.
     use : (n,) bool, vertices that run ADMM (the others get the plain Procrustes rotation).
     diag : (3,) non-negative diagonal of the style matrix (the per-axis thresholds' factors).
-    z, u : (n, 3), rho : (n,) ADMM state, read and updated in place (warm start).
+    z, u : (n, 3), rho : (n,) ADMM state, read and updated in place (warm start); in the local
+        frames when ``frames`` is given.
     eps_abs, eps_rel, mu, tau : float; max_iter : int.
     R : (n, 3, 3) output rotations. iters : (n,) int64 output, ADMM iterations per vertex.
+    frames : None or (n, 3, 3) rotations, columns = vertex i's cube axes (the L1 term is
+        ``||diag Q_i^T R_i n_i||_1``).
     """
     n = S.shape[0]
     A = np.empty((9, BLOCK))
@@ -298,6 +308,13 @@ def admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_r
                 rh = rho[i]
                 w0, w1, w2 = rh * normals[i, 0], rh * normals[i, 1], rh * normals[i, 2]
                 y0, y1, y2 = z[i, 0] - u[i, 0], z[i, 1] - u[i, 1], z[i, 2] - u[i, 2]
+                if frames is not None:  # the target Q_i (z - u) in world coordinates
+                    y0, y1, y2 = (frames[i, 0, 0] * y0 + frames[i, 0, 1] * y1
+                                  + frames[i, 0, 2] * y2,
+                                  frames[i, 1, 0] * y0 + frames[i, 1, 1] * y1
+                                  + frames[i, 1, 2] * y2,
+                                  frames[i, 2, 0] * y0 + frames[i, 2, 1] * y1
+                                  + frames[i, 2, 2] * y2)
                 _load_lane(A, V, l,
                            S[i, 0, 0] + w0 * y0, S[i, 0, 1] + w0 * y1, S[i, 0, 2] + w0 * y2,
                            S[i, 1, 0] + w1 * y0, S[i, 1, 1] + w1 * y1, S[i, 1, 2] + w1 * y2,
@@ -311,6 +328,13 @@ def admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_r
                 rn0 = r[0] * n0 + r[1] * n1 + r[2] * n2
                 rn1 = r[3] * n0 + r[4] * n1 + r[5] * n2
                 rn2 = r[6] * n0 + r[7] * n1 + r[8] * n2
+                if frames is not None:  # R n in the local frame: Q_i^T R n
+                    rn0, rn1, rn2 = (frames[i, 0, 0] * rn0 + frames[i, 1, 0] * rn1
+                                     + frames[i, 2, 0] * rn2,
+                                     frames[i, 0, 1] * rn0 + frames[i, 1, 1] * rn1
+                                     + frames[i, 2, 1] * rn2,
+                                     frames[i, 0, 2] * rn0 + frames[i, 1, 2] * rn1
+                                     + frames[i, 2, 2] * rn2)
                 z0, z1, z2 = z[i, 0], z[i, 1], z[i, 2]
                 u0, u1, u2 = u[i, 0], u[i, 1], u[i, 2]
                 rh = rho[i]
@@ -354,6 +378,19 @@ def rotate_normals(R, normals, out):
         n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
         for a in range(3):
             out[i, a] = R[i, a, 0] * n0 + R[i, a, 1] * n1 + R[i, a, 2] * n2
+
+
+@njit(**_OPTS)
+def frame_normals(R, normals, frames, out):
+    """``out[i] = frames[i]^T @ R[i] @ normals[i]`` (R n in vertex i's local frame); (n, 3, 3)
+    R and frames, (n, 3) normals and out."""
+    for i in range(R.shape[0]):
+        n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
+        r0 = R[i, 0, 0] * n0 + R[i, 0, 1] * n1 + R[i, 0, 2] * n2
+        r1 = R[i, 1, 0] * n0 + R[i, 1, 1] * n1 + R[i, 1, 2] * n2
+        r2 = R[i, 2, 0] * n0 + R[i, 2, 1] * n1 + R[i, 2, 2] * n2
+        for a in range(3):
+            out[i, a] = frames[i, 0, a] * r0 + frames[i, 1, a] * r1 + frames[i, 2, a] * r2
 
 
 @njit(**_OPTS)

@@ -8,6 +8,8 @@
   [0, 2], 1 = the slider's λ), a Gauss-map painter (the same field, painted by normal
   direction), a fix brush (painted region stays put), point handles (click, drag; Ctrl+click
   removes), and a plane brush (the painted region keeps its mean coordinate along an axis);
+* a frame brush: the painted region gets the current cube orientation as its own local cube
+  frame (thesis §5.4: per-region n_i^local); elsewhere the global orientation applies;
 * "Progressive meshes" (thesis Alg. 4) for big meshes: stylize a decimated copy with m triangles
   and put the details back with fitted affine maps; switched on by itself for meshes above
   ``AUTO_PROGRESSIVE_FACES`` triangles. The decimation is cached like the rest;
@@ -17,6 +19,8 @@
 from __future__ import annotations
 
 import numpy as np
+
+from algorithms.errors import ParameterError
 from PySide6.QtWidgets import (QButtonGroup, QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout,
                                QGroupBox, QHBoxLayout, QLabel, QPushButton, QRadioButton,
                                QVBoxLayout)
@@ -27,12 +31,29 @@ from app.forms import ParamsForm
 from app.commands import StateCommand
 from app.gaussmap import GaussMapPainter
 from app.panels.base import MethodPanel
-from app.tools import BrushSettings, FieldBrush, HandleTool
+from app.tools import BrushSettings, FieldBrush, HandleTool, StampBrush
 
 LAMBDA_FIELD = "lambda_scale"
 FIXED_FIELD = "fixed"
 PLANE_FIELD = "plane"
+FRAME_FIELDS = ("frame_rx", "frame_ry", "frame_rz")
 AUTO_PROGRESSIVE_FACES = 300_000
+
+
+def frames_of(state, global_rotation: np.ndarray) -> np.ndarray | None:
+    """(n, 3, 3) per-vertex cube frames from the painted angles, or None when none is painted;
+    vertices without a painted frame use ``global_rotation``."""
+    if FRAME_FIELDS[0] not in state.fields:
+        return None
+    ang = np.stack([np.asarray(state.fields.get(f, np.full(len(state.V), np.nan)))
+                    for f in FRAME_FIELDS], axis=1)
+    frames = np.broadcast_to(global_rotation, (len(ang), 3, 3)).copy()
+    ok = np.isfinite(ang).all(axis=1)
+    if ok.any():
+        uniq, inv = np.unique(ang[ok], axis=0, return_inverse=True)
+        mats = np.stack([rotation_from_degrees(*a) for a in uniq])
+        frames[ok] = mats[inv.reshape(-1)]
+    return frames
 
 
 def constraints_of(state, plane_axis: int):
@@ -75,6 +96,9 @@ class CubicPanel(MethodPanel):
                                       label="plane region", settings=self.brush_settings,
                                       cmap="Greens")
         self.handle_tool = HandleTool(window)
+        self.frame_brush = StampBrush(
+            window, FRAME_FIELDS, lambda: self._frame_angles, label="cube frame",
+            settings=self.brush_settings)
         self._build_tools()
         window.document.subscribe(self._on_doc)
 
@@ -106,14 +130,17 @@ class CubicPanel(MethodPanel):
                  ("handle", "Handles", "Click the surface to add a handle, drag to move it; "
                   "Ctrl+click removes the nearest handle."),
                  ("plane", "Plane", "Paint a region that keeps its average coordinate along the "
-                  "chosen axis (it becomes flat in that direction).")]
+                  "chosen axis (it becomes flat in that direction)."),
+                 ("frame", "Frame", "Paint a region that gets its own cube orientation: the "
+                  "three 'Cube orientation' angles set now. 'Erase' gives it back the global "
+                  "orientation.")]
         self.tool_buttons = {}
         for i, (key, text, tip) in enumerate(specs):
             b = QRadioButton(text)
             b.setToolTip(tip)
             self.tool_group.addButton(b, i)
             self.tool_buttons[key] = b
-            (row1 if i < 3 else row2).addWidget(b)
+            (row1 if i < 3 else row2).addWidget(b)  # 3 + 3 buttons
             b.toggled.connect(lambda on, key=key: on and self.set_tool(key))
         v.addLayout(row1)
         v.addLayout(row2)
@@ -146,7 +173,8 @@ class CubicPanel(MethodPanel):
         v.addLayout(form)
         row = QHBoxLayout()
         self.show_combo = QComboBox()
-        self.show_combo.addItems(["Shape only", "λ scale", "Fixed region", "Plane region"])
+        self.show_combo.addItems(["Shape only", "λ scale", "Fixed region", "Plane region",
+                                  "Local frames"])
         self.show_combo.setToolTip("Colour the mesh by a painted field.")
         self.show_combo.currentIndexChanged.connect(self._show_field)
         self.clear_button = QPushButton("Clear painting")
@@ -164,13 +192,19 @@ class CubicPanel(MethodPanel):
         lay.insertWidget(lay.count() - 1, box)
         self.tool_buttons["camera"].setChecked(True)
         self.plane_axis.currentIndexChanged.connect(lambda _i: self._on_params_changed(None))
+        self._frame_angles = (0.0, 0.0, 0.0)
+        self.form.changed.connect(lambda p: setattr(self, "_frame_angles",
+                                                    (p.rot_x, p.rot_y, p.rot_z)))
         self.gauss.brush.changed.connect(lambda _v: self.show_combo.setCurrentIndex(1))
 
     def set_tool(self, key: str) -> None:
+        p = self.form.params()
+        self._frame_angles = (p.rot_x, p.rot_y, p.rot_z)
         tool = {"camera": None, "lambda": self.lambda_brush, "fix": self.fix_brush,
-                "handle": self.handle_tool, "plane": self.plane_brush}[key]
+                "handle": self.handle_tool, "plane": self.plane_brush,
+                "frame": self.frame_brush}[key]
         self.window_.viewport.set_handler(tool)
-        show = {"lambda": 1, "fix": 2, "plane": 3}.get(key)
+        show = {"lambda": 1, "fix": 2, "plane": 3, "frame": 4}.get(key)
         if show is not None:
             self.show_combo.setCurrentIndex(show)
         if not self.tool_buttons[key].isChecked():
@@ -178,7 +212,12 @@ class CubicPanel(MethodPanel):
 
     def _show_field(self, index: int) -> None:
         brush = {1: self.lambda_brush, 2: self.fix_brush, 3: self.plane_brush}.get(index)
-        if brush is None:
+        if index == 4:
+            if not self.window_.document.is_empty:
+                self.window_.viewport.show_field("frame_mask",
+                                                 self.frame_brush.mask().astype(float),
+                                                 "Purples", (0.0, 1.0))
+        elif brush is None:
             self.window_.viewport.show_field(None)
         else:
             brush.show()
@@ -200,7 +239,8 @@ class CubicPanel(MethodPanel):
         # painting re-runs a live result (only this panel's fields, only once it has a result)
         st = self.window_.document.state
         key = None if st is None else (tuple(id(st.fields.get(f)) for f in
-                                             (LAMBDA_FIELD, FIXED_FIELD, PLANE_FIELD)), st.handles)
+                                             (LAMBDA_FIELD, FIXED_FIELD, PLANE_FIELD)
+                                             + FRAME_FIELDS), st.handles)
         changed, self._constraint_key = key != getattr(self, "_constraint_key", None), key
         if (what in ("fields", "handles") and changed and self.live_box.isChecked()
                 and self._last is not None and st is not None and st.V is self._last[1].V):
@@ -212,7 +252,7 @@ class CubicPanel(MethodPanel):
             return
         st = doc.state
         after = st
-        for f in (LAMBDA_FIELD, FIXED_FIELD, PLANE_FIELD):
+        for f in (LAMBDA_FIELD, FIXED_FIELD, PLANE_FIELD) + FRAME_FIELDS:
             after = after.with_field(f, None)
         after = after.with_handles({})
         if after.fields != st.fields or after.handles != st.handles:
@@ -244,8 +284,13 @@ class CubicPanel(MethodPanel):
         scale = state.fields.get(LAMBDA_FIELD)
         lam_v = None if scale is None else params.lam * np.asarray(scale)
         rotation = rotation_from_degrees(params.rot_x, params.rot_y, params.rot_z)
+        frames = frames_of(state, rotation)
+        extra = {} if frames is None else {"frames": frames}
         if prog is None:
-            return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation)
+            return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation, **extra)
+        if frames is not None:
+            raise ParameterError("Painted local cube frames do not work with progressive meshes "
+                                 "yet: switch progressive meshes off, or clear the frames.")
         return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation,
                             preview_every=prog.preview_every)
 

@@ -150,3 +150,33 @@ def test_progressive_mode_runs_and_reuses_its_preprocessing(window, dialogs, qtb
     with qtbot.waitSignal(window.runner.finished, timeout=120000):
         panel.run_button.click()
     assert panel._cache[1] is solver  # λ changed: decimation reused
+
+
+def test_frame_brush_paints_a_local_cube_frame(window, dialogs, qtbot):
+    panel = open_cubic(window)
+    panel.form.set_value("rot_y", 45.0)
+    panel.tool_buttons["frame"].click()
+    V = window.document.V
+    cam = np.array(window.viewport.plotter.camera.position)
+    v = int(np.argmin(((V - cam) ** 2).sum(axis=1)))
+    x, y = window.viewport.project(V[[v]])[0]
+    w = window.viewport.plotter.interactor
+    qtbot.mousePress(w, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
+                     QPoint(int(x), int(y)))
+    qtbot.mouseRelease(w, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
+                       QPoint(int(x), int(y)))
+    st = window.document.state
+    ry = st.fields["frame_ry"]
+    assert ry[v] == 45.0 and np.isnan(ry).sum() > 0.5 * len(V)
+    assert window.undo_stack.undoText() == "Paint cube frame"
+    from app.panels.cubic import frames_of
+
+    frames = frames_of(st, np.eye(3))
+    np.testing.assert_allclose(frames[v] @ np.array([1.0, 0, 0]),
+                               [np.cos(np.radians(45)), 0, -np.sin(np.radians(45))], atol=1e-12)
+    far = int(np.flatnonzero(np.isnan(ry))[0])
+    np.testing.assert_array_equal(frames[far], np.eye(3))
+    panel.form.set_value("rot_y", 0.0)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.run_button.click()
+    assert window.undo_stack.undoText() == "Cubic"

@@ -7,7 +7,8 @@ import pytest
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
-from algorithms.deform.arap import procrustes_rotations
+from algorithms.deform import arap
+from algorithms.deform.arap import procrustes_rotations, set_compiled_kernels
 from algorithms.deform.cubic import (
     STYLE_PRESETS,
     AdmmState,
@@ -19,6 +20,7 @@ from algorithms.deform.cubic import (
     cubic_stylization_iter,
     rotation_from_degrees,
     shrinkage,
+    validate_frames,
 )
 from algorithms.errors import ParameterError
 from algorithms.mesh import icosahedron, icosphere, read_mesh
@@ -367,6 +369,150 @@ def test_rotation_equals_stylizing_the_rotated_mesh():
     np.testing.assert_allclose(Qd, Q, atol=1e-14)
     np.testing.assert_allclose(cubic_stylization(V, F, replace(p, rot_x=20, rot_y=35, rot_z=-10)),
                                ours, atol=1e-12)
+
+
+# ------------------------------------------------------------------------------ local frames
+@pytest.fixture(params=["kernel", "numpy"])
+def path(request):
+    """Runs the test with the compiled kernels on ("kernel") and off ("numpy")."""
+    if request.param == "kernel" and arap.compiled_kernels() is None:
+        pytest.skip("compiled kernels unavailable or switched off (STYLIZE3D_NUMBA=0)")
+    previous = set_compiled_kernels(request.param == "kernel")
+    yield request.param
+    set_compiled_kernels(previous)
+
+
+@pytest.mark.parametrize("style", ["cube", "octahedron"])
+def test_uniform_frames_equal_the_global_rotation(path, style):
+    """Frames all equal to Q are ``rotation=Q`` (thesis §5.4: n_i^local with one frame).
+
+    The two runs differ only in round-off: ``rotation`` folds Q into the style matrix (world-frame
+    z, the general prox), frames keep z in the local frame (for the cube: shrinkage, compiled on
+    the kernel path). Measured on spot_lowres: <= 5e-15 of the bounding-box diagonal for 12
+    iterations; after ~15 the round-off-level rho decisions start to differ (module docstring).
+    """
+    m = read_mesh(shared_mesh("spot_lowres.obj"))
+    st = CubicStylizer(m.V, m.F)
+    Q = Rotation.from_euler("xyz", [20, 35, -10], degrees=True).as_matrix()
+    frames = np.broadcast_to(Q, (st.n, 3, 3))
+    p = CubicParams(lam=0.2, style=style, max_iterations=12, rel_displacement_tol=0.0)
+    by_rotation = list(st.steps(p, rotation=Q))
+    by_frames = list(st.steps(p, frames=frames))
+    assert len(by_rotation) == len(by_frames) == 12
+    for a, b in zip(by_rotation, by_frames):
+        np.testing.assert_allclose(b.V, a.V, rtol=0, atol=1e-9)
+        assert b.metrics["admm_iterations"] == a.metrics["admm_iterations"]
+        for k in ("energy", "arap", "l1"):
+            assert b.metrics[k] == pytest.approx(a.metrics[k], rel=1e-9)
+    assert np.abs(by_frames[-1].V - list(st.steps(p))[-1].V).max() > 1e-3  # Q does matter
+
+
+def test_identity_frames_are_no_frames(path):
+    m = read_mesh(shared_mesh("spot_lowres.obj"))
+    st = CubicStylizer(m.V, m.F)
+    p = CubicParams(lam=0.3)  # the thesis stopping rule: the run length must agree too
+    plain = list(st.steps(p))
+    framed = list(st.steps(p, frames=np.tile(np.eye(3), (st.n, 1, 1))))
+    assert len(framed) == len(plain) > 5
+    for a, b in zip(plain, framed):  # the frames only add exact operations (x 1, + 0): same bits
+        np.testing.assert_array_equal(b.V, a.V)
+        assert b.metrics == a.metrics
+
+
+def test_frames_take_precedence_over_the_rotation():
+    V, F = icosphere(2)
+    Q = rotation_from_degrees(0, 30, 0)
+    frames = np.broadcast_to(rotation_from_degrees(10, 0, 20), (len(V), 3, 3))
+    p = CubicParams(lam=0.5, max_iterations=5, rel_displacement_tol=0.0)
+    alone = cubic_stylization(V, F, p, frames=frames)
+    np.testing.assert_array_equal(cubic_stylization(V, F, p, frames=frames, rotation=Q), alone)
+    np.testing.assert_array_equal(
+        cubic_stylization(V, F, replace(p, rot_y=30.0), frames=frames), alone)
+
+
+def test_two_regions_take_two_cube_orientations():
+    """Thesis Fig. 5.23: different frames on different parts give different cube orientations.
+
+    icosphere(3), lambda = 1 (thesis stopping rule, 42 iterations); frames rotated 45 degrees
+    about y where y > 0, identity elsewhere. Area fraction whose face normal is within 10 degrees
+    of an axis set, per half (faces by input centroid; "x/z": the side axes only, without the
+    shared +-y), measured:
+
+    ===============  =====  =======  =========  ===========  ======================
+    faces            world  rotated  x/z world  x/z rotated  no frames: world / rot
+    ===============  =====  =======  =========  ===========  ======================
+    upper (y > 0)    0.400  0.416    0.115      0.130        0.675 / 0.238
+    lower (y <= 0)   0.535  0.313    0.260      0.038        0.680 / 0.226
+    upper, y > 0.3   0.445  0.504    0.061      0.120        0.620 / 0.320
+    ===============  =====  =======  =========  ===========  ======================
+
+    The halves are not symmetric because the 32 equator vertices (y = 0 exactly) keep the
+    identity frame: the lower cube's vertical sides reach ~0.3 into the upper half, where the
+    twist to the rotated sides happens (assigning the equator to the upper half with y >= 0
+    mirrors the table: upper 0.328 / 0.534, lower 0.402 / 0.405). Both axis sets contain +-y,
+    so the top and bottom faces count for both.
+    """
+    V, F = icosphere(3)
+    Q = rotation_from_degrees(0, 45, 0)
+    upper_v = V[:, 1] > 0
+    frames = np.where(upper_v[:, None, None], Q, np.eye(3))
+    U = cubic_stylization(V, F, CubicParams(lam=1.0), frames=frames)
+    U0 = cubic_stylization(V, F, CubicParams(lam=1.0))
+    yc = V[F].mean(axis=1)[:, 1]
+    world, rotated = np.eye(3), Q.T  # rows: the axes
+    sides_w, sides_r = world[[0, 2]], rotated[[0, 2]]
+
+    def near(X, axes, faces):  # area fraction of `faces` within 10 degrees of +-axes
+        return area_fraction_near(X, F[faces], axes)
+
+    up, low, top = yc > 0, yc <= 0, yc > 0.3
+    # lower half: world cube
+    assert near(U, world, low) > near(U, rotated, low) + 0.15
+    assert near(U, sides_w, low) > 4 * near(U, sides_r, low)
+    # upper half: the rotated axes win, the more so away from the equator
+    assert near(U, rotated, up) > near(U, world, up)
+    assert near(U, sides_r, up) > near(U, sides_w, up)
+    assert near(U, sides_r, top) > 1.5 * near(U, sides_w, top)
+    # against the same run without frames, area moved from the world to the rotated axes
+    assert near(U, rotated, up) > near(U0, rotated, up) + 0.1
+    assert near(U, world, up) < near(U0, world, up) - 0.1
+    # and the lower half stayed (mostly) a world cube
+    assert near(U, world, low) > near(U0, world, low) - 0.2
+
+
+def test_bad_frames_raise_readable_errors():
+    V, F = icosphere(1)
+    n = len(V)
+    good = np.tile(np.eye(3), (n, 1, 1))
+    with pytest.raises(ParameterError, match=r"one 3×3 rotation matrix per vertex"):
+        cubic_stylization(V, F, frames=good[:-1])
+    with pytest.raises(ParameterError, match=r"per vertex"):
+        cubic_stylization(V, F, frames=np.eye(3))
+    with pytest.raises(ParameterError, match="array of numbers"):
+        cubic_stylization(V, F, frames=[["a"] * 3] * 3)
+    bad = good.copy()
+    bad[4, 1, 2] = np.nan
+    with pytest.raises(ParameterError, match="vertex 4 has NaN or infinite"):
+        cubic_stylization(V, F, frames=bad)
+    bad = good.copy()
+    bad[[2, 7]] *= 1.01  # not unit length
+    with pytest.raises(ParameterError,
+                       match=r"frames of 2 vertices \(the first is vertex 2\) are not rotations"):
+        cubic_stylization(V, F, frames=bad)
+    bad = good.copy()
+    bad[3, 0, 1] = 1e-3  # sheared
+    with pytest.raises(ParameterError, match="vertex 3 is not a rotation"):
+        cubic_stylization(V, F, frames=bad)
+    bad = good.copy()
+    bad[5] = np.diag([1.0, 1.0, -1.0])
+    with pytest.raises(ParameterError, match="vertex 5 is a reflection"):
+        cubic_stylization(V, F, frames=bad)
+    # within the tolerance is accepted (and returned as a contiguous float64 array)
+    near_ok = good.copy()
+    near_ok[0, 0, 0] += 4e-7
+    out = validate_frames(near_ok, n)
+    assert out.dtype == np.float64 and out.flags.c_contiguous and out.shape == (n, 3, 3)
+    validate_frames(Rotation.random(n, random_state=1).as_matrix().astype(np.float32), n)
 
 
 def test_stylizer_is_reusable_across_lambdas():

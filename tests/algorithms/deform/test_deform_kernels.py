@@ -222,11 +222,17 @@ def spot_local_problem(lam=0.2):
     return st, st.system.covariances(U), lam * st.areas
 
 
-@pytest.mark.parametrize("case", ["cube", "per_axis", "masked", "warm"])
+@pytest.mark.parametrize("case", ["cube", "per_axis", "masked", "warm", "frames",
+                                  "frames_warm"])
 def test_admm_kernel_matches_the_numpy_loop(case, numpy_path):
     st, S, lam_a = spot_local_problem()
     p = CubicParams(lam=0.2)
     normals = st.normals.copy()
+    frames = None
+    if case.startswith("frames"):  # a random local frame per vertex
+        frames = Rotation.random(st.n, random_state=12).as_matrix()
+        if case == "frames_warm":
+            p = CubicParams(lam=0.2, per_axis=True, axis_factor_x=0.5, axis_factor_z=3.0)
     if case == "per_axis":
         p = CubicParams(lam=0.2, per_axis=True, axis_factor_x=0.0, axis_factor_y=2.0)
     if case == "masked":  # lam = 0 and zero normals take the plain ARAP rotation
@@ -236,14 +242,14 @@ def test_admm_kernel_matches_the_numpy_loop(case, numpy_path):
     prox = st.style_prox(p)
     assert prox.diagonal is not None
     state = AdmmState.initial(st.n, p.rho0)
-    if case == "warm":  # a warm state with varied rho
+    if case in ("warm", "frames_warm"):  # a warm state with varied rho
         rng = np.random.default_rng(10)
         state = AdmmState(0.3 * rng.standard_normal((st.n, 3)), 0.01 * rng.standard_normal(
             (st.n, 3)), p.rho0 * 2.0 ** rng.integers(-3, 8, st.n))
     s_np = AdmmState(state.z.copy(), state.u.copy(), state.rho.copy())
-    R, it = admm_local_step(S, normals, lam_a, prox, state, p)
+    R, it = admm_local_step(S, normals, lam_a, prox, state, p, frames)
     with numpy_path():
-        R_np, it_np = admm_local_step(S, normals, lam_a, prox, s_np, p)
+        R_np, it_np = admm_local_step(S, normals, lam_a, prox, s_np, p, frames)
     np.testing.assert_array_equal(it, it_np)
     assert it.max() > 1
     np.testing.assert_allclose(R, R_np, rtol=0, atol=1e-9)
@@ -255,6 +261,36 @@ def test_admm_kernel_matches_the_numpy_loop(case, numpy_path):
         plain = (lam_a == 0) | ~np.abs(normals).any(axis=1)
         assert not it[plain].any() and it[~plain].all()
         np.testing.assert_array_equal(R[plain], kernel_procrustes(S[plain]))
+
+
+def test_admm_kernel_with_frames_lowers_the_local_objective():
+    """With frames the kernel minimizes tr(-R S) + lam a ||Q^T R n||_1, not the world-frame one."""
+    st, S, lam_a = spot_local_problem(lam=0.5)
+    p = CubicParams(lam=0.5)
+    frames = Rotation.random(st.n, random_state=13).as_matrix()
+    R, it = admm_local_step(S, st.normals, lam_a, st.style_prox(p), AdmmState.initial(st.n,
+                                                                                     p.rho0),
+                            p, frames)
+    R0 = kernel_procrustes(S)
+    Rw, _ = admm_local_step(S, st.normals, lam_a, st.style_prox(p),
+                            AdmmState.initial(st.n, p.rho0), p)
+
+    def local(Rs, Q):
+        Rn = np.einsum("nij,nj->ni", Rs, st.normals)
+        if Q is not None:
+            Rn = np.einsum("nji,nj->ni", Q, Rn)
+        return -np.einsum("nij,nji->n", Rs, S) + lam_a * np.abs(Rn).sum(axis=1)
+
+    assert_rotations(R)
+    assert local(R, frames).sum() < local(R0, frames).sum() - 1e-3
+    assert local(R, frames).sum() < local(Rw, frames).sum() - 1e-3
+    assert local(Rw, None).sum() < local(R, None).sum() - 1e-3
+    # the energy helper: Q^T R n
+    out = np.empty((st.n, 3))
+    kernels.frame_normals(R, st.normals, frames, out)
+    np.testing.assert_allclose(out, np.einsum("nji,nj->ni", frames,
+                                              np.einsum("nij,nj->ni", R, st.normals)),
+                               rtol=0, atol=1e-15)
 
 
 def test_polyhedral_style_keeps_the_numpy_prox(numpy_path):
