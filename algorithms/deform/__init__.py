@@ -27,3 +27,32 @@ __all__ = [
     "STYLE_PRESETS", "L1Prox", "shrinkage",
     "progressive", "ProgressiveCubic", "ProgressiveParams", "progressive_cubic_iter", "rotation_from_degrees",
 ]  # fmt: skip
+
+# normal-driven spherical shape analogies (thesis ch. 6) and their target normals
+from . import analogies, targets  # noqa: E402
+from .analogies import (  # noqa: E402
+    REGULARIZERS,
+    AnalogyParams,
+    ShapeAnalogy,
+    developable_face_targets,
+    shape_analogy,
+    shape_analogy_iter,
+)
+from .targets import (  # noqa: E402
+    PRIMITIVES,
+    CaptureSphere,
+    ClosestNormals,
+    SphericalStyleMap,
+    TargetMap,
+    closest_normal_targets,
+    mesh_style_normals,
+    primitive_normals,
+)
+
+__all__ += [
+    "analogies", "targets",
+    "AnalogyParams", "ShapeAnalogy", "shape_analogy_iter", "shape_analogy", "REGULARIZERS",
+    "developable_face_targets",
+    "TargetMap", "ClosestNormals", "SphericalStyleMap", "CaptureSphere", "PRIMITIVES",
+    "primitive_normals", "mesh_style_normals", "closest_normal_targets",
+]  # fmt: skip

@@ -44,6 +44,17 @@ Choices written down here:
 * ``rotations(U, extra)`` adds an ``(n, 3, 3)`` term to the covariances before Procrustes: the
   hook through which cubic stylization (ADMM, ``rho n (z - u)^T``) and shape analogies
   (``lambda a n t^T``) enter.
+* Face cells (``cells="faces"``, the face-only ARAP of thesis Eq. 6.4, Zhao & Gortler 2016,
+  Levi & Gotsman 2015): one rotation per triangle whose cell holds the three edges of that
+  triangle, with the same per-triangle cotangent weights. Every triangle edge then sits in one
+  cell instead of three, so ``Q = 2 * (-L)``; ``K`` is ``(3m, n)`` and every per-cell array
+  (covariances, rotations, ``rest_covariance``) has ``n_cells = m`` rows. Vertex cells are the
+  default and their results are unchanged.
+* Per-cell scale (the as-conformal-as-possible energy of thesis Eq. 6.5, Bouaziz et al. 2012):
+  :meth:`ArapSystem.scaled_rotations` solves the isotropic Procrustes problem of every cell
+  (rotation as above, then the closed-form scale of Schönemann & Carroll 1970); the global step
+  and the energy take the scaled rotations ``s_k R_k`` as they are (``rhs`` and ``energy`` accept
+  any per-cell linear maps).
 * Vertices that no triangle uses have no energy; they are always held where the given values put
   them (all three coordinates are Dirichlet), so the system stays definite.
 * A connected component with no hard or soft constraint in some coordinate leaves the global
@@ -81,10 +92,14 @@ __all__ = [
     "compiled_kernels",
     "set_compiled_kernels",
     "spokes_and_rims_cells",
+    "face_cells",
     "relative_displacement",
+    "CELL_KINDS",
 ]
 
 HANDLE_MODES = ("hard", "soft")
+#: The kinds of ARAP cells :class:`ArapSystem` accepts (``cells=``).
+CELL_KINDS = ("spokes_and_rims", "faces")
 
 
 _KERNELS_STATE: dict[str, object] = {"enabled": None, "module": None}
@@ -217,6 +232,33 @@ def spokes_and_rims_cells(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.
             np.ascontiguousarray(head), np.ascontiguousarray(weight))
 
 
+def face_cells(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                    np.ndarray]:
+    """The face-only ARAP cells: the three edges of every triangle, one cell per triangle.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 rest positions.
+    F : (m, 3) int64 triangles.
+
+    Returns
+    -------
+    cell : (3m,) int64, the triangle whose cell the entry belongs to.
+    tail, head : (3m,) int64, the edge's endpoints (the edge vector is ``V[head] - V[tail]``).
+    weight : (3m,) float64, ``cot(angle opposite the edge in its triangle)``.
+
+    Notes
+    -----
+    Entry ``3 f + k`` is edge ``k`` (opposite corner ``k``, from corner ``k+1`` to ``k+2``) of
+    triangle ``f``: the entries ``9 f + 3 k + l`` of :func:`spokes_and_rims_cells` with one ``l``.
+    """
+    cell, tail, head, w = spokes_and_rims_cells(V, F)
+    keep = slice(0, None, 3)  # l = 0: each triangle edge once
+    m = len(np.asarray(F))
+    return (np.repeat(np.arange(m, dtype=np.int64), 3), np.ascontiguousarray(tail[keep]),
+            np.ascontiguousarray(head[keep]), np.ascontiguousarray(w[keep]))
+
+
 def relative_displacement(U_new: np.ndarray, U_old: np.ndarray, U_rest: np.ndarray,
                           floor: float = 1e-9) -> float:
     """Largest vertex move of one iteration relative to the largest total move from the rest.
@@ -276,20 +318,26 @@ class ArapSystem:
         given at solve time. Weights are absolute (compare with ``Q.diagonal()``).
     backend : str
         SPDSolver backend ("auto", "cholmod", "superlu").
+    cells : {"spokes_and_rims", "faces"}
+        One rotation per vertex with its spokes-and-rims cell (default, ARAP), or one rotation
+        per triangle with the triangle's three edges (face-only ARAP, thesis Eq. 6.4).
 
     Attributes
     ----------
     n : int, number of vertices.
-    K : (3n, n) csr_matrix, covariance operator (``S = (K @ U).reshape(n, 3, 3)``).
+    cells : str, the kind of cells.
+    n_cells : int, number of cells (``n`` for spokes and rims, ``m`` for faces); every per-cell
+        array below and every ``R`` passed in or returned has this many rows.
+    K : (3 n_cells, n) csr_matrix, covariance operator (``S = (K @ U).reshape(n_cells, 3, 3)``).
     Q : (n, n) csc_matrix, global system matrix ``G^T W G`` (without soft-handle terms).
-    rest_covariance : (n, 3, 3), ``C_i = sum w d d^T``.
+    rest_covariance : (n_cells, 3, 3), ``C_k = sum w d d^T``.
     constrained : (n, 3) bool, which coordinates are hard-constrained.
     referenced : (n,) bool, vertices used by at least one triangle.
     backend : str, the SPDSolver backend in use ("cholmod" or "superlu").
     """
 
     def __init__(self, V, F, *, fixed=None, coord_constraints=None, soft_handles=None,
-                 backend: str = "auto"):
+                 backend: str = "auto", cells: str = "spokes_and_rims"):
         V = np.array(V, dtype=np.float64, copy=True)
         F = np.asarray(F, dtype=np.int64)
         if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
@@ -300,8 +348,14 @@ class ArapSystem:
         if F.min() < 0 or F.max() >= n:
             raise InvalidMeshError("Some faces refer to vertices that do not exist. "
                                    "Validate the mesh to see which.")
+        if cells not in CELL_KINDS:
+            raise ParameterError(f"Unknown ARAP cells {cells!r}; use one of "
+                                 f"{', '.join(CELL_KINDS)}.")
         self.V, self.F, self.n = V, F, n
-        cell, tail, head, w = spokes_and_rims_cells(V, F)
+        self.cells = cells
+        self.n_cells = nc = n if cells == "spokes_and_rims" else len(F)
+        cell, tail, head, w = (spokes_and_rims_cells(V, F) if cells == "spokes_and_rims"
+                               else face_cells(V, F))
         if not np.isfinite(w).all():
             raise InvalidMeshError("The mesh has degenerate (zero-area) triangles, so the "
                                    "cotangent weights are undefined. Run Clean first.")
@@ -316,7 +370,7 @@ class ArapSystem:
         rows = np.concatenate([rows.ravel(), rows.ravel()])
         cols = np.concatenate([np.repeat(head, 3), np.repeat(tail, 3)])
         vals = np.concatenate([wd.ravel(), -wd.ravel()])
-        self.K = sp.csr_matrix((vals, (rows, cols)), shape=(3 * n, n))
+        self.K = sp.csr_matrix((vals, (rows, cols)), shape=(3 * nc, n))
         self.K.sum_duplicates()
         self._KT = self.K.T.tocsr()
         self._blocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -324,8 +378,8 @@ class ArapSystem:
         # C_i = sum_{t in cell i} w d d^T
         outer = (wd[:, :, None] * d[:, None, :]).reshape(T, 9)
         self.rest_covariance = np.column_stack(
-            [np.bincount(cell, weights=outer[:, k], minlength=n) for k in range(9)]
-        ).reshape(n, 3, 3)
+            [np.bincount(cell, weights=outer[:, k], minlength=nc) for k in range(9)]
+        ).reshape(nc, 3, 3)
 
         # Q = G^T W G
         qr = np.concatenate([tail, head, tail, head])
@@ -398,7 +452,7 @@ class ArapSystem:
 
     # ---------------------------------------------------------------- local step
     def covariances(self, U: np.ndarray) -> np.ndarray:
-        """Per-vertex covariances ``S_i = sum_{cell i} w d d~^T``.
+        """Per-cell covariances ``S_k = sum_{cell k} w d d~^T``.
 
         Parameters
         ----------
@@ -406,19 +460,19 @@ class ArapSystem:
 
         Returns
         -------
-        (n, 3, 3) float64; ``S_i[a, b] = sum w d[a] d~[b]``.
+        (n_cells, 3, 3) float64; ``S_k[a, b] = sum w d[a] d~[b]``.
         """
         U = np.asarray(U, dtype=np.float64)
         kern = compiled_kernels()
         if kern is None:
-            return np.asarray(self.K @ U).reshape(self.n, 3, 3)
+            return np.asarray(self.K @ U).reshape(self.n_cells, 3, 3)
         ptr, col, val = self._k_blocks()
-        S = np.empty((self.n, 3, 3))
+        S = np.empty((self.n_cells, 3, 3))
         kern.block_covariances(ptr, col, val, np.ascontiguousarray(U).reshape(self.n, 3), S)
         return S
 
     def _k_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``K`` stored by 3x1 blocks for the compiled kernels: for vertex i, blocks
+        """``K`` stored by 3x1 blocks for the compiled kernels: for cell i, blocks
         ``ptr[i]:ptr[i+1]`` hold ``K[3 i + a, col[k]] = val[k, a]`` (built on first use)."""
         if self._blocks is None:
             n = self.n
@@ -429,7 +483,7 @@ class ArapSystem:
             val = np.column_stack([np.bincount(inv, weights=vals[:, a], minlength=len(uniq))
                                    for a in range(3)])
             cell = uniq // n
-            ptr = np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=n))])
+            ptr = np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=self.n_cells))])
             self._blocks = (ptr.astype(np.int64), (uniq % n).astype(np.int64),
                             np.ascontiguousarray(val))
         return self._blocks
@@ -440,18 +494,59 @@ class ArapSystem:
         Parameters
         ----------
         U : (n, 3) float64 deformed positions.
-        extra : (n, 3, 3) float array, optional
-            Added to the covariances before Procrustes (extra per-vertex Procrustes terms: the
-            maximized objective becomes ``tr(R_i (S_i + extra_i))``).
+        extra : (n_cells, 3, 3) float array, optional
+            Added to the covariances before Procrustes (extra per-cell Procrustes terms: the
+            maximized objective becomes ``tr(R_k (S_k + extra_k))``).
 
         Returns
         -------
-        (n, 3, 3) float64 proper rotations.
+        (n_cells, 3, 3) float64 proper rotations.
         """
         S = self.covariances(U)
         if extra is not None:
-            S = S + np.asarray(extra, dtype=np.float64).reshape(self.n, 3, 3)
+            S = S + np.asarray(extra, dtype=np.float64).reshape(self.n_cells, 3, 3)
         return procrustes_rotations(S)
+
+    def scaled_rotations(self, U: np.ndarray, extra: np.ndarray | None = None,
+                         extra_weight=None, *, covariances: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """Local step with a per-cell scale: isotropic orthogonal Procrustes (ACAP, Eq. 6.5).
+
+        Minimizes, for every cell ``k`` separately, over a rotation ``R_k`` and a scale
+        ``s_k >= 0``::
+
+            sum_{cell k} w/2 ||s_k R_k d - d~||^2 + (extra part)
+
+        where the extra part is a set of further weighted vector pairs ``(x, y)`` with weights
+        ``c`` (``sum c/2 ||s_k R_k x - y||^2``) given through ``extra = sum c x y^T`` and
+        ``extra_weight = sum c |x|^2``. Schönemann & Carroll (1970): ``R_k`` is the Procrustes
+        rotation of ``S_k + extra_k`` and
+        ``s_k = max(tr(R_k (S_k + extra_k)), 0) / (tr(C_k) + extra_weight_k)``.
+
+        Parameters
+        ----------
+        U : (n, 3) float64 deformed positions.
+        extra : (n_cells, 3, 3) float array, optional (see above).
+        extra_weight : (n_cells,) float array or scalar, optional (0 when omitted).
+        covariances : (n_cells, 3, 3), optional, ``self.covariances(U)`` when already known.
+
+        Returns
+        -------
+        R : (n_cells, 3, 3) float64 proper rotations.
+        s : (n_cells,) float64 non-negative scales (1 where the cell's denominator is 0).
+        """
+        S = self.covariances(U) if covariances is None else np.asarray(covariances, np.float64)
+        if extra is not None:
+            S = S + np.asarray(extra, dtype=np.float64).reshape(self.n_cells, 3, 3)
+        R = procrustes_rotations(S)
+        num = np.einsum("kab,kba->k", R, S)
+        den = np.trace(self.rest_covariance, axis1=1, axis2=2).copy()
+        if extra_weight is not None:
+            den = den + np.broadcast_to(np.asarray(extra_weight, np.float64), den.shape)
+        s = np.ones(self.n_cells)
+        ok = den > 0
+        s[ok] = np.maximum(num[ok], 0.0) / den[ok]
+        return R, s
 
     # ---------------------------------------------------------------- global step
     def rhs(self, R: np.ndarray) -> np.ndarray:
@@ -459,16 +554,17 @@ class ArapSystem:
 
         Parameters
         ----------
-        R : (n, 3, 3) float array (rotations, or any per-vertex linear maps).
+        R : (n_cells, 3, 3) float array (rotations, or any per-cell linear maps such as the
+            scaled rotations ``s_k R_k``).
 
         Returns
         -------
         (n, 3) float64 ``b`` with ``Q U = b`` the unconstrained minimizer condition.
         """
-        R = np.asarray(R, dtype=np.float64).reshape(self.n, 3, 3)
+        R = np.asarray(R, dtype=np.float64).reshape(self.n_cells, 3, 3)
         kern = compiled_kernels()
         if kern is None:
-            return np.asarray(self._KT @ R.transpose(0, 2, 1).reshape(3 * self.n, 3))
+            return np.asarray(self._KT @ R.transpose(0, 2, 1).reshape(3 * self.n_cells, 3))
         ptr, col, val = self._k_blocks()
         b = np.empty((self.n, 3))
         kern.block_rhs(ptr, col, val, np.ascontiguousarray(R), b)
@@ -515,19 +611,19 @@ class ArapSystem:
     # ---------------------------------------------------------------- energy
     def energy(self, U: np.ndarray, R: np.ndarray, *, exact: bool = True,
                covariances: np.ndarray | None = None) -> float:
-        """ARAP energy ``sum_i sum_{cell i} w/2 ||R_i d - d~||^2`` (soft handle terms excluded).
+        """ARAP energy ``sum_k sum_{cell k} w/2 ||R_k d - d~||^2`` (soft handle terms excluded).
 
         Parameters
         ----------
         U : (n, 3) float64 deformed positions.
-        R : (n, 3, 3) float array of per-vertex rotations (or linear maps).
+        R : (n_cells, 3, 3) float array of per-cell rotations (or linear maps).
         exact : bool
             True (default): sum the residual of every cell entry (9 per triangle). False: the
             same value from the precomputed operators,
             ``1/2 sum tr(R C R^T) - sum tr(R S) + 1/2 tr(U^T Q U)``, several times faster but
             with an absolute round-off of about ``1e-16 * sum w |d|^2`` (it can read ~1e-15
             instead of 0 at the rest state); good for plotting.
-        covariances : (n, 3, 3) float array, optional
+        covariances : (n_cells, 3, 3) float array, optional
             ``self.covariances(U)`` when the caller has it already (used when ``exact`` is
             False).
 
@@ -536,7 +632,7 @@ class ArapSystem:
         float
         """
         U = np.asarray(U, dtype=np.float64)
-        R = np.asarray(R, dtype=np.float64).reshape(self.n, 3, 3)
+        R = np.asarray(R, dtype=np.float64).reshape(self.n_cells, 3, 3)
         if not exact:
             S = self.covariances(U) if covariances is None else covariances
             quad_u = 0.5 * float(np.einsum("ij,ij->", U, self.Q @ U))
