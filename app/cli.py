@@ -19,7 +19,7 @@ from typing import Any, Callable
 from algorithms.errors import InvalidMeshError, MeshWriteError, ParameterError, Stylize3DError
 from algorithms.params import describe, params_from_dict, params_to_dict
 
-SUBCOMMANDS = ("info", "clean", "smooth", "cubic")
+SUBCOMMANDS = ("info", "clean", "smooth", "cubic", "analogy")
 
 
 # ----------------------------------------------------------------------------- Params -> flags
@@ -207,6 +207,48 @@ def cmd_cubic(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_analogy(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from algorithms.deform.analogies import AnalogyParams, ShapeAnalogy
+    from algorithms.deform.targets import load_style
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.operators import mass_matrix, vertex_normals
+
+    params = params_from_args(AnalogyParams, args)
+    _check_output(args.output, args.overwrite, args.mesh)
+    target_map, what = load_style(args.style, args.style_map)
+    data, _ = _read_valid(args.mesh, clean=args.clean, quiet=args.json or args.quiet)
+
+    def angles(V):
+        N = vertex_normals(V, data.F)
+        a = mass_matrix(V, data.F, "voronoi").diagonal()
+        ang = np.degrees(np.arccos(np.clip((N * target_map(N)).sum(axis=1), -1.0, 1.0)))
+        return float((a * ang).sum() / a.sum()), float(ang.max())
+
+    before = angles(data.V)
+    t0 = time.perf_counter()
+    last = None
+    for last in ShapeAnalogy(data.V, data.F, target_map).steps(params):
+        if not args.json and not args.quiet:
+            print(f"  iteration {last.iteration}: mean angle to targets "
+                  f"{last.metrics['mean_angle_to_targets']:.2f}°", file=sys.stderr)
+    seconds = time.perf_counter() - t0
+    write_mesh(args.output, last.V, data.F)
+    after = angles(last.V)
+    if args.json:
+        _print_json({"input": args.mesh, "output": args.output, "style": args.style,
+                     "style_map": what, "params": params_to_dict(params),
+                     "iterations": last.iteration, "seconds": seconds,
+                     "mean_angle_before": before[0], "max_angle_before": before[1],
+                     "mean_angle_after": after[0], "max_angle_after": after[1]})
+    else:
+        print(f"Stylized {args.mesh} after {what} in {seconds:.2f} s ({last.iteration} "
+              f"iterations); mean angle to the target normals {before[0]:.1f}° -> "
+              f"{after[0]:.1f}°; wrote {args.output}.")
+    return 0
+
+
 # ----------------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     from algorithms.smoothing import SmoothParams
@@ -262,6 +304,28 @@ def build_parser() -> argparse.ArgumentParser:
                         "with M triangles, then put the details back; for big meshes")
     add_params_arguments(s, CubicParams)
     s.set_defaults(func=cmd_cubic)
+
+    from algorithms.deform.analogies import AnalogyParams
+    from algorithms.deform.targets import PRIMITIVES, STYLE_MAP_MODES
+
+    s = sub.add_parser("analogy", help="normal-driven shape analogy (thesis ch. 6)")
+    s.add_argument("mesh")
+    s.add_argument("-o", "--output", required=True, help="where to write the stylized mesh")
+    s.add_argument("--style", default="cube",
+                   help=f"a primitive ({', '.join(PRIMITIVES)}), a normal-capture .json file, or "
+                        "a style mesh file. Default: cube.")
+    s.add_argument("--style-map", choices=STYLE_MAP_MODES, default="auto",
+                   help="for a style mesh: closest face normals (convex meshes) or a spherical "
+                        "parameterization (any closed genus-0 mesh); auto picks. Default: auto.")
+    s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
+    s.add_argument("--json", action="store_true",
+                   help="print iterations, time, and the mean/max angle to the targets before "
+                        "and after, as JSON")
+    s.add_argument("--quiet", action="store_true", help="no per-iteration progress")
+    s.add_argument("--clean", action="store_true",
+                   help="clean the mesh first when it has fixable problems (says what it fixed)")
+    add_params_arguments(s, AnalogyParams)
+    s.set_defaults(func=cmd_analogy)
     return p
 
 

@@ -60,10 +60,26 @@ class _NumberEditor(QWidget):
         self._sync = False
 
     # slider position <-> value (log-scale when asked and the range is positive)
+    def _log_range(self) -> tuple[float, float] | None:
+        """(low, high) of a logarithmic slider; a range starting at 0 starts the log scale at one
+        step (or 1e-3) and keeps position 0 for the value 0."""
+        lo, hi = self.spec.minimum, self.spec.maximum
+        if not self.spec.log_scale or hi <= 0:
+            return None
+        if lo > 0:
+            return lo, hi
+        return min(self.spec.step or 1e-3, hi / 10.0), hi
+
     def _to_pos(self, v: float) -> int:
         lo, hi = self.spec.minimum, self.spec.maximum
-        if self.spec.log_scale and lo > 0:
-            t = (math.log(v) - math.log(lo)) / (math.log(hi) - math.log(lo))
+        lr = self._log_range()
+        if lr is not None:
+            a, b = lr
+            if v <= lo or v <= 0:
+                return 0
+            t = (math.log(max(v, a)) - math.log(a)) / (math.log(b) - math.log(a))
+            if lo < a:  # position 0 is the value 0: the log scale starts at position 1
+                t = (1 + t * (SLIDER_STEPS - 1)) / SLIDER_STEPS
         else:
             t = (v - lo) / (hi - lo) if hi > lo else 0.0
         return int(round(min(max(t, 0.0), 1.0) * SLIDER_STEPS))
@@ -71,8 +87,14 @@ class _NumberEditor(QWidget):
     def _from_pos(self, pos: int) -> float:
         lo, hi = self.spec.minimum, self.spec.maximum
         t = pos / SLIDER_STEPS
-        if self.spec.log_scale and lo > 0:
-            v = math.exp(math.log(lo) + t * (math.log(hi) - math.log(lo)))
+        lr = self._log_range()
+        if lr is not None:
+            a, b = lr
+            if lo < a:
+                if pos == 0:
+                    return float(lo)
+                t = (pos - 1) / (SLIDER_STEPS - 1)
+            v = math.exp(math.log(a) + t * (math.log(b) - math.log(a)))
             digits = max(0, -int(math.floor(math.log10(v))) + 1)  # two significant digits
             return round(v, digits)
         v = lo + t * (hi - lo)

@@ -149,7 +149,7 @@ class AnalogyParams:
                 "creases between triangles. acap: as-conformal-as-possible, keeps angles but "
                 "lets regions grow or shrink.")
     dynamic_targets: bool = param(
-        False, label="Dynamic targets",
+        False, label="Dynamic targets", cli_aliases=("--dynamic",),
         tooltip="Recompute the target normals from the current shape after every iteration. "
                 "Avoids some poor results (e.g. ears folding the wrong way) at the cost of "
                 "drifting further from the input.")
@@ -165,6 +165,7 @@ class AnalogyParams:
                 "largest total move so far. 0 runs all iterations.")
     developable_threshold: float = param(
         0.0, label="Developable threshold", minimum=0.0, maximum=1.0, step=0.01, decimals=4,
+        cli_aliases=("--developable",),
         tooltip="0: off. Above 0 the shape is made piecewise developable (bendable from paper) "
                 "instead of following a style; larger values flatten more regions and give "
                 "fewer, sharper creases. The paper's demo uses 0.03 with λ = 1000.")

@@ -640,3 +640,43 @@ class CaptureSphere:
         if not isinstance(data, dict):
             raise ParameterError(f"The normal capture file {p} is not a capture (wrong contents).")
         return cls.from_dict(data)
+
+
+STYLE_MAP_MODES = ("auto", "closest", "spherical")
+
+
+def load_style(spec: str, mode: str = "auto") -> tuple[TargetMap, str]:
+    """The target map a user names: a primitive (``"cube"``, ``"hexagonal_prism"``, ...; see
+    :data:`PRIMITIVES`), a normal-capture file (``*.json``), or a style mesh file.
+
+    For a mesh, ``mode`` picks option 1 (``"closest"``: closest face normals, convex meshes only)
+    or option 2 (``"spherical"``: cMCF spherical parameterization, any closed genus-0 mesh);
+    ``"auto"`` uses closest normals when the mesh is convex and the spherical map otherwise.
+
+    Returns
+    -------
+    (target map, a one-line description for the user)
+    """
+    from ..mesh.io import read_mesh
+
+    if mode not in STYLE_MAP_MODES:
+        raise ParameterError(f"Style map must be one of {', '.join(STYLE_MAP_MODES)}.")
+    if spec in PRIMITIVES:
+        return ClosestNormals.primitive(spec), f"closest normals of a {spec.replace('_', ' ')}"
+    path = Path(spec)
+    if path.suffix.lower() == ".json":
+        cap = CaptureSphere.load(path)
+        return cap, f"normal capture {path.name} ({cap.n_regions} painted regions)"
+    if not path.exists():
+        raise ParameterError(f"Unknown style '{spec}': use one of {', '.join(PRIMITIVES)}, a "
+                             "capture .json file or a mesh file.")
+    data = read_mesh(path)
+    if mode in ("auto", "closest"):
+        try:
+            return (ClosestNormals.from_mesh(data.V, data.F),
+                    f"closest normals of {path.name}")
+        except InvalidMeshError:
+            if mode == "closest":
+                raise
+    sm = SphericalStyleMap(data.V, data.F)
+    return sm, f"spherical map of {path.name} ({sm.steps_taken} cMCF steps)"

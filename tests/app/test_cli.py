@@ -169,3 +169,37 @@ def test_cubic_progressive_faces(tmp_path):
     r = stylize3d("cubic", shared_mesh("bob.obj"), "-o", tmp_path / "q.obj",
                   "--progressive-faces", "50000")
     assert r.returncode == 5 and "larger than the mesh" in r.stderr
+
+
+def test_analogy_json_and_style_errors(tmp_path):
+    out = tmp_path / "a.obj"
+    r = stylize3d("analogy", shared_mesh("spot_lowres.obj"), "-o", out, "--style", "cube",
+                  "--lambda", "1", "--max-iterations", "30", "--json")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["iterations"] <= 30 and d["mean_angle_after"] < d["mean_angle_before"] - 2
+    assert "cube" in d["style_map"]
+    assert read_mesh(out).F.shape == (1654, 3)
+    # a genus-1 style shape cannot be mapped to the sphere: plain message, nothing written
+    r = stylize3d("analogy", SAMPLES / "blob.obj", "-o", tmp_path / "b.obj", "--style",
+                  shared_mesh("bob.obj"), "--style-map", "spherical")
+    assert r.returncode == 4 and "genus" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "b.obj").exists()
+    r = stylize3d("analogy", SAMPLES / "blob.obj", "-o", tmp_path / "c.obj", "--style", "nope")
+    assert r.returncode == 5 and "Unknown style" in r.stderr
+
+
+def test_analogy_with_capture_json_and_flags(tmp_path):
+    from algorithms.deform.targets import CaptureSphere
+
+    cap = CaptureSphere(3)
+    cap.paint_cap([0, 1, 0], 40.0, [0, 0, 1])  # normals facing up are sent to +z
+    cap.save(tmp_path / "capture.json")
+    r = stylize3d("analogy", SAMPLES / "blob.obj", "-o", tmp_path / "d.obj", "--style",
+                  tmp_path / "capture.json", "--regularizer", "farap", "--dynamic",
+                  "--developable", "0.03", "--max-iterations", "5", "--json")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["params"]["regularizer"] == "farap" and d["params"]["dynamic_targets"]
+    assert d["params"]["developable_threshold"] == 0.03
+    assert "capture" in d["style_map"]

@@ -89,3 +89,26 @@ def test_advanced_fields_are_collapsed_and_excluded_fields_keep_defaults(qtbot):
     form.changed.connect(got.append)
     form.set_value("b", 7)
     assert got[-1] == AdvParams(b=7)
+
+
+@dataclass(frozen=True)
+class ZeroLogParams:
+    lam: float = param(1.0, label="λ", minimum=0.0, maximum=1e5, step=0.1, log_scale=True,
+                       tooltip="spans decades from 0")
+
+
+def test_log_slider_starting_at_zero(qtbot):
+    from app.forms import ParamsForm
+
+    form = ParamsForm(ZeroLogParams)
+    qtbot.addWidget(form)
+    ed = form.editors["lam"]
+    assert 0 < ed.slider.value() < 1000  # λ = 1 is somewhere inside, not at an end
+    got = []
+    form.changed.connect(got.append)
+    ed.slider.setValue(0)
+    assert got[-1].lam == 0.0
+    ed.slider.setValue(1000)
+    assert got[-1].lam == pytest.approx(1e5)
+    ed.slider.setValue(500)
+    assert 0.1 < got[-1].lam < 1e5
