@@ -176,11 +176,12 @@ class MainWindow(QMainWindow):
         self._esc.activated.connect(self.cancel_job)
 
     def _build_panels(self) -> None:
+        from app.panels.analogies import AnalogiesPanel
         from app.panels.cubic import CubicPanel
         from app.panels.smooth import SmoothPanel
 
         self.panels = {}
-        for cls in (CubicPanel, SmoothPanel):
+        for cls in (CubicPanel, AnalogiesPanel, SmoothPanel):
             panel = cls(self)
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, panel)
             self.panels[cls.title] = panel

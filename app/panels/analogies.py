@@ -1,0 +1,321 @@
+"""Panel "Analogies": normal-driven spherical shape analogies (thesis ch. 6).
+
+* a gallery of style primitives (thumbnails from resources/styles, made by
+  scripts/make_style_thumbnails.py), "Load style…" for a user mesh (closest normals when it is
+  convex, a cMCF spherical map otherwise) or a capture .json, and "Capture sphere" mode;
+* the Params form (λ, regularizer, dynamic targets, developable threshold, PolyCube), live by
+  default; the ShapeAnalogy precomputation is cached while only the parameters change;
+* a normal-capture sphere: pick a target direction, paint regions of the sphere of directions;
+  vertices whose normals fall in a region are sent to that direction (one undo step per stroke);
+* views: the mesh coloured by the angle between its normals and their targets (thesis Fig. 6.15)
+  or by Gaussian curvature (angle defect per Voronoi area, Fig. 6.21).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from PySide6.QtCore import QSize
+from PySide6.QtGui import QIcon, QUndoCommand
+from PySide6.QtWidgets import (QComboBox, QGroupBox, QHBoxLayout, QLabel, QListWidget,
+                               QListWidgetItem, QPushButton, QVBoxLayout, QWidget)
+
+from algorithms.deform.analogies import AnalogyParams, ShapeAnalogy
+from algorithms.deform.targets import PRIMITIVES, CaptureSphere, load_style
+from algorithms.errors import Stylize3DError
+from algorithms.mesh.operators import mass_matrix, vertex_normals
+from app import dialogs
+from app.panels.base import MethodPanel
+from app.tools import BrushSettings
+from app.viewport import PickResult, Viewport
+
+STYLE_DIR = Path(__file__).resolve().parents[2] / "resources" / "styles"
+CAPTURE = "capture sphere"
+AXES = {"+X": (1, 0, 0), "−X": (-1, 0, 0), "+Y": (0, 1, 0), "−Y": (0, -1, 0),
+        "+Z": (0, 0, 1), "−Z": (0, 0, -1)}
+
+
+def angle_defect_curvature(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Discrete Gaussian curvature: angle defect (2π − Σ angles; π − Σ on the boundary is not
+    corrected) divided by the Voronoi area. (n,) float64."""
+    E = [V[F[:, (k + 1) % 3]] - V[F[:, k]] for k in range(3)]
+    ang = np.zeros(F.shape)
+    for k in range(3):
+        a, b = -E[(k + 2) % 3], E[k]
+        cos = (a * b).sum(1) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1),
+                                          1e-300)
+        ang[:, k] = np.arccos(np.clip(cos, -1, 1))
+    total = np.bincount(F.ravel(), weights=ang.ravel(), minlength=len(V))
+    area = mass_matrix(V, F, "voronoi").diagonal()
+    return (2 * np.pi - total) / np.maximum(area, 1e-300)
+
+
+class _CaptureCommand(QUndoCommand):
+    def __init__(self, panel: "AnalogiesPanel", before: dict, after: dict):
+        super().__init__("Paint capture sphere")
+        self.panel, self.before, self.after = panel, before, after
+
+    def redo(self) -> None:
+        self.panel.set_capture(CaptureSphere.from_dict(self.after))
+
+    def undo(self) -> None:
+        self.panel.set_capture(CaptureSphere.from_dict(self.before))
+
+
+class CaptureBrush:
+    """Paints the capture sphere's regions (picks on the sphere view)."""
+
+    def __init__(self, panel: "AnalogiesPanel", settings: BrushSettings):
+        self.panel = panel
+        self.settings = settings
+        self._before: dict | None = None
+        self._label: int | None = None
+
+    def press(self, hit: PickResult) -> bool:
+        from PySide6.QtCore import Qt
+
+        if hit.modifiers & Qt.KeyboardModifier.ShiftModifier:  # pick a custom target direction
+            self.panel.set_custom_target(hit.position)
+            return True
+        self._before = self.panel.capture.to_dict()
+        self._label = None
+        self._dab(hit)
+        return True
+
+    def drag(self, hit: PickResult | None) -> None:
+        if hit is not None and self._before is not None:
+            self._dab(hit)
+
+    def _dab(self, hit: PickResult) -> None:
+        cap = self.panel.capture
+        d = hit.position / max(np.linalg.norm(hit.position), 1e-12)
+        theta_r = max(self.settings.radius, 1e-6) * np.pi
+        near = np.flatnonzero(cap.vertices @ d > np.cos(theta_r))
+        if self.settings.erase:
+            cap.erase(near)
+        else:
+            self._label = cap.paint(near, self.panel.capture_target(), self._label)
+        self.panel.refresh_capture_view()
+
+    def release(self) -> None:
+        if self._before is None:
+            return
+        before, self._before = self._before, None
+        after = self.panel.capture.to_dict()
+        if after != before:
+            self.panel.window_.undo_stack.push(_CaptureCommand(self.panel, before, after))
+
+
+class AnalogiesPanel(MethodPanel):
+    title = "Analogies"
+    description = ("Gives the shape the look of a style: its surface normals are pulled towards "
+                   "the normals of a style shape (or of a sphere you paint). Pick a style, move λ.")
+    params_cls = AnalogyParams
+    plot_metrics = ("mean_angle_to_targets",)
+    plot_title = "Mean angle to the target normals (°)"
+    live_by_default = True
+
+    def __init__(self, window):
+        super().__init__(window)
+        self.style_name = "cube"
+        self.custom_style = None  # (target map, description) of a loaded file
+        self.capture = CaptureSphere(3)
+        self._cache: tuple | None = None
+        self.brush_settings = BrushSettings(radius=0.1, strength=1.0)
+        self._build()
+        window.document.subscribe(self._on_doc)
+
+    # -- widgets -------------------------------------------------------------------------------
+    def _build(self) -> None:
+        lay = self.body_layout
+        box = QGroupBox("Style")
+        v = QVBoxLayout(box)
+        self.gallery = QListWidget()
+        self.gallery.setViewMode(QListWidget.ViewMode.IconMode)
+        self.gallery.setIconSize(QSize(56, 56))
+        self.gallery.setFixedHeight(150)
+        self.gallery.setResizeMode(QListWidget.ResizeMode.Adjust)
+        self.gallery.setToolTip("Click a style: the surface is pulled towards its face "
+                                "directions.")
+        for name in PRIMITIVES + (CAPTURE,):
+            png = STYLE_DIR / f"{name}.png"
+            item = QListWidgetItem(QIcon(str(png)) if png.exists() else QIcon(),
+                                   name.replace("_", " "))
+            item.setData(256, name)
+            item.setToolTip("Paint your own targets on the sphere below" if name == CAPTURE
+                            else f"Closest normals of a {name.replace('_', ' ')}")
+            self.gallery.addItem(item)
+        self.gallery.setCurrentRow(0)
+        self.gallery.currentItemChanged.connect(self._on_gallery)
+        v.addWidget(self.gallery)
+        row = QHBoxLayout()
+        self.load_button = QPushButton("Load style…")
+        self.load_button.setToolTip("Use a mesh file as the style (convex: its faces; any closed "
+                                    "genus-0 shape: a spherical map) or a capture .json file.")
+        self.load_button.clicked.connect(self.load_style_dialog)
+        self.style_label = QLabel("closest normals of a cube")
+        self.style_label.setWordWrap(True)
+        row.addWidget(self.load_button)
+        row.addWidget(self.style_label, 1)
+        v.addLayout(row)
+        lay.insertWidget(lay.indexOf(self.form), box)
+
+        cap = QGroupBox("Capture sphere: paint regions of directions (Shift+click: pick target)")
+        cv = QVBoxLayout(cap)
+        row = QHBoxLayout()
+        self.target_combo = QComboBox()
+        self.target_combo.addItems(list(AXES) + ["custom"])
+        self.target_combo.setToolTip("The direction painted regions send their normals to. "
+                                     "Shift+click the sphere to pick any direction (custom).")
+        self._custom_target = np.array([0.0, 0.0, 1.0])
+        self.erase_button = QPushButton("Erase mode")
+        self.erase_button.setCheckable(True)
+        self.erase_button.toggled.connect(lambda on: setattr(self.brush_settings, "erase", on))
+        self.save_capture_button = QPushButton("Save…")
+        self.save_capture_button.setToolTip("Save the painted sphere as a capture .json file.")
+        self.save_capture_button.clicked.connect(self.save_capture_dialog)
+        row.addWidget(QLabel("Target"))
+        row.addWidget(self.target_combo)
+        row.addWidget(self.erase_button)
+        row.addWidget(self.save_capture_button)
+        cv.addLayout(row)
+        self.capture_view = Viewport(cap)
+        self.capture_view.setMinimumSize(200, 200)
+        self.capture_view.set_mesh(self.capture.vertices, self.capture.faces)
+        self.capture_brush = CaptureBrush(self, self.brush_settings)
+        self.capture_view.set_handler(self.capture_brush)
+        cv.addWidget(self.capture_view)
+        self.capture_box = cap
+        lay.insertWidget(lay.indexOf(self.form) + 1, cap)
+
+        row = QHBoxLayout()
+        self.view_combo = QComboBox()
+        self.view_combo.addItems(["Shape only", "Angle to targets", "Gaussian curvature"])
+        self.view_combo.setToolTip("Colour the mesh by the angle between its normals and their "
+                                   "targets, or by its Gaussian curvature.")
+        self.view_combo.currentIndexChanged.connect(lambda _i: self.show_view())
+        row.addWidget(QLabel("Colour by"))
+        row.addWidget(self.view_combo, 1)
+        lay.insertLayout(lay.indexOf(self.plot) + 1, row)
+        self.refresh_capture_view()
+
+    # -- style -----------------------------------------------------------------------------------
+    def capture_target(self) -> np.ndarray:
+        key = self.target_combo.currentText()
+        if key == "custom":
+            return self._custom_target.copy()
+        return np.array(AXES[key], dtype=np.float64)
+
+    def set_custom_target(self, direction) -> None:
+        d = np.asarray(direction, dtype=np.float64)
+        self._custom_target = d / max(np.linalg.norm(d), 1e-12)
+        self.target_combo.setCurrentText("custom")
+        self.status_label.setText("Custom target direction ({:.2f}, {:.2f}, {:.2f}): paint "
+                                  "regions to send their normals there."
+                                  .format(*self._custom_target))
+
+    def set_capture(self, cap: CaptureSphere) -> None:
+        self.capture = cap
+        self.refresh_capture_view()
+        if self.style_name == CAPTURE:
+            self._on_params_changed(None)
+
+    def refresh_capture_view(self) -> None:
+        lab = self.capture.labels
+        vals = np.full(len(lab), np.nan)
+        painted = lab >= 0
+        if painted.any():  # colour regions by their target direction (x, y, z -> hue)
+            t = self.capture.targets[lab[painted]]
+            vals[painted] = np.arctan2(t[:, 1], t[:, 0]) + 2 * t[:, 2]
+        self.capture_view.show_field("capture", vals, "hsv", (-np.pi - 2, np.pi + 2))
+
+    def _on_gallery(self, item, _prev=None) -> None:
+        if item is None:
+            return
+        self.style_name = item.data(256)
+        self.custom_style = None
+        self.style_label.setText("your painted capture sphere" if self.style_name == CAPTURE
+                                 else f"closest normals of a {item.text()}")
+        self._on_params_changed(None)
+        self.show_view()
+
+    def load_style_dialog(self) -> bool:
+        path = dialogs.open_file(self, "Load style", "Style meshes or captures "
+                                 "(*.obj *.ply *.stl *.off *.json)")
+        if not path:
+            return False
+        try:
+            self.custom_style = load_style(path)
+        except Stylize3DError as e:
+            dialogs.error(self, "Cannot use this style", str(e))
+            return False
+        self.style_name = path
+        self.gallery.clearSelection()
+        self.style_label.setText(self.custom_style[1])
+        self._on_params_changed(None)
+        return True
+
+    def save_capture_dialog(self) -> bool:
+        path = dialogs.save_file(self, "Save capture sphere", "Capture (*.json)")
+        if not path:
+            return False
+        if not path.endswith(".json"):
+            path += ".json"
+        if Path(path).exists() and not dialogs.confirm(self, "Replace file?",
+                                                       f"{path} exists. Replace it?",
+                                                       yes="Replace"):
+            return False
+        try:
+            self.capture.save(path)
+        except (OSError, Stylize3DError) as e:
+            dialogs.error(self, "Could not save", str(e))
+            return False
+        return True
+
+    def target_map(self):
+        if self.custom_style is not None:
+            return self.custom_style[0]
+        if self.style_name == CAPTURE:
+            return CaptureSphere.from_dict(self.capture.to_dict())  # a snapshot for the worker
+        return load_style(self.style_name)[0]
+
+    # -- views -----------------------------------------------------------------------------------
+    def show_view(self) -> None:
+        doc = self.window_.document
+        if doc.is_empty:
+            return
+        i = self.view_combo.currentIndex()
+        if i == 0:
+            self.window_.viewport.show_field(None)
+        elif i == 1:
+            N = vertex_normals(doc.V, doc.F)
+            T = self.target_map()(N)
+            ang = np.degrees(np.arccos(np.clip((N * T).sum(1), -1.0, 1.0)))
+            self.window_.viewport.show_field("angle_to_targets", ang, "magma", (0.0, 45.0))
+        else:
+            K = angle_defect_curvature(doc.V, doc.F)
+            lim = float(np.percentile(np.abs(K), 95)) or 1.0
+            self.window_.viewport.show_field("gaussian_curvature", K, "coolwarm", (-lim, lim))
+
+    def _on_doc(self, what: str) -> None:
+        if what in ("mesh", "positions", "topology") and self.view_combo.currentIndex():
+            self.show_view()
+
+    # -- the method --------------------------------------------------------------------------------
+    def run(self, live: bool = False) -> None:
+        try:
+            self._target_map = self.target_map()
+        except Stylize3DError as e:
+            self.status_label.setText(str(e))
+            return
+        super().run(live)
+
+    def build_steps(self, state, params):
+        key = (id(state.V), id(state.F))
+        if self._cache is not None and self._cache[0] == key:
+            sa = self._cache[1]
+        else:
+            sa = ShapeAnalogy(state.V, state.F)
+            self._cache = (key, sa)
+        return sa.steps(params, target_map=self._target_map)
