@@ -7,8 +7,9 @@
   default; the ShapeAnalogy precomputation is cached while only the parameters change;
 * a normal-capture sphere: pick a target direction, paint regions of the sphere of directions;
   vertices whose normals fall in a region are sent to that direction (one undo step per stroke);
-* views: the mesh coloured by the angle between its normals and their targets (thesis Fig. 6.15)
-  or by Gaussian curvature (angle defect per Voronoi area, Fig. 6.21).
+* views: the mesh coloured by the angle between its normals and their targets (thesis Fig. 6.15),
+  by Gaussian curvature (angle defect per Voronoi area, Fig. 6.21), or by its transferred target
+  directions in the same colours as the capture sphere.
 """
 
 from __future__ import annotations
@@ -34,6 +35,16 @@ STYLE_DIR = Path(__file__).resolve().parents[2] / "resources" / "styles"
 CAPTURE = "capture sphere"
 AXES = {"+X": (1, 0, 0), "−X": (-1, 0, 0), "+Y": (0, 1, 0), "−Y": (0, -1, 0),
         "+Z": (0, 0, 1), "−Z": (0, 0, -1)}
+
+
+HUE_RANGE = (-np.pi - 2.0, np.pi + 2.0)
+
+
+def direction_hue(T: np.ndarray) -> np.ndarray:
+    """A scalar per unit direction (k, 3) for an "hsv" colour map: equal directions get equal
+    colours (azimuth plus a lift by z), used for the capture sphere and the mesh alike."""
+    T = np.asarray(T, dtype=np.float64)
+    return np.arctan2(T[:, 1], T[:, 0]) + 2.0 * T[:, 2]
 
 
 def angle_defect_curvature(V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -191,7 +202,8 @@ class AnalogiesPanel(MethodPanel):
 
         row = QHBoxLayout()
         self.view_combo = QComboBox()
-        self.view_combo.addItems(["Shape only", "Angle to targets", "Gaussian curvature"])
+        self.view_combo.addItems(["Shape only", "Angle to targets", "Gaussian curvature",
+                                  "Target directions"])
         self.view_combo.setToolTip("Colour the mesh by the angle between its normals and their "
                                    "targets, or by its Gaussian curvature.")
         self.view_combo.currentIndexChanged.connect(lambda _i: self.show_view())
@@ -225,10 +237,11 @@ class AnalogiesPanel(MethodPanel):
         lab = self.capture.labels
         vals = np.full(len(lab), np.nan)
         painted = lab >= 0
-        if painted.any():  # colour regions by their target direction (x, y, z -> hue)
-            t = self.capture.targets[lab[painted]]
-            vals[painted] = np.arctan2(t[:, 1], t[:, 0]) + 2 * t[:, 2]
-        self.capture_view.show_field("capture", vals, "hsv", (-np.pi - 2, np.pi + 2))
+        if painted.any():  # colour regions by their target direction
+            vals[painted] = direction_hue(self.capture.targets[lab[painted]])
+        self.capture_view.show_field("capture", vals, "hsv", HUE_RANGE)
+        if self.view_combo.currentIndex() == 3:
+            self.show_view()
 
     def _on_gallery(self, item, _prev=None) -> None:
         if item is None:
@@ -293,6 +306,10 @@ class AnalogiesPanel(MethodPanel):
             T = self.target_map()(N)
             ang = np.degrees(np.arccos(np.clip((N * T).sum(1), -1.0, 1.0)))
             self.window_.viewport.show_field("angle_to_targets", ang, "magma", (0.0, 45.0))
+        elif i == 3:  # the transferred targets, in the capture sphere's colours
+            T = self.target_map()(vertex_normals(doc.V, doc.F))
+            self.window_.viewport.show_field("target_direction", direction_hue(T), "hsv",
+                                             HUE_RANGE)
         else:
             K = angle_defect_curvature(doc.V, doc.F)
             lim = float(np.percentile(np.abs(K), 95)) or 1.0

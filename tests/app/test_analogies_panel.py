@@ -100,3 +100,17 @@ def test_shift_click_picks_a_custom_target(window, dialogs, qtbot):
     assert np.degrees(np.arccos(np.clip(panel.capture_target() @ d, -1, 1))) < 3.0
     assert (panel.capture.labels < 0).all()  # picking does not paint
     assert window.undo_stack.count() == 0
+
+
+def test_target_direction_view_matches_capture_colours(window, dialogs):
+    from app.panels.analogies import direction_hue
+
+    panel = open_panel(window)
+    panel.gallery.setCurrentRow(panel.gallery.count() - 1)
+    panel.capture.paint_cap([0, 1, 0], 50.0, [1, 0, 0])
+    panel.refresh_capture_view()
+    panel.view_combo.setCurrentIndex(3)
+    hue = window.viewport.poly.point_data["target_direction"]
+    N = vertex_normals(window.document.V, window.document.F)
+    up = N[:, 1] / np.linalg.norm(N, axis=1) > np.cos(np.radians(45))
+    np.testing.assert_allclose(hue[up], direction_hue(np.array([[1.0, 0, 0]]))[0])
