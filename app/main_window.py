@@ -82,8 +82,8 @@ class MainWindow(QMainWindow):
         if geo is not None:
             self.restoreGeometry(geo)
         state = self.settings.value("window/state")
-        if state is not None:
-            self.restoreState(state)
+        if state is not None:  # a layout saved with another set of panels is ignored
+            self.restoreState(state, self._layout_version())
         self._update_title()
         self._update_stats()
 
@@ -174,6 +174,11 @@ class MainWindow(QMainWindow):
         self._esc = QShortcut(QKeySequence(Qt.Key.Key_Escape), self)
         self._esc.setContext(Qt.ShortcutContext.ApplicationShortcut)
         self._esc.activated.connect(self.cancel_job)
+
+    def _layout_version(self) -> int:
+        import zlib
+
+        return zlib.crc32(",".join(self.panels).encode()) & 0x7FFFFFFF
 
     def _build_panels(self) -> None:
         from app.panels.analogies import AnalogiesPanel
@@ -555,7 +560,7 @@ class MainWindow(QMainWindow):
             panel.shutdown()
         self.runner.shutdown()
         self.settings.setValue("window/geometry", self.saveGeometry())
-        self.settings.setValue("window/state", self.saveState())
+        self.settings.setValue("window/state", self.saveState(self._layout_version()))
         self.settings.sync()
         for vp in self.findChildren(Viewport):  # the main view and panel views (Gauss map)
             vp.close_plotter()

@@ -1,5 +1,5 @@
-"""Makes docs/screenshot.png with the app itself: opens the bumpy sample, runs Smooth, waits for
-it, and saves the whole window (File > Export Screenshot saves the 3D view alone).
+"""Makes docs/screenshot.png with the app itself: opens the blob sample, runs cubic stylization,
+waits for it, and saves the whole window (File > Export Screenshot saves the 3D view alone).
 
 Run under a display, e.g.: xvfb-run -a -s "-screen 0 1600x1000x24" .venv/bin/python scripts/readme_screenshot.py
 """
@@ -27,11 +27,11 @@ def main() -> int:
     out = ROOT / "docs" / "screenshot.png"
 
     def start():
-        assert win.open_path(ROOT / "resources" / "samples" / "bumpy.obj")
-        panel = win.panels["Smooth"]
-        panel.form.editors["flow"].setCurrentText("cmcf")
-        panel.form.editors["step_size"].setValue(2e-4)
-        panel.form.editors["iterations"].setValue(8)
+        assert win.open_path(ROOT / "resources" / "samples" / "blob.obj")
+        panel = win.panels["Cubic"]
+        panel.raise_()
+        panel.live_box.setChecked(False)
+        panel.form.editors["lam"].setValue(0.6)
         win.runner.finished.connect(lambda _s: QTimer.singleShot(500, shoot))
         panel.run()
 
