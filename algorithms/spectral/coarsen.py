@@ -1,0 +1,470 @@
+"""Spectral coarsening of a sparse PSD operator (thesis ch. 7: combinatorial + operator optimization).
+
+Input: a sparse symmetric positive semi-definite ``L`` (n x n; for meshes pass ``-cotmatrix``), a
+diagonal mass ``M`` (sparse diagonal or a length-n vector) and a target size ``m``. Output: a
+sparse ``L~ = G^T L G`` (m x m, PSD, containing the null space of L), a lumped ``M~ = K M K^T``,
+the interpolation ``G`` (n x m, cluster-ring sparsity), the cluster assignment ``K`` and the root
+selection ``P`` (both m x n, 0/1).
+
+No mesh is needed here; :mod:`algorithms.spectral.operators` builds (L, M) from meshes.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Iterator
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+from scipy.sparse.linalg import eigsh
+
+from ..errors import ParameterError
+from ..params import param
+
+__all__ = ["CoarsenParams", "CoarsenStep", "Clustering", "edge_distances", "kmedoids_clustering",
+           "cluster_sparsity", "null_space", "project_constraint", "energy_and_gradient",
+           "generalized_eigs", "coarsen_iter", "coarsen"]
+
+
+@dataclass(frozen=True)
+class CoarsenParams:
+    """Parameters of spectral coarsening (defaults: thesis ch. 7 / the authors' demo)."""
+
+    m: int = param(500, label="Coarse size", minimum=2, maximum=10_000_000, step=1,
+                   tooltip="Number of rows of the coarsened operator (coarse vertices). "
+                           "Should exceed twice the eigenvector count.")
+    k: int = param(0, label="Eigenvectors", minimum=0, maximum=10_000, step=1,
+                   tooltip="How many low-frequency eigenvectors to preserve; 0 means round(m/3) "
+                           "as in the authors' demo.")
+    p: float = param(0.0, label="Operator length power p", minimum=-4.0, maximum=4.0, step=0.5,
+                     advanced=True,
+                     tooltip="Units of the operator in powers of length (0 for the cotangent "
+                             "Laplacian). Used by the operator-aware edge distance.")
+    q: float = param(2.0, label="Mass length power q", minimum=0.5, maximum=4.0, step=0.5,
+                     advanced=True,
+                     tooltip="Units of the mass matrix in powers of length (2 for surface "
+                             "vertex areas, 3 for volumes).")
+    max_iterations: int = param(1000, label="Max iterations", minimum=0, maximum=100_000, step=10,
+                                tooltip="Upper bound on optimizer iterations.")
+    learning_rate: float = param(0.02, label="Learning rate", minimum=1e-6, maximum=1.0,
+                                 step=0.005, decimals=4, log_scale=True,
+                                 tooltip="NADAM step size (thesis: 0.02). It is halved every "
+                                         "time the energy fails to improve.")
+    patience: int = param(10, label="Patience", minimum=1, maximum=1000, step=1,
+                          tooltip="Stop after this many consecutive iterations without "
+                                  "improving the energy.")
+    clustering_iterations: int = param(20, label="Clustering iterations", minimum=1,
+                                       maximum=1000, step=1, advanced=True,
+                                       tooltip="Lloyd iterations of the graph k-medoids.")
+    seed: int = param(0, label="Random seed", minimum=0, maximum=2**31 - 1, step=1,
+                      tooltip="Seed of the random initial cluster roots.")
+
+
+@dataclass
+class Clustering:
+    """Result of the combinatorial stage."""
+
+    labels: np.ndarray   # (n,) cluster of every fine node
+    roots: np.ndarray    # (m,) root (fine index) of every cluster
+    K: sp.csr_matrix     # (m, n) assignment
+    P: sp.csr_matrix     # (m, n) root selection
+    seconds: float = 0.0
+
+
+@dataclass
+class CoarsenStep:
+    """One optimizer iteration; the last step carries the result."""
+
+    iteration: int
+    total: int | None
+    energy: float
+    metrics: dict[str, float] = field(default_factory=dict)
+    message: str = ""
+    done: bool = False
+    L: sp.csr_matrix | None = None   # L~ (m x m)
+    M: sp.csr_matrix | None = None   # M~ (m x m, diagonal)
+    G: sp.csr_matrix | None = None   # (n x m)
+    K: sp.csr_matrix | None = None
+    P: sp.csr_matrix | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------------------------
+# helpers
+
+def _as_mass_vector(M, n: int) -> np.ndarray:
+    d = M.diagonal() if sp.issparse(M) else np.asarray(M, dtype=float).reshape(-1)
+    if d.shape[0] != n:
+        raise ParameterError(f"the mass matrix has {d.shape[0]} entries but the operator has {n} "
+                             "rows; pass the mass of the same mesh.")
+    if not np.all(np.isfinite(d)) or np.any(d <= 0):
+        raise ParameterError("the mass matrix has zero, negative or non-finite entries; remove "
+                             "unreferenced or degenerate vertices first.")
+    return np.asarray(d, dtype=float)
+
+
+def _check_L(L) -> sp.csr_matrix:
+    if not sp.issparse(L) or L.shape[0] != L.shape[1]:
+        raise ParameterError("the operator must be a square sparse matrix.")
+    L = sp.csr_matrix(L, dtype=float)
+    if L.nnz and not np.all(np.isfinite(L.data)):
+        raise ParameterError("the operator has non-finite entries.")
+    if L.diagonal().sum() < 0:
+        raise ParameterError("the operator looks negative semi-definite (libigl's cotmatrix "
+                             "sign); pass -L.")
+    return L
+
+
+def generalized_eigs(L, M, k: int, sigma: float = -1e-8):
+    """First ``k`` eigenpairs of ``L x = lam M x`` (ascending), eigenvectors M-orthonormal."""
+    n = L.shape[0]
+    k = int(min(k, n - 1))
+    Ms = M if sp.issparse(M) else sp.diags(np.asarray(M, float))
+    if n <= max(200, 3 * k):
+        import scipy.linalg as sla
+        lam, phi = sla.eigh(L.toarray() if sp.issparse(L) else L, Ms.toarray())
+        lam, phi = lam[:k], phi[:, :k]
+    else:
+        lam, phi = eigsh(sp.csc_matrix(L), k=k, M=sp.csc_matrix(Ms), sigma=sigma, which="LM")
+        order = np.argsort(lam)
+        lam, phi = lam[order], phi[:, order]
+        # M-orthonormalize (eigsh is close but not exact within clusters of eigenvalues)
+        Gm = phi.T @ (Ms @ phi)
+        C = np.linalg.cholesky((Gm + Gm.T) / 2)
+        phi = np.linalg.solve(C, phi.T).T
+    return lam, phi
+
+
+# --------------------------------------------------------------------------------------------
+# 1. combinatorial coarsening
+
+def edge_distances(L, mass: np.ndarray, p: float = 0.0, q: float = 2.0) -> sp.csr_matrix:
+    """Operator-aware edge lengths D_ij = (M_ii + M_jj)^((p+1)/q) / (-L_ij) (thesis Eq. in 7.3.1).
+
+    Edges with -L_ij <= 0 (where the formula's max(., 0) would give no usable length) keep the
+    graph connected with a length of 10x the largest positive one.
+    """
+    C = sp.coo_matrix(L)
+    off = C.row != C.col
+    i, j, w = C.row[off], C.col[off], -C.data[off]
+    d = np.empty_like(w)
+    good = w > 0
+    d[good] = (mass[i[good]] + mass[j[good]]) ** ((p + 1.0) / q) / w[good]
+    big = 10.0 * d[good].max() if good.any() else 1.0
+    d[~good] = big
+    D = sp.csr_matrix((d, (i, j)), shape=L.shape)
+    D = D.maximum(D.T)  # symmetric
+    return D
+
+
+def _seeds_per_component(D: sp.csr_matrix, m: int, rng: np.random.Generator) -> np.ndarray:
+    n = D.shape[0]
+    ncomp, comp = csgraph.connected_components(D, directed=False)
+    if ncomp > m:
+        raise ParameterError(f"the operator has {ncomp} disconnected parts but only {m} coarse "
+                             "nodes were asked for; ask for at least one per part.")
+    sizes = np.bincount(comp, minlength=ncomp)
+    alloc = np.maximum(1, np.floor(sizes / n * m).astype(int))
+    alloc = np.minimum(alloc, sizes)
+    while alloc.sum() < m:  # hand out the remainder to the largest parts with room
+        room = sizes - alloc
+        c = int(np.argmax(np.where(room > 0, sizes / alloc, -1)))
+        alloc[c] += 1
+    while alloc.sum() > m:
+        c = int(np.argmax(np.where(alloc > 1, alloc, -1)))
+        alloc[c] -= 1
+    seeds = [rng.choice(np.flatnonzero(comp == c), size=a, replace=False)
+             for c, a in enumerate(alloc)]
+    return np.concatenate(seeds).astype(np.int64)
+
+
+def kmedoids_clustering(L, M, m: int, *, p: float = 0.0, q: float = 2.0, iterations: int = 20,
+                        seed: int = 0) -> Clustering:
+    """Graph k-medoids (Lloyd aggregation, Bell 2008) on operator-aware shortest paths.
+
+    Each iteration assigns every node to its nearest root (one multi-source Dijkstra) and moves
+    every root to its cluster's centre: the node farthest (within the cluster) from the cluster
+    boundary, Bell's approximation of the medoid.
+    """
+    t0 = time.perf_counter()
+    L = _check_L(L)
+    n = L.shape[0]
+    if not 1 <= m <= n:
+        raise ParameterError(f"the coarse size m={m} must be between 1 and n={n}.")
+    mass = _as_mass_vector(M, n)
+    D = edge_distances(L, mass, p, q)
+    rng = np.random.default_rng(seed)
+    roots = _seeds_per_component(D, m, rng)
+    Dc = D.tocoo()
+    labels = None
+    for _ in range(max(1, iterations)):
+        dist, _, src = csgraph.dijkstra(D, directed=False, indices=roots, min_only=True,
+                                        return_predecessors=True)
+        pos = np.full(n, -1, dtype=np.int64)
+        pos[roots] = np.arange(len(roots))
+        new_labels = pos[src]
+        # centre update: distance to the cluster boundary inside each cluster
+        same = new_labels[Dc.row] == new_labels[Dc.col]
+        inner = sp.csr_matrix((Dc.data[same], (Dc.row[same], Dc.col[same])), shape=(n, n))
+        boundary = np.zeros(n, dtype=bool)
+        boundary[Dc.row[~same]] = True
+        if boundary.any():
+            bd = csgraph.dijkstra(inner, directed=False, indices=np.flatnonzero(boundary),
+                                  min_only=True)
+            bd[~np.isfinite(bd)] = np.inf  # isolated cluster: any node, prefer the old root
+        else:
+            bd = np.zeros(n)
+        bd = np.where(np.isfinite(bd), bd, dist.max() + 1.0)
+        # tie-break towards the current root so converged roots stay put
+        score = bd.copy()
+        score[roots] += 1e-12 * (1.0 + np.abs(score[roots]))
+        order = np.lexsort((-score, new_labels))
+        first = np.r_[0, np.flatnonzero(np.diff(new_labels[order])) + 1]
+        new_roots = order[first]
+        new_roots = new_roots[np.argsort(new_labels[new_roots])]
+        converged = labels is not None and np.array_equal(new_roots, roots)
+        labels, roots = new_labels, new_roots
+        if converged:
+            break
+    # final assignment to the final roots
+    _, _, src = csgraph.dijkstra(D, directed=False, indices=roots, min_only=True,
+                                 return_predecessors=True)
+    pos = np.full(n, -1, dtype=np.int64)
+    pos[roots] = np.arange(len(roots))
+    labels = pos[src]
+    mm = len(roots)
+    K = sp.csr_matrix((np.ones(n), (labels, np.arange(n))), shape=(mm, n))
+    P = sp.csr_matrix((np.ones(mm), (np.arange(mm), roots)), shape=(mm, n))
+    return Clustering(labels=labels, roots=roots, K=K, P=P, seconds=time.perf_counter() - t0)
+
+
+def cluster_sparsity(L, K) -> sp.csr_matrix:
+    """S_G = K^T A~ with the cluster adjacency A~ = K S_L K^T (so S_L~ = A~^3), n x m 0/1."""
+    SL = sp.csr_matrix(L, copy=True)
+    SL.data[:] = 1.0
+    SL = SL + sp.eye(L.shape[0], format="csr")
+    A = (K @ SL @ K.T).tocsr()
+    A.data[:] = 1.0
+    S = (K.T @ A).tocsr()
+    S.data[:] = 1.0
+    S.sort_indices()
+    return S
+
+
+# --------------------------------------------------------------------------------------------
+# 2. operator optimization
+
+def null_space(L, M=None, lam=None, phi=None, rtol: float = 1e-8) -> np.ndarray:
+    """Basis Phi0 (n x c) of the null space of L.
+
+    Exact connected-component indicators when L annihilates them (Laplacians: G P 1 = 1 per
+    part); otherwise the eigenvectors ``phi`` whose eigenvalues are below ``rtol * max|lam|``.
+    """
+    L = sp.csr_matrix(L)
+    n = L.shape[0]
+    ncomp, comp = csgraph.connected_components(L, directed=False)
+    ind = np.zeros((n, ncomp))
+    ind[np.arange(n), comp] = 1.0
+    scale = max(abs(L).sum(axis=1).max(), 1e-300)
+    if np.abs(L @ ind).max() <= 1e-9 * scale:
+        return ind
+    if lam is None or phi is None:
+        raise ParameterError("the operator has no constant null space; pass its eigenpairs.")
+    lam = np.asarray(lam)
+    keep = np.abs(lam) <= rtol * max(np.abs(lam).max(), 1e-300)
+    return phi[:, keep]
+
+
+def project_constraint(G: sp.csr_matrix, B0: np.ndarray, Phi0: np.ndarray) -> sp.csr_matrix:
+    """Closest G' (Frobenius, same sparsity) with G' B0 = Phi0 (App. 7.6.2), B0 = P Phi0.
+
+    The constraint decouples per row of G: g_i B0[J_i] = Phi0[i]; the minimum-norm correction is
+    r_i (B0_J^T B0_J)^-1 B0_J^T with r_i = g_i B0_J - Phi0_i. For one null vector this is the
+    element-wise division of the thesis.
+    """
+    G = sp.csr_matrix(G, copy=True)
+    n = G.shape[0]
+    rows = np.repeat(np.arange(n), np.diff(G.indptr))
+    cols = G.indices
+    c = B0.shape[1]
+    resid = G @ B0 - Phi0                       # (n, c)
+    if c == 0:
+        return G
+    if c == 1:
+        b = B0[:, 0]
+        S = G.copy()
+        S.data = b[cols] ** 2
+        gram = np.asarray(S.sum(axis=1)).ravel()
+        gram[gram == 0] = 1.0
+        G.data -= (resid[rows, 0] / gram[rows]) * b[cols]
+        return G
+    outer = (B0[:, :, None] * B0[:, None, :]).reshape(-1, c * c)
+    S = G.copy()
+    S.data[:] = 1.0
+    gram = (S @ outer).reshape(n, c, c) + 1e-300 * np.eye(c)
+    try:
+        y = np.linalg.solve(gram, resid[:, :, None])[:, :, 0]
+    except np.linalg.LinAlgError:
+        y = np.stack([np.linalg.lstsq(gram[i], resid[i], rcond=None)[0] for i in range(n)])
+    G.data -= np.einsum("zc,zc->z", y[rows], B0[cols])
+    return G
+
+
+def energy_and_gradient(G: sp.csr_matrix, L: sp.csr_matrix, A: np.ndarray, B: np.ndarray,
+                        mt: np.ndarray, *, gradient: bool = True, chunk: int = 200_000,
+                        blocks=None):
+    """E_k(G) = 1/2 ||A - M~^-1 G^T L G B||^2_M~ and its gradient on the pattern of G.
+
+    Gradient (App. 7.6.1): dE/dG = Y Z with Y = L G and Z = W B^T + B W^T, W = M~^-1 L~ B - A;
+    evaluated only on the non-zeros of G as (Y W)_i . B_j + (Y B)_i . W_j (never n x m dense).
+    ``blocks`` (from :func:`_cluster_blocks`) evaluates it cluster by cluster as small dense
+    products (rows of one cluster share their column pattern), which is faster than gathering.
+    Returns (E, grad_data aligned with G.data or None, L~).
+    """
+    Y = (L @ G).tocsr()
+    Lt = (G.T @ Y).tocsr()
+    Lt = (Lt + Lt.T) * 0.5
+    W = (Lt @ B) / mt[:, None] - A
+    E = 0.5 * float(np.sum(mt[:, None] * W * W))
+    if not gradient:
+        return E, None, Lt
+    YW = Y @ W
+    YB = Y @ B
+    n = G.shape[0]
+    g = np.empty(G.nnz)
+    if blocks is not None:
+        for R, J, pos in blocks:
+            g[pos] = YW[R] @ B[J].T + YB[R] @ W[J].T
+        return E, g, Lt
+    rows = np.repeat(np.arange(n), np.diff(G.indptr))
+    cols = G.indices
+    for s in range(0, G.nnz, chunk):
+        r, c = rows[s:s + chunk], cols[s:s + chunk]
+        g[s:s + chunk] = (np.einsum("zk,zk->z", YW[r], B[c])
+                          + np.einsum("zk,zk->z", YB[r], W[c]))
+    return E, g, Lt
+
+
+def _cluster_blocks(G: sp.csr_matrix, labels: np.ndarray):
+    """Per cluster: (member rows R, shared columns J, positions in G.data (|R| x |J|)), or None
+    when the rows of a cluster do not share one column pattern."""
+    order = np.argsort(labels, kind="stable")
+    starts = np.r_[0, np.flatnonzero(np.diff(labels[order])) + 1, len(order)]
+    out = []
+    for a, b in zip(starts[:-1], starts[1:]):
+        R = order[a:b]
+        lo, hi = G.indptr[R[0]], G.indptr[R[0] + 1]
+        J = G.indices[lo:hi]
+        cnt = np.diff(G.indptr)[R]
+        if np.any(cnt != len(J)):
+            return None
+        pos = G.indptr[R][:, None] + np.arange(len(J))[None, :]
+        if not np.array_equal(G.indices[pos], np.broadcast_to(J, pos.shape)):
+            return None
+        out.append((R, J, pos))
+    return out
+
+
+def coarsen_iter(L, M, m: int | None = None, k: int | None = None,
+                 params: CoarsenParams | None = None, *, eigs=None,
+                 clustering: Clustering | None = None) -> Iterator[CoarsenStep]:
+    """Spectral coarsening as a generator: one :class:`CoarsenStep` per optimizer iteration.
+
+    ``m``/``k`` override ``params.m``/``params.k``; ``eigs=(lam, phi)`` reuses a fine
+    eigendecomposition (first k, M-orthonormal); ``clustering`` reuses a combinatorial stage.
+    The last step has ``done=True`` and the result (best iterate) in L, M, G, K, P.
+    """
+    params = params or CoarsenParams()
+    m = int(params.m if m is None else m)
+    k = int(params.k if k is None else k)
+    if k <= 0:
+        k = max(1, round(m / 3))
+    L = _check_L(L)
+    n = L.shape[0]
+    mass = _as_mass_vector(M, n)
+    if not 2 <= m <= n:
+        raise ParameterError(f"the coarse size m={m} must be between 2 and the operator size "
+                             f"{n}.")
+    if k >= m:
+        raise ParameterError(f"the eigenvector count k={k} must be smaller than m={m} "
+                             "(the thesis recommends m > 2k).")
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    if eigs is None:
+        lam, phi = generalized_eigs(L, sp.diags(mass), k)
+    else:
+        lam, phi = eigs
+        lam, phi = np.asarray(lam)[:k], np.asarray(phi)[:, :k]
+    timings["eigendecomposition"] = time.perf_counter() - t
+    t = time.perf_counter()
+    if clustering is None:
+        clustering = kmedoids_clustering(L, mass, m, p=params.p, q=params.q,
+                                         iterations=params.clustering_iterations,
+                                         seed=params.seed)
+    K, P = clustering.K, clustering.P
+    SG = cluster_sparsity(L, K)
+    timings["clustering"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    mt = np.asarray(K @ mass).ravel()                   # M~ = K M K^T (diagonal)
+    A = P @ ((L @ phi) / mass[:, None])                 # P M^-1 L Phi
+    B = P @ phi                                         # P Phi
+    Phi0 = null_space(L, None, lam, phi)
+    B0 = P @ Phi0
+    # initial G: piecewise-constant prolongation K^T on the pattern S_G
+    G = SG.copy()
+    rows = np.repeat(np.arange(n), np.diff(G.indptr))
+    G.data = (clustering.labels[rows] == G.indices).astype(float)   # explicit zeros kept
+    G = project_constraint(G, B0, Phi0)
+    blocks = _cluster_blocks(G, clustering.labels)
+    E, grad, Lt = energy_and_gradient(G, L, A, B, mt, blocks=blocks)
+    E0 = E
+    best_E, best_G, best_Lt = E, G.copy(), Lt
+    yield CoarsenStep(0, params.max_iterations, E, {"energy": E, "relative_energy": 1.0},
+                      "initial (piecewise constant)")
+    lr = float(params.learning_rate)
+    b1, b2, eps = 0.9, 0.9, 1e-8
+    mom = np.zeros(G.nnz)
+    vel = np.zeros(G.nnz)
+    stall = 0
+    it = 0
+    for it in range(1, params.max_iterations + 1):
+        mom = b1 * mom + (1 - b1) * grad
+        vel = b2 * vel + (1 - b2) * grad * grad
+        mhat = mom / (1 - b1 ** it)
+        vhat = vel / (1 - b2 ** it)
+        step = lr * (b1 * mhat + (1 - b1) * grad / (1 - b1 ** it)) / (np.sqrt(vhat) + eps)
+        G.data -= step
+        G = project_constraint(G, B0, Phi0)
+        E, grad, Lt = energy_and_gradient(G, L, A, B, mt, blocks=blocks)
+        if E < best_E:
+            best_E, best_G, best_Lt = E, G.copy(), Lt
+            stall = 0
+        else:
+            stall += 1
+            lr *= 0.5
+        yield CoarsenStep(it, params.max_iterations, E,
+                          {"energy": E, "relative_energy": E / E0 if E0 else 0.0,
+                           "learning_rate": lr},
+                          f"iteration {it}: energy {E:.4g}")
+        if stall >= params.patience:
+            break
+    timings["optimization"] = time.perf_counter() - t
+    timings["iterations"] = float(it)
+    Mt = sp.diags(mt).tocsr()
+    yield CoarsenStep(it, params.max_iterations, best_E,
+                      {"energy": best_E, "relative_energy": best_E / E0 if E0 else 0.0},
+                      f"done after {it} iterations: energy {best_E:.4g} "
+                      f"({best_E / E0 if E0 else 0:.3g} of the initial)",
+                      done=True, L=best_Lt.tocsr(), M=Mt, G=best_G, K=K, P=P, timings=timings)
+
+
+def coarsen(L, M, m: int | None = None, k: int | None = None,
+            params: CoarsenParams | None = None, **kw) -> CoarsenStep:
+    """Run :func:`coarsen_iter` to the end and return its final step (with the result)."""
+    last = None
+    for last in coarsen_iter(L, M, m, k, params, **kw):
+        pass
+    return last

@@ -1,0 +1,130 @@
+"""Operators (PSD L, diagonal M) to coarsen: cotangent, intrinsic Delaunay, anisotropic
+(Andreux et al. 2014), graph and point-cloud Laplacians. All return ``(L, M)`` with ``L``
+symmetric positive semi-definite (the negative of libigl's sign convention)."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import ParameterError
+from ..mesh.operators import cotangent_laplacian, mass_matrix
+
+__all__ = ["OPERATORS", "build_operator", "cotangent_operator", "intrinsic_delaunay_operator",
+           "anisotropic_operator", "tensor_laplacian", "graph_operator", "point_cloud_operator"]
+
+OPERATORS = ("cotangent", "intrinsic_delaunay", "anisotropic", "graph", "point_cloud")
+
+
+def _VF(V, F):
+    V = np.ascontiguousarray(V, dtype=np.float64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    return V, F
+
+
+def cotangent_operator(V, F):
+    V, F = _VF(V, F)
+    return sp.csr_matrix(-cotangent_laplacian(V, F)), sp.csr_matrix(mass_matrix(V, F))
+
+
+def intrinsic_delaunay_operator(V, F):
+    """Cotangent Laplacian of the intrinsic Delaunay triangulation (libigl's edge flipping)."""
+    import igl
+    V, F = _VF(V, F)
+    L = igl.intrinsic_delaunay_cotmatrix(V, F)[0]
+    return sp.csr_matrix(-L), sp.csr_matrix(mass_matrix(V, F))
+
+
+def tensor_laplacian(V, F, slow_dirs, alpha: float):
+    """Per-face tensor Laplacian L = Grad^T A D Grad with D = e1 e1^T / (1 + alpha) + e2 e2^T.
+
+    ``slow_dirs`` (#F x 3) gives e1 per face (projected into the face plane and normalized);
+    diffusion along it is ``1 + alpha`` times slower. alpha = 0 is the cotangent Laplacian.
+    """
+    import igl
+    V, F = _VF(V, F)
+    nf = len(F)
+    Gr = igl.grad(V, F)                            # (3 nf, n), rows [x-block; y-block; z-block]
+    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    area = 0.5 * np.linalg.norm(N, axis=1)
+    N = N / np.maximum(2 * area, 1e-300)[:, None]
+    e1 = np.asarray(slow_dirs, float)
+    e1 = e1 - np.sum(e1 * N, axis=1)[:, None] * N
+    nrm = np.linalg.norm(e1, axis=1)
+    bad = nrm < 1e-12
+    if bad.any():  # no direction: any in-plane one (the tensor is then isotropic-ish there)
+        e1[bad] = V[F[bad, 1]] - V[F[bad, 0]]
+        nrm[bad] = np.linalg.norm(e1[bad], axis=1)
+    e1 /= np.maximum(nrm, 1e-300)[:, None]
+    e2 = np.cross(N, e1)
+    D = (e1[:, :, None] * e1[:, None, :]) / (1.0 + alpha) + e2[:, :, None] * e2[:, None, :]
+    D *= area[:, None, None]
+    f = np.arange(nf)
+    rows = np.concatenate([a * nf + f for a in range(3) for b in range(3)])
+    cols = np.concatenate([b * nf + f for a in range(3) for b in range(3)])
+    vals = np.concatenate([D[:, a, b] for a in range(3) for b in range(3)])
+    T = sp.csr_matrix((vals, (rows, cols)), shape=(3 * nf, 3 * nf))
+    L = (Gr.T @ T @ Gr).tocsr()
+    L = 0.5 * (L + L.T)
+    L = L - sp.diags(np.asarray(L.sum(axis=1)).ravel())   # exact zero row sums
+    return sp.csr_matrix(L), sp.csr_matrix(mass_matrix(V, F))
+
+
+def anisotropic_operator(V, F, alpha: float = 10.0):
+    """Anisotropic Laplacian of Andreux et al. 2014: diffusion along the maximum principal
+    curvature direction slowed by 1 / (1 + alpha) (igl.principal_curvature directions)."""
+    import igl
+    V, F = _VF(V, F)
+    if alpha < 0:
+        raise ParameterError("the anisotropy alpha must be zero or positive.")
+    PD1 = igl.principal_curvature(V, F)[0]          # maximal curvature direction per vertex
+    # average the (sign-ambiguous) line field per face: align to the first corner
+    d0 = PD1[F[:, 0]]
+    acc = d0.copy()
+    for c in (1, 2):
+        d = PD1[F[:, c]]
+        s = np.sign(np.sum(d * d0, axis=1))
+        s[s == 0] = 1
+        acc += s[:, None] * d
+    return tensor_laplacian(V, F, acc, alpha)
+
+
+def graph_operator(V, F):
+    """Combinatorial graph Laplacian of the edge graph, identity mass."""
+    import igl
+    V, F = _VF(V, F)
+    A = igl.adjacency_matrix(F).astype(float)
+    A = sp.csr_matrix(A)
+    A.data[:] = 1.0
+    n = len(V)
+    if A.shape[0] < n:
+        A.resize((n, n))
+    L = sp.diags(np.asarray(A.sum(axis=1)).ravel()) - A
+    return sp.csr_matrix(L), sp.identity(n, format="csr")
+
+
+def point_cloud_operator(V, F=None):
+    """Point-cloud Laplacian (Sharp & Crane's robust_laplacian, if installed)."""
+    try:
+        import robust_laplacian  # type: ignore
+    except ImportError as exc:
+        raise ParameterError("the point-cloud Laplacian needs the optional package "
+                             "'robust_laplacian', which is not installed; choose another "
+                             "operator.") from exc
+    L, M = robust_laplacian.point_cloud_laplacian(np.asarray(V, float))
+    return sp.csr_matrix(L), sp.csr_matrix(M)
+
+
+def build_operator(V, F, name: str = "cotangent", *, alpha: float = 10.0):
+    """(L, M, p, q) for an operator name in :data:`OPERATORS` (p, q: units for the distance)."""
+    if name == "cotangent":
+        return (*cotangent_operator(V, F), 0.0, 2.0)
+    if name == "intrinsic_delaunay":
+        return (*intrinsic_delaunay_operator(V, F), 0.0, 2.0)
+    if name == "anisotropic":
+        return (*anisotropic_operator(V, F, alpha), 0.0, 2.0)
+    if name == "graph":
+        return (*graph_operator(V, F), 0.0, 2.0)
+    if name == "point_cloud":
+        return (*point_cloud_operator(V, F), 0.0, 2.0)
+    raise ParameterError(f"unknown operator '{name}'; choose one of {', '.join(OPERATORS)}.")
