@@ -203,3 +203,34 @@ def test_analogy_with_capture_json_and_flags(tmp_path):
     assert d["params"]["regularizer"] == "farap" and d["params"]["dynamic_targets"]
     assert d["params"]["developable_threshold"] == 0.03
     assert "capture" in d["style_map"]
+
+
+def test_coarsen_json_keys_are_the_interface(tmp_path):
+    out = tmp_path / "c.npz"
+    r = stylize3d("coarsen", shared_mesh("spot_lowres.obj"), "--m", "60", "--k", "20",
+                  "--compare", "qslim,amg", "-o", out, "--json")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert set(d) == {"n", "m", "k", "methods"} and (d["n"], d["m"], d["k"]) == (829, 60, 20)
+    assert set(d["methods"]) == {"ours", "qslim", "amg"}
+    for name, mt in d["methods"].items():
+        keys = {"c_diag_score", "eig_rel_err_mean", "eig_rel_err_max", "seconds"}
+        assert set(mt) == keys | ({"iterations"} if name == "ours" else set())
+        assert 0 < mt["c_diag_score"] <= 1
+    assert d["methods"]["ours"]["c_diag_score"] > max(d["methods"]["qslim"]["c_diag_score"],
+                                                      d["methods"]["amg"]["c_diag_score"])
+    import numpy as np
+
+    z = np.load(out)
+    assert tuple(z["L_shape"]) == (60, 60) and tuple(z["P_shape"]) == (60, 829)
+
+
+def test_coarsen_bad_arguments(tmp_path):
+    r = stylize3d("coarsen", SAMPLES / "blob.obj", "--operator", "nope")
+    assert r.returncode == 5 and "Unknown operator" in r.stderr
+    r = stylize3d("coarsen", SAMPLES / "blob.obj", "--m", "30", "--k", "20")
+    assert r.returncode == 5 and "2k < m < n" in r.stderr
+    r = stylize3d("coarsen", SAMPLES / "blob.obj", "--m", "60", "--k", "10", "--operator",
+                  "aniso:70", "--max-iterations", "20", "--json")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["methods"]["ours"]["iterations"] <= 20
