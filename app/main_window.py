@@ -184,9 +184,10 @@ class MainWindow(QMainWindow):
         from app.panels.analogies import AnalogiesPanel
         from app.panels.cubic import CubicPanel
         from app.panels.smooth import SmoothPanel
+        from app.panels.spectral import SpectralPanel
 
         self.panels = {}
-        for cls in (CubicPanel, AnalogiesPanel, SmoothPanel):
+        for cls in (CubicPanel, AnalogiesPanel, SmoothPanel, SpectralPanel):
             panel = cls(self)
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, panel)
             self.panels[cls.title] = panel
@@ -409,6 +410,17 @@ class MainWindow(QMainWindow):
         self.last_job_name = name
         self._job_before = self.document.state
         self._job_merge_id = merge_id
+        self._job_kind = "positions"
+        self.runner.start(name, factory)
+
+    def start_analysis_job(self, name: str, factory) -> None:
+        """Run a Step generator that only computes (spectral analysis, ...): progress, plots and
+        cancel as usual, but the document and the viewport's shape are never changed."""
+        if self.document.is_empty:
+            return
+        self.last_job_name = name
+        self._job_before = None
+        self._job_kind = "analysis"
         self.runner.start(name, factory)
 
     def cancel_job(self) -> None:
@@ -416,6 +428,8 @@ class MainWindow(QMainWindow):
             self.runner.cancel()
 
     def _on_preview(self, step: Step) -> None:
+        if getattr(self, "_job_kind", "positions") == "analysis":
+            return
         if self.document.state is not None and step.V.shape == self.document.V.shape:
             self.viewport.update_points(step.V)
 
@@ -445,6 +459,10 @@ class MainWindow(QMainWindow):
             self.viewport.update_points(self.document.V)
 
     def _on_job_finished(self, step: Step) -> None:
+        if getattr(self, "_job_kind", "positions") == "analysis":
+            self.statusBar().showMessage(f"{self.last_job_name} finished in "
+                                         f"{self.runner.last_duration:.2f} s.", 8000)
+            return
         before = self._job_before
         if before is None or self.document.state is not before:
             self._restore_view()

@@ -190,6 +190,16 @@ class Viewport(QWidget):
         p = np.array(ren.GetWorldPoint(), dtype=np.float64)
         return p[:3] / (p[3] if p[3] != 0 else 1.0)
 
+    def show_points(self, points: np.ndarray | None, color: str = "#111111") -> None:
+        """Draw marker dots at world points (k, 3) (e.g. root nodes); None removes them."""
+        self.plotter.remove_actor("markers", render=False)
+        if points is not None and len(points):
+            self.plotter.add_mesh(pv.PolyData(np.asarray(points, dtype=np.float64)),
+                                  name="markers", color=color, point_size=9,
+                                  render_points_as_spheres=True, reset_camera=False,
+                                  pickable=False)
+        self.render()
+
     def show_handles(self, handles: dict | None) -> None:
         """Draw point handles: a sphere at each target, a line from its vertex to the target."""
         self.plotter.remove_actor(["handles", "handle_lines"], render=False)
@@ -282,8 +292,10 @@ class Viewport(QWidget):
             self.mesh_actor.prop.interpolation = "flat" if self._flat else "gouraud"
 
     def show_field(self, name: str | None, values: np.ndarray | None = None,
-                   cmap: str = "viridis", clim: tuple[float, float] | None = None) -> None:
-        """Colour the mesh by a per-vertex scalar field (None: plain colour)."""
+                   cmap: str = "viridis", clim: tuple[float, float] | None = None,
+                   categorical: bool = False) -> None:
+        """Colour the mesh by a per-vertex scalar field (None: plain colour). ``categorical``
+        labels blend colours across a triangle instead of running through the colour map."""
         if self.poly is None or self.mesh_actor is None:
             return
         mapper = self.mesh_actor.mapper
@@ -296,6 +308,7 @@ class Viewport(QWidget):
             mapper.lookup_table = pv.LookupTable(cmap, nan_color="#9a9a9a")
             lo, hi = clim if clim else (float(np.min(values)), float(np.max(values)))
             mapper.scalar_range = (lo, hi if hi > lo else lo + 1.0)
+            mapper.SetInterpolateScalarsBeforeMapping(not categorical)
             mapper.scalar_visibility = True
             self._field_name = name
         self.render()

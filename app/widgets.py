@@ -64,5 +64,6 @@ class LinePlot(QWidget):
             p.drawPath(path)
             last = ys[-1]
             p.drawText(QRectF(m, m + 12 + 12 * i, self.width() - 2 * m, 12),
-                       Qt.AlignmentFlag.AlignLeft, f"last {last:.4g} · min {min(ys):.4g} · max {max(ys):.4g}")
+                       Qt.AlignmentFlag.AlignLeft, (f"{name}: " if len(self.series) > 1 else "")
+                       + f"last {last:.4g} · min {min(ys):.4g} · max {max(ys):.4g}")
         p.end()
