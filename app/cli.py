@@ -154,19 +154,8 @@ def cmd_smooth(args: argparse.Namespace) -> int:
     return 0
 
 
-def mean_l1_of_normals(V, F) -> float:
-    """Area-weighted mean L1 norm of the unit vertex normals (1 on axis-aligned faces, up to √3)."""
-    import numpy as np
-
-    from algorithms.mesh.operators import barycentric_vertex_areas, vertex_normals
-
-    N = vertex_normals(V, F)
-    a = barycentric_vertex_areas(V, F)
-    return float((a * np.abs(N).sum(axis=1)).sum() / a.sum())
-
-
 def cmd_cubic(args: argparse.Namespace) -> int:
-    from algorithms.deform.cubic import CubicParams, cubic_stylization_iter
+    from algorithms.deform.cubic import CubicParams, cubic_stylization_iter, mean_l1_of_normals
     from algorithms.mesh import write_mesh
 
     params = params_from_args(CubicParams, args)
@@ -208,9 +197,7 @@ def cmd_cubic(args: argparse.Namespace) -> int:
 
 
 def cmd_analogy(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from algorithms.deform.analogies import AnalogyParams, ShapeAnalogy
+    from algorithms.deform.analogies import AnalogyParams, ShapeAnalogy, angles_to_targets
     from algorithms.deform.targets import load_style
     from algorithms.mesh import write_mesh
     from algorithms.mesh.operators import mass_matrix, vertex_normals
@@ -222,9 +209,7 @@ def cmd_analogy(args: argparse.Namespace) -> int:
 
     def angles(V):
         N = vertex_normals(V, data.F)
-        a = mass_matrix(V, data.F, "voronoi").diagonal()
-        ang = np.degrees(np.arccos(np.clip((N * target_map(N)).sum(axis=1), -1.0, 1.0)))
-        return float((a * ang).sum() / a.sum()), float(ang.max())
+        return angles_to_targets(N, target_map(N), mass_matrix(V, data.F, "voronoi").diagonal())
 
     before = angles(data.V)
     t0 = time.perf_counter()

@@ -142,6 +142,7 @@ __all__ = [
     "validate_frames",
     "cubic_stylization_iter",
     "cubic_stylization",
+    "mean_l1_of_normals",
 ]
 
 
@@ -248,6 +249,14 @@ class CubicParams:
         True, label="Pin one vertex",
         tooltip="Remove the free translation by holding one vertex (per part with no other "
                 "constraint). Off: keep each part's centre where it was instead.")
+
+
+def mean_l1_of_normals(V, F) -> float:
+    """Area-weighted mean L1 norm of the unit vertex normals: 1 where the surface is axis-aligned,
+    up to √3; the "cubeness" measure the tests and the CLI report (lower = cubier)."""
+    N = vertex_normals(V, F)
+    a = barycentric_vertex_areas(V, F)
+    return float((a * np.abs(N).sum(axis=1)).sum() / a.sum())
 
 
 def rotation_from_degrees(rx: float, ry: float, rz: float) -> np.ndarray:

@@ -283,3 +283,24 @@ def normalize_unit_box(V) -> tuple[np.ndarray, np.ndarray, float]:
 def denormalize(V_unit, center, scale: float) -> np.ndarray:
     """Undo :func:`normalize_unit_box`: return ``V_unit * scale + center`` as ``(n, 3) float64``."""
     return np.asarray(V_unit, dtype=np.float64) * float(scale) + np.asarray(center, np.float64)
+
+
+def gaussian_curvature(V, F) -> np.ndarray:
+    """Discrete Gaussian curvature: angle defect 2π − Σ(corner angles) divided by the Voronoi
+    area (boundary vertices are not corrected).
+
+    Returns
+    -------
+    (n,) float64 array; on a closed surface Σ K_i A_i = 2π χ (Gauss-Bonnet).
+    """
+    V, F = _check(V, F)
+    ang = np.zeros(F.shape)
+    for k in range(3):
+        a = V[F[:, (k + 1) % 3]] - V[F[:, k]]
+        b = V[F[:, (k + 2) % 3]] - V[F[:, k]]
+        cos = (a * b).sum(1) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1),
+                                          1e-300)
+        ang[:, k] = np.arccos(np.clip(cos, -1.0, 1.0))
+    total = np.bincount(F.ravel(), weights=ang.ravel(), minlength=len(V))
+    area = mass_matrix(V, F, "voronoi").diagonal()
+    return (2 * np.pi - total) / np.maximum(area, 1e-300)

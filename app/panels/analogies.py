@@ -25,7 +25,7 @@ from PySide6.QtWidgets import (QComboBox, QGroupBox, QHBoxLayout, QLabel, QListW
 from algorithms.deform.analogies import AnalogyParams, ShapeAnalogy
 from algorithms.deform.targets import PRIMITIVES, CaptureSphere, load_style
 from algorithms.errors import Stylize3DError
-from algorithms.mesh.operators import mass_matrix, vertex_normals
+from algorithms.mesh.operators import gaussian_curvature, vertex_normals
 from app import dialogs
 from app.panels.base import MethodPanel
 from app.tools import BrushSettings
@@ -45,21 +45,6 @@ def direction_hue(T: np.ndarray) -> np.ndarray:
     colours (azimuth plus a lift by z), used for the capture sphere and the mesh alike."""
     T = np.asarray(T, dtype=np.float64)
     return np.arctan2(T[:, 1], T[:, 0]) + 2.0 * T[:, 2]
-
-
-def angle_defect_curvature(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Discrete Gaussian curvature: angle defect (2π − Σ angles; π − Σ on the boundary is not
-    corrected) divided by the Voronoi area. (n,) float64."""
-    E = [V[F[:, (k + 1) % 3]] - V[F[:, k]] for k in range(3)]
-    ang = np.zeros(F.shape)
-    for k in range(3):
-        a, b = -E[(k + 2) % 3], E[k]
-        cos = (a * b).sum(1) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1),
-                                          1e-300)
-        ang[:, k] = np.arccos(np.clip(cos, -1, 1))
-    total = np.bincount(F.ravel(), weights=ang.ravel(), minlength=len(V))
-    area = mass_matrix(V, F, "voronoi").diagonal()
-    return (2 * np.pi - total) / np.maximum(area, 1e-300)
 
 
 class _CaptureCommand(QUndoCommand):
@@ -304,14 +289,14 @@ class AnalogiesPanel(MethodPanel):
         elif i == 1:
             N = vertex_normals(doc.V, doc.F)
             T = self.target_map()(N)
-            ang = np.degrees(np.arccos(np.clip((N * T).sum(1), -1.0, 1.0)))
+            ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", N, T), -1.0, 1.0)))
             self.window_.viewport.show_field("angle_to_targets", ang, "magma", (0.0, 45.0))
         elif i == 3:  # the transferred targets, in the capture sphere's colours
             T = self.target_map()(vertex_normals(doc.V, doc.F))
             self.window_.viewport.show_field("target_direction", direction_hue(T), "hsv",
                                              HUE_RANGE)
         else:
-            K = angle_defect_curvature(doc.V, doc.F)
+            K = gaussian_curvature(doc.V, doc.F)
             lim = float(np.percentile(np.abs(K), 95)) or 1.0
             self.window_.viewport.show_field("gaussian_curvature", K, "coolwarm", (-lim, lim))
 

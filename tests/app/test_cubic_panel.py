@@ -5,16 +5,9 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtCore import QPoint, Qt
 
+from algorithms.deform.cubic import mean_l1_of_normals as l1_of_normals
 from algorithms.mesh.operators import vertex_normals
 from tests.conftest import SAMPLES
-
-
-def l1_of_normals(V, F):
-    from algorithms.mesh.operators import barycentric_vertex_areas
-
-    N = vertex_normals(V, F)
-    a = barycentric_vertex_areas(V, F)
-    return float((a * np.abs(N).sum(axis=1)).sum() / a.sum())
 
 
 def open_cubic(window):

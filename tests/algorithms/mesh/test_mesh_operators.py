@@ -149,3 +149,17 @@ def test_operators_keep_trailing_loose_vertices():
         np.testing.assert_allclose(M[: len(V), : len(V)].toarray(), mass_matrix(V, F, kind).toarray())
     L = cotangent_laplacian(V2, F)
     assert L.shape == (len(V2), len(V2)) and abs(L[len(V):]).sum() == 0
+
+
+def test_gaussian_curvature_gauss_bonnet_and_sphere():
+    from algorithms.mesh import icosphere, torus
+    from algorithms.mesh.operators import gaussian_curvature, mass_matrix
+
+    V, F = icosphere(4)
+    K = gaussian_curvature(V, F)
+    A = mass_matrix(V, F, "voronoi").diagonal()
+    assert (K * A).sum() == pytest.approx(4 * np.pi, rel=1e-9)  # χ = 2
+    assert np.median(K) == pytest.approx(1.0, rel=0.02)  # unit sphere: K = 1
+    V, F = torus()
+    assert (gaussian_curvature(V, F) * mass_matrix(V, F, "voronoi").diagonal()).sum() \
+        == pytest.approx(0.0, abs=1e-8)  # χ = 0
