@@ -2,8 +2,9 @@
 
 ``SPDSolver`` factors a sparse symmetric positive definite matrix once and solves for many
 right-hand sides; ``fixed`` rows/columns are eliminated (Dirichlet conditions) by the reduced
-system  A_ff x_f = b_f - A_fc x_c. The backend is CHOLMOD (scikit-sparse) when it is installed and
-SciPy's SuperLU otherwise; both are exact direct solvers, so results agree to round-off.
+system  A_ff x_f = b_f - A_fc x_c. Backends: SciPy's SuperLU (COLAMD ordering, the default) and
+CHOLMOD's supernodal Cholesky (through the self-contained ``cholespy`` wheel); both are exact
+direct solvers, so results agree to round-off.
 """
 
 from __future__ import annotations
@@ -16,9 +17,9 @@ __all__ = ["SPDSolver", "cholmod_available"]
 
 
 def cholmod_available() -> bool:
-    """True when scikit-sparse's CHOLMOD can be imported."""
+    """True when CHOLMOD (the ``cholespy`` package) can be imported."""
     try:
-        import sksparse.cholmod  # noqa: F401
+        import cholespy  # noqa: F401
     except Exception:
         return False
     return True
@@ -32,7 +33,8 @@ class SPDSolver:
     A : (n, n) sparse symmetric positive (semi-)definite matrix; positive definite once the
         ``fixed`` unknowns are removed.
     fixed : (k,) int indices of unknowns whose values are given at solve time (may be empty).
-    backend : "auto" (CHOLMOD if installed, else SuperLU), "cholmod" or "superlu".
+    backend : "auto" (SuperLU: the solver every method was validated with), "cholmod" (CHOLMOD
+        supernodal Cholesky; needs ``A_ff`` positive definite) or "superlu".
 
     Notes
     -----
@@ -56,13 +58,10 @@ class SPDSolver:
         self.A_ff = A[self.free][:, self.free].tocsc()
         self.A_fc = A[self.free][:, fixed].tocsc() if fixed.size else None
         if backend == "auto":
-            backend = "cholmod" if cholmod_available() else "superlu"
+            backend = "superlu"
         self.backend = backend
         if backend == "cholmod":
-            from sksparse.cholmod import cholesky
-
-            factor = cholesky(self.A_ff)
-            self._solve = factor
+            self._solve = _cholmod_factor(self.A_ff)
         elif backend == "superlu":
             # The system is symmetric: a symmetric ordering (MMD on A^T+A) keeps the fill of a
             # Cholesky-like factorization; COLAMD is much faster to compute on big meshes.
@@ -86,3 +85,22 @@ class SPDSolver:
             x[self.fixed] = x_fixed
         x[self.free] = np.asarray(self._solve(np.ascontiguousarray(rhs))).reshape(rhs.shape)
         return x
+
+
+def _cholmod_factor(A: sp.spmatrix):
+    """CHOLMOD factor of an SPD matrix (cholespy); returns ``solve(b)`` for b of shape (n,) or (n, d)."""
+    import cholespy
+
+    A = sp.coo_matrix(A)
+    n = A.shape[0]
+    factor = cholespy.CholeskySolverD(n, A.row.astype(np.int32), A.col.astype(np.int32),
+                                      np.ascontiguousarray(A.data, dtype=np.float64),
+                                      cholespy.MatrixType.COO)
+
+    def solve(b: np.ndarray) -> np.ndarray:
+        b = np.ascontiguousarray(b, dtype=np.float64)
+        x = np.empty_like(b)
+        factor.solve(b, x)
+        return x
+
+    return solve
