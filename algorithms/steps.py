@@ -8,11 +8,12 @@ step; a plain ``method(V, F, params)`` calls :func:`run_to_end`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Iterator
+import threading
+from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
-__all__ = ["Step", "run_to_end"]
+__all__ = ["Step", "run_to_end", "Cancelled", "with_progress"]
 
 
 @dataclass
@@ -53,3 +54,56 @@ def run_to_end(steps: Iterable[Step], callback: Callable[[Step], None] | None = 
     return last
 
 
+
+
+class Cancelled(Exception):
+    """Raised inside a blocking computation (from its progress callback) once its consumer has
+    stopped listening; :func:`with_progress` swallows it."""
+
+
+def with_progress(work: Callable[[Callable[[float, str], None]], Any], V: np.ndarray,
+                  result: dict, *, poll_seconds: float = 0.05) -> Iterator[Step]:
+    """Stream a blocking computation that reports progress as Steps, and let it be cancelled.
+
+    ``work(progress)`` runs on a helper thread and calls ``progress(fraction, message)`` now and
+    then. Meanwhile this generator yields a Step (iteration = per-mille done, total 1000, ``V``
+    unchanged, message) whenever the progress moved. Its return value is stored in
+    ``result["value"]``; an exception it raises is re-raised here. When the consumer stops
+    iterating (``close()``: a cancelled job), the next ``progress`` call raises
+    :class:`Cancelled`, which ends the computation early.
+    """
+    state = {"fraction": 0.0, "message": "", "error": None}
+    stop = threading.Event()
+    lock = threading.Lock()
+
+    def progress(fraction: float, message: str = "") -> None:
+        if stop.is_set():
+            raise Cancelled()
+        with lock:
+            state["fraction"] = float(fraction)
+            state["message"] = message
+
+    def target() -> None:
+        try:
+            result["value"] = work(progress)
+        except Cancelled:
+            pass
+        except BaseException as exc:  # noqa: BLE001 - handed over to the consumer
+            state["error"] = exc
+
+    t = threading.Thread(target=target, name="stylize3d-work", daemon=True)
+    t.start()
+    last = -1
+    try:
+        while t.is_alive():
+            t.join(poll_seconds)
+            with lock:
+                frac, msg = state["fraction"], state["message"]
+            it = int(round(1000 * min(1.0, max(0.0, frac))))
+            if it != last and t.is_alive():
+                last = it
+                yield Step(it, 1000, V, {}, msg)
+    finally:
+        stop.set()
+    if state["error"] is not None:
+        raise state["error"]

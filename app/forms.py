@@ -13,6 +13,7 @@ import math
 from typing import Any
 
 from PySide6.QtCore import Qt, Signal
+from PySide6.QtGui import QValidator
 from PySide6.QtWidgets import (QAbstractSpinBox, QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout,
                                QGroupBox, QHBoxLayout, QLabel, QSlider, QSpinBox, QVBoxLayout,
                                QWidget)
@@ -20,6 +21,35 @@ from PySide6.QtWidgets import (QAbstractSpinBox, QCheckBox, QComboBox, QDoubleSp
 from algorithms.params import ParamSpec, describe
 
 SLIDER_STEPS = 1000
+
+
+class _ScientificSpinBox(QDoubleSpinBox):
+    """A float spin box that shows and accepts numbers like 1e-06 or 0.0025 (4 significant
+    digits), for log-scale parameters spanning many decades."""
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.setDecimals(323)  # no rounding of small values by the spin box itself
+
+    def textFromValue(self, value: float) -> str:  # noqa: N802 (Qt API)
+        return f"{value:.4g}"
+
+    def valueFromText(self, text: str) -> float:  # noqa: N802 (Qt API)
+        try:
+            return float(text.strip())
+        except ValueError:
+            return self.value()
+
+    def validate(self, text: str, pos: int):  # noqa: A003 (Qt API)
+        t = text.strip()
+        try:
+            v = float(t)
+        except ValueError:
+            ok = t == "" or all(c in "0123456789.eE+-" for c in t)
+            return (QValidator.State.Intermediate if ok else QValidator.State.Invalid), text, pos
+        if self.minimum() <= v <= self.maximum():
+            return QValidator.State.Acceptable, text, pos
+        return QValidator.State.Intermediate, text, pos
 
 
 class _NumberEditor(QWidget):
@@ -37,6 +67,12 @@ class _NumberEditor(QWidget):
             self.spin.setRange(int(spec.minimum if spec.minimum is not None else -10**9),
                                int(spec.maximum if spec.maximum is not None else 10**9))
             self.spin.setSingleStep(int(spec.step or 1))
+        elif (spec.log_scale and spec.maximum is not None and spec.minimum is not None
+              and spec.maximum >= 1e4 * (spec.minimum if spec.minimum > 0
+                                         else (spec.step or 1e-3))):
+            self.spin = _ScientificSpinBox()  # many decades: 1e-06 reads better than 0.000001
+            self.spin.setRange(spec.minimum, spec.maximum)
+            self.spin.setStepType(QAbstractSpinBox.StepType.AdaptiveDecimalStepType)
         else:
             self.spin = QDoubleSpinBox()
             self.spin.setDecimals(spec.decimals if spec.decimals is not None else 4)

@@ -76,6 +76,7 @@ __all__ = [
     "SUPPORTED_READ",
     "SUPPORTED_WRITE",
     "file_filter",
+    "atomic_write",
 ]
 
 #: Extensions :func:`read_mesh` understands (lower case, with the dot).
@@ -1218,6 +1219,14 @@ def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray) -> None:
             f"write. Use one of {', '.join(SUPPORTED_WRITE)}."
         )
     V, F = _check_for_writing(V, F, p.name, ext)
+    atomic_write(p, lambda fh: _WRITERS[ext](fh, V, F))
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], None]) -> None:
+    """Write a file atomically: ``write(fh)`` fills a temporary file next to ``path``, which is
+    flushed, ``fsync``-ed and renamed over ``path``; on any failure the temporary file is removed,
+    an existing file at ``path`` is left unchanged, and :class:`MeshWriteError` says why."""
+    p = Path(os.fspath(path))
     folder = p.parent if str(p.parent) else Path(".")
     if not folder.is_dir():
         raise MeshWriteError(f"Cannot save '{p.name}': the folder '{folder}' does not exist.")
@@ -1232,7 +1241,7 @@ def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray) -> None:
         ) from None
     try:
         with os.fdopen(fd, "wb") as fh:
-            _WRITERS[ext](fh, V, F)
+            write(fh)
             fh.flush()
             os.fsync(fh.fileno())
         try:

@@ -112,3 +112,26 @@ def test_log_slider_starting_at_zero(qtbot):
     assert got[-1].lam == pytest.approx(1e5)
     ed.slider.setValue(500)
     assert 0.1 < got[-1].lam < 1e5
+
+
+def test_parameters_spanning_many_decades_read_in_scientific_notation(qtbot):
+    from app.forms import ParamsForm
+
+    form = ParamsForm(DemoParams)  # scale: 1e-6 .. 1, log-scaled
+    qtbot.addWidget(form)
+    spin = form.editors["scale"].spin
+    spin.setValue(2.5e-6)
+    assert spin.text() == "2.5e-06" and form.params().scale == pytest.approx(2.5e-6)
+    got = []
+    form.changed.connect(got.append)
+    spin.lineEdit().setText("3e-5")
+    spin.interpretText()
+    assert got[-1].scale == pytest.approx(3e-5)
+    assert spin.validate("3e-5", 4)[0].name == "Acceptable"
+    assert spin.validate("abc", 3)[0].name == "Invalid"
+    assert spin.validate("5", 1)[0].name == "Intermediate"  # above the maximum
+    # a plain range keeps the ordinary spin box
+    from app.forms import _ScientificSpinBox
+
+    assert not isinstance(form.editors["weight"].spin, _ScientificSpinBox)
+    assert isinstance(spin, _ScientificSpinBox)
