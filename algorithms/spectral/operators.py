@@ -103,16 +103,35 @@ def graph_operator(V, F):
     return sp.csr_matrix(L), sp.identity(n, format="csr")
 
 
-def point_cloud_operator(V, F=None):
-    """Point-cloud Laplacian (Sharp & Crane's robust_laplacian, if installed)."""
+def point_cloud_operator(V, F=None, *, n_neighbors: int = 30):
+    """Point-cloud Laplacian of Sharp & Crane 2020 (``robust_laplacian``, pinned 1.1.0).
+
+    ``robust_laplacian.point_cloud_laplacian(P)`` builds the intrinsic Delaunay "tufted cover"
+    of local triangulations of the ``n_neighbors`` nearest neighbours and returns ``(L, M)``
+    with ``L`` already in our convention (symmetric positive semi-definite: positive diagonal,
+    non-positive weights on most off-diagonals, zero row sums) and ``M`` a lumped diagonal
+    mass. ``F`` is ignored: only the points are used.
+    """
     try:
         import robust_laplacian  # type: ignore
     except ImportError as exc:
         raise ParameterError("the point-cloud Laplacian needs the optional package "
                              "'robust_laplacian', which is not installed; choose another "
                              "operator.") from exc
-    L, M = robust_laplacian.point_cloud_laplacian(np.asarray(V, float))
-    return sp.csr_matrix(L), sp.csr_matrix(M)
+    P = np.ascontiguousarray(V, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 3 or len(P) < 4:
+        raise ParameterError(f"the point-cloud Laplacian needs at least 4 points in 3D; got an "
+                             f"array of shape {P.shape}.")
+    if not np.all(np.isfinite(P)):
+        raise ParameterError("the point cloud has non-finite coordinates; remove those points.")
+    L, M = robust_laplacian.point_cloud_laplacian(P, n_neighbors=int(min(n_neighbors,
+                                                                          len(P) - 1)))
+    L = sp.csr_matrix(L, dtype=np.float64)
+    if L.diagonal().sum() < 0:   # guard against a sign change in a future release
+        L = -L
+    L = 0.5 * (L + L.T)
+    mass = np.asarray(M.diagonal() if sp.issparse(M) else M, dtype=np.float64).ravel()
+    return sp.csr_matrix(L), sp.diags(mass).tocsr()
 
 
 def build_operator(V, F, name: str = "cotangent", *, alpha: float = 10.0):

@@ -19,7 +19,8 @@ from app.panels.base import MethodPanel
 from app.widgets import LinePlot
 
 OPERATORS = {"cotangent": "cotangent", "intrinsic Delaunay": "intrinsic_delaunay",
-             "anisotropic (α 70)": "anisotropic", "graph": "graph"}
+             "anisotropic (α 70)": "anisotropic", "graph": "graph",
+             "point cloud (vertices only)": "point_cloud"}
 METHODS = ("ours", "qslim", "amg")
 
 

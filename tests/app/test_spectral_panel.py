@@ -33,3 +33,17 @@ def test_panel_produces_heatmaps_eigenvalue_plot_and_browser(window, dialogs, qt
     coarse = np.array(window.viewport.poly.point_data["eigenfunction"])
     corr = fine @ coarse / np.linalg.norm(fine) / np.linalg.norm(coarse)
     assert corr > 0.5  # the prolonged coarse eigenvector resembles the fine one
+
+
+def test_point_cloud_operator_from_the_panel(window, dialogs, qtbot):
+    assert window.open_path(SAMPLES / "blob.obj")
+    panel = window.panels["Spectral coarsening"]
+    panel.operator_combo.setCurrentText("point cloud (vertices only)")
+    panel.form.editors["m"].setValue(60)
+    panel.form.editors["k"].setValue(15)
+    panel.form.editors["max_iterations"].setValue(40)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.run_button.click()
+    qtbot.waitUntil(lambda: panel.result is not None, timeout=5000)
+    ours = panel.result.methods["ours"].metrics
+    assert 0.0 < ours["c_diag_score"] <= 1.0 and np.isfinite(ours["eig_rel_error_mean"])

@@ -1,8 +1,10 @@
 """Core of spectral coarsening: gradient, projection, operator properties, anisotropy."""
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 
+from algorithms.errors import ParameterError
 from algorithms.mesh import primitives
 from algorithms.mesh.operators import cotangent_laplacian, mass_matrix
 from algorithms.spectral import (CoarsenParams, cluster_sparsity, coarsen, energy_and_gradient,
@@ -119,3 +121,73 @@ def test_blockwise_gradient_equals_gathered_gradient():
     _, g1, _ = energy_and_gradient(G, L, A, B, mt)
     _, g2, _ = energy_and_gradient(G, L, A, B, mt, blocks=blocks)
     assert np.allclose(g1, g2, rtol=1e-12, atol=1e-12 * np.abs(g1).max())
+
+
+def test_thesis_step_is_fixed_and_stops_at_first_stall():
+    """Thesis 7.3.2: fixed step 0.02, stop after 10 non-improving iterations (lr_decays = 0)."""
+    from algorithms.spectral import coarsen_iter
+    V, F, L, M = _sphere()
+    steps = list(coarsen_iter(L, M, 40, 10, CoarsenParams(max_iterations=400)))
+    lrs = {s.metrics["learning_rate"] for s in steps[1:-1]}
+    assert lrs == {0.02}
+    assert steps[-1].timings["iterations"] < 400          # stopped by the stall rule
+    E = [s.energy for s in steps[:-1]]
+    # the last `patience` iterations did not improve on the best before them
+    assert min(E[-10:]) >= min(E[:-10])
+
+
+def test_authors_schedule_halves_only_after_a_stall():
+    from algorithms.spectral import coarsen_iter
+    V, F, L, M = _sphere()
+    p = CoarsenParams(max_iterations=600, lr_decays=2)
+    steps = list(coarsen_iter(L, M, 40, 10, p))[1:-1]
+    lrs = [s.metrics["learning_rate"] for s in steps]
+    assert set(lrs) <= {0.02, 0.01, 0.005}
+    assert lrs == sorted(lrs, reverse=True)
+    first_drop = next((i for i, v in enumerate(lrs) if v < 0.02), None)
+    if first_drop is not None:   # at least `patience` non-improving steps precede every halving
+        E = [s.energy for s in steps]
+        assert first_drop >= 10
+        assert min(E[first_drop - 10:first_drop]) >= min(E[:first_drop - 10] or [np.inf]) or \
+            first_drop == 10
+
+
+def test_optimizer_is_independent_of_units():
+    """Scaling the mesh by 10 scales E by 10^-4 (lam ~ s^-2, Phi ~ s^-1, M~ ~ s^2); the
+    normalized NADAM takes the same steps, so G is the same."""
+    V, F = primitives.icosphere(2)
+    V = V * np.array([1.0, 1.2, 0.8])
+    out = []
+    for s in (1.0, 10.0):
+        L = sp.csr_matrix(-cotangent_laplacian(V * s, F))
+        M = mass_matrix(V * s, F)
+        r = coarsen(L, M, 40, 10, CoarsenParams(max_iterations=60))
+        out.append(r)
+    a, b = out
+    assert np.array_equal(a.P.indices, b.P.indices)
+    assert np.allclose(a.G.toarray(), b.G.toarray(), atol=1e-6)
+    assert np.isclose(a.energy, b.energy * 1e4, rtol=1e-6)
+
+
+def test_initial_interpolations():
+    """Both initial G satisfy G P 1 = 1; the smoothed one lies in the pattern S_G (nothing of
+    the Jacobi-smoothed K^T is cut off) and starts at a lower energy; K^T is the default."""
+    assert CoarsenParams().initial_G == "constant"
+    from algorithms.spectral import coarsen_iter
+    V, F, L, M = _sphere()
+    cl = kmedoids_clustering(L, M, 40, seed=0)
+    SG = cluster_sparsity(L, cl.K)
+    S = (sp.diags(1.0 / L.diagonal()) @ L).tocsr()
+    Ksm = (cl.K.T - 0.5 * (S @ cl.K.T)).tocsr()
+    outside = Ksm - Ksm.multiply(SG)
+    assert abs(outside).max() == 0 if outside.nnz else True
+    E0 = {}
+    for init in ("constant", "smoothed"):
+        p = CoarsenParams(max_iterations=0, initial_G=init)
+        steps = list(coarsen_iter(L, M, 40, 10, p, clustering=cl))
+        E0[init] = steps[0].energy
+        G = steps[-1].G
+        assert np.abs(G @ (steps[-1].P @ np.ones(L.shape[0])) - 1).max() < 1e-10
+    assert E0["smoothed"] < E0["constant"]
+    with pytest.raises(ParameterError):
+        list(coarsen_iter(L, M, 40, 10, CoarsenParams(initial_G="cubic")))
