@@ -419,14 +419,18 @@ class Decimation:
 
 
 # ------------------------------------------------------------------------------ driver
-def _check_input(V, F, target_faces) -> tuple[np.ndarray, np.ndarray, int]:
+def check_collapse_input(V, F, target_faces, what: str = "Decimation"
+                         ) -> tuple[np.ndarray, np.ndarray, int]:
+    """Shapes, numbers and the target of an edge-collapse method (decimation, successive
+    self-parameterization); ``what`` names the method in the messages. Returns float64 ``V``,
+    int64 ``F`` and the target as an int."""
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F)
     if V.ndim != 2 or V.shape[1] != 3 or len(V) == 0:
-        raise InvalidMeshError(f"Decimation needs vertex positions as an (n, 3) array, got shape "
+        raise InvalidMeshError(f"{what} needs vertex positions as an (n, 3) array, got shape "
                                f"{V.shape}.")
     if F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
-        raise InvalidMeshError("Decimation needs a triangle mesh with at least one triangle.")
+        raise InvalidMeshError(f"{what} needs a triangle mesh with at least one triangle.")
     if F.dtype.kind not in "iu":
         raise InvalidMeshError("Face indices must be whole numbers.")
     F = np.ascontiguousarray(F, dtype=np.int64)
@@ -451,6 +455,11 @@ def _check_input(V, F, target_faces) -> tuple[np.ndarray, np.ndarray, int]:
         raise ParameterError(f"The target of {target_faces:,} triangles is larger than the mesh "
                              f"itself ({len(F):,} triangles); decimation can only remove "
                              f"triangles. Choose a target below {len(F):,}.")
+    return V, F, target_faces
+
+
+def _check_input(V, F, target_faces) -> tuple[np.ndarray, np.ndarray, int]:
+    V, F, target_faces = check_collapse_input(V, F, target_faces, "Decimation")
     edge_flaps(F)  # raises a readable error for non-manifold edges / inconsistent orientation
     bad = nonmanifold_vertices(F, len(V))
     if bad.size:

@@ -95,7 +95,7 @@ import scipy.sparse as sp
 
 from ..errors import InvalidMeshError, ParameterError
 from . import _selfparam_kernels as _k
-from .decimate import vertex_quadrics
+from .decimate import check_collapse_input, vertex_quadrics
 
 __all__ = ["SelfParameterization", "self_parameterize", "STRATEGIES", "lscm_joint_flatten"]
 
@@ -363,39 +363,7 @@ def lscm_joint_flatten(X_before, F_before, X_after, F_after, shared, pins=None):
 # ------------------------------------------------------------------------------ driver
 def _check_arrays(V, F, target_faces) -> tuple[np.ndarray, np.ndarray, int]:
     """Shapes, numbers and target (the topology is checked while building the corner table)."""
-    V = np.asarray(V, dtype=np.float64)
-    F = np.asarray(F)
-    if V.ndim != 2 or V.shape[1] != 3 or len(V) == 0:
-        raise InvalidMeshError(f"Self-parameterization needs vertex positions as an (n, 3) array, "
-                               f"got shape {V.shape}.")
-    if F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
-        raise InvalidMeshError("Self-parameterization needs a triangle mesh with at least one "
-                               "triangle.")
-    if F.dtype.kind not in "iu":
-        raise InvalidMeshError("Face indices must be whole numbers.")
-    F = np.ascontiguousarray(F, dtype=np.int64)
-    if F.min() < 0 or F.max() >= len(V):
-        raise InvalidMeshError(f"Some faces refer to vertices that do not exist (the mesh has "
-                               f"{len(V)} vertices).")
-    if not np.isfinite(V).all():
-        raise InvalidMeshError("The mesh has NaN or infinite coordinates; run Clean first.")
-    if ((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])).any():
-        raise InvalidMeshError("Some triangles use the same vertex twice; run Clean first.")
-    if isinstance(target_faces, bool) or not isinstance(target_faces, (int, np.integer)):
-        if isinstance(target_faces, float) and float(target_faces).is_integer():
-            target_faces = int(target_faces)
-        else:
-            raise ParameterError(f"The target number of triangles must be a whole number (got "
-                                 f"{target_faces!r}).")
-    target_faces = int(target_faces)
-    if target_faces < 1:
-        raise ParameterError(f"The target number of triangles must be at least 1 (got "
-                             f"{target_faces}).")
-    if target_faces > len(F):
-        raise ParameterError(f"The target of {target_faces:,} triangles is larger than the mesh "
-                             f"itself ({len(F):,} triangles); decimation can only remove "
-                             f"triangles. Choose a target below {len(F):,}.")
-    return V, F, target_faces
+    return check_collapse_input(V, F, target_faces, "Self-parameterization")
 
 
 def self_parameterize(V, F, target_faces, *, strategy: str = "midpoint", flattening: str = "lscm",
