@@ -19,7 +19,7 @@ from typing import Any, Callable
 from algorithms.errors import InvalidMeshError, MeshWriteError, ParameterError, Stylize3DError
 from algorithms.params import describe, params_from_dict, params_to_dict
 
-SUBCOMMANDS = ("info", "clean", "smooth", "cubic", "analogy", "coarsen")
+SUBCOMMANDS = ("info", "clean", "smooth", "multigrid-info", "cubic", "analogy", "coarsen")
 
 
 # ----------------------------------------------------------------------------- Params -> flags
@@ -127,7 +127,13 @@ def cmd_clean(args: argparse.Namespace) -> int:
     return 0 if after.ok else InvalidMeshError.exit_code
 
 
+def _data_smoothing_requested(args: argparse.Namespace) -> bool:
+    return any(getattr(args, k) is not None for k in ("signal", "energy", "alpha", "solver"))
+
+
 def cmd_smooth(args: argparse.Namespace) -> int:
+    if _data_smoothing_requested(args):
+        return _cmd_data_smooth(args)
     from algorithms.mesh import write_mesh
     from algorithms.smoothing import SmoothParams, smooth_iter
 
@@ -154,6 +160,137 @@ def cmd_smooth(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_data_smooth(args: argparse.Namespace) -> int:
+    """Data smoothing (thesis Eq. 8.6) of positions, a noisy test field or a field file."""
+    import numpy as np
+
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.fields import FIELD_EXTENSIONS, read_field, write_field
+    from algorithms.multigrid import surface_multigrid
+    from algorithms.multigrid.applications import DataSmoother
+    from algorithms.multigrid.params import DataSmoothingParams
+    from algorithms.smoothing import noisy_test_field, unit_area
+
+    defaults = DataSmoothingParams()
+    params = params_from_dict(DataSmoothingParams, {
+        "energy": args.energy or defaults.energy,
+        "alpha": defaults.alpha if args.alpha is None else args.alpha,
+        "solver": args.solver or defaults.solver})
+    signal = args.signal or "positions"
+    out_ext = Path(args.output).suffix.lower()
+    if signal == "positions":
+        if out_ext in FIELD_EXTENSIONS:
+            raise ParameterError(f"--signal positions writes a mesh; {args.output} is a field "
+                                 "file name. Use .obj, .ply, .off or .stl.")
+    elif out_ext not in FIELD_EXTENSIONS:
+        raise ParameterError(f"--signal {signal} writes one value per vertex: give -o a "
+                             f"{', '.join(FIELD_EXTENSIONS)} file name.")
+    _check_output(args.output, args.overwrite, args.mesh)
+    data, _ = _read_valid(args.mesh, clean=args.clean, quiet=args.json or args.quiet)
+    V, F = data.V, data.F
+    clean = None
+    if signal == "positions":
+        f = V
+    elif signal == "noise":
+        clean, f = noisy_test_field(V, F, args.noise, args.seed)
+    else:
+        f = read_field(signal, len(V))
+    t0 = time.perf_counter()
+    mg = None
+    if params.solver == "multigrid":
+        mg = surface_multigrid(V, F)
+    t1 = time.perf_counter()
+    # operators of the unit-area copy: one α does the same whatever the mesh's units
+    smoother = DataSmoother(unit_area(V, F), F, energy=params.energy, solver=params.solver, mg=mg)
+    t2 = time.perf_counter()
+    u, info = smoother.smooth(f, params.alpha, rtol=args.rtol, maxiter=args.max_cycles,
+                              accel="cg" if params.energy != "dirichlet" else None)
+    if signal == "positions":
+        write_mesh(args.output, u, F)
+    else:
+        write_field(args.output, u)
+    out = {"input": args.mesh, "output": args.output, "signal": signal,
+           "params": params_to_dict(params), "vertices": len(V),
+           "hierarchy_seconds": t1 - t0, "precompute_seconds": t2 - t1,
+           "setup_seconds": info["setup_seconds"], "solve_seconds": info["solve_seconds"],
+           "cycles": info.get("cycles", 0), "converged": bool(info.get("converged", True)),
+           "levels": [len(Vh) for Vh, _ in mg.levels] if mg is not None else None}
+    res = list(info.get("residuals") or [])
+    if res:
+        out["relative_residual"] = float(res[-1] / res[0]) if res[0] > 0 else 0.0
+    if clean is not None:
+        rms = lambda x: float(np.sqrt(np.mean((x - clean) ** 2)))  # noqa: E731
+        out["rms_error_before"], out["rms_error_after"] = rms(f), rms(u)
+    if args.json:
+        _print_json(out)
+    else:
+        extra = (f"; RMS error to the clean signal {out['rms_error_before']:.4g} -> "
+                 f"{out['rms_error_after']:.4g}" if clean is not None else "")
+        how = (f"{out['cycles']} V-cycles" if params.solver == "multigrid" else "direct solve")
+        print(f"Smoothed {signal} of {args.mesh} ({params.energy}, α {params.alpha:g}) with "
+              f"{how} in {info['seconds']:.3f} s{extra}; wrote {args.output}.")
+    if not out["converged"]:
+        print(f"stylize3d smooth: warning: the V-cycles stopped at --max-cycles "
+              f"{args.max_cycles} before reaching --rtol {args.rtol:g}.", file=sys.stderr)
+    return 0
+
+
+def cmd_multigrid_info(args: argparse.Namespace) -> int:
+    """Build the multigrid hierarchy of a mesh and report levels, sizes, time and bijectivity."""
+    import numpy as np
+
+    from algorithms.multigrid import surface_multigrid
+
+    data, _ = _read_valid(args.mesh, clean=args.clean, quiet=args.json)
+    progress = None
+    if not args.json:
+        progress = lambda frac, msg: print(f"  {100 * frac:5.1f}%  {msg}", file=sys.stderr)  # noqa: E731
+    mg = surface_multigrid(data.V, data.F, ratio=args.ratio, min_vertices=args.min_vertices,
+                           strategy=args.strategy, prolongation=args.prolongation,
+                           progress=progress)
+    levels = []
+    all_ok = True
+    for h, (Vh, Fh) in enumerate(mg.levels):
+        entry = {"level": h, "vertices": int(len(Vh)), "faces": int(len(Fh))}
+        if h > 0:
+            P = mg.prolongations[h - 1].tocsr()
+            nnz = np.diff(P.indptr)
+            rows = np.asarray(P.sum(axis=1)).ravel()
+            rep = mg.report["levels"][h]
+            # bijectivity: every fine vertex in exactly one coarse triangle, with valid
+            # barycentric coordinates (>= 0, sum 1): 3 non-negative weights per row summing to 1
+            ok = bool((nnz == 3).all() and P.data.min() >= -1e-8
+                      and np.abs(rows - 1).max() <= 1e-8)
+            all_ok &= ok
+            entry.update(seconds=float(rep.get("seconds", 0.0)), prolongation_nnz_per_row=3
+                         if (nnz == 3).all() else int(nnz.max()),
+                         min_barycentric=float(P.data.min()),
+                         max_row_sum_error=float(np.abs(rows - 1).max()), bijective=ok)
+            sprep = rep.get("selfparam") or {}
+            for k in ("rejections", "reached_target", "collapses"):
+                if k in sprep:
+                    entry[k] = sprep[k]
+        levels.append(entry)
+    out = {"input": args.mesh, "vertices": int(len(data.V)), "faces": int(len(data.F)),
+           "n_levels": mg.n_levels, "hierarchy_seconds": float(mg.build_seconds),
+           "prolongation": mg.report.get("prolongation"), "strategy": mg.report.get("strategy"),
+           "bijective": all_ok, "levels": levels, "notes": list(mg.report.get("notes", []))}
+    if args.json:
+        _print_json(out)
+    else:
+        print(f"{args.mesh}: {mg.n_levels} levels, built in {mg.build_seconds:.2f} s "
+              f"({out['prolongation']} prolongation, {out['strategy']} collapses)")
+        for e in levels:
+            extra = "" if e["level"] == 0 else (
+                f"  {e['seconds']:.2f} s, barycentric min {e['min_barycentric']:.2e}, "
+                f"{'bijective' if e['bijective'] else 'NOT bijective'}")
+            print(f"  level {e['level']}: {e['vertices']:>9,} vertices {e['faces']:>9,} "
+                  f"triangles{extra}")
+        for n in out["notes"]:
+            print(f"  note: {n}")
+    return 0 if all_ok else 1
+
+
 def cmd_cubic(args: argparse.Namespace) -> int:
     from algorithms.deform.cubic import CubicParams, cubic_stylization_iter, mean_l1_of_normals
     from algorithms.mesh import write_mesh
@@ -169,6 +306,9 @@ def cmd_cubic(args: argparse.Namespace) -> int:
     l1_before = mean_l1_of_normals(data.V, data.F)
     t0 = time.perf_counter()
     last = None
+    if args.progressive_faces is not None and args.global_solver == "multigrid":
+        raise ParameterError("--progressive-faces and --global-solver multigrid are two ways to "
+                             "handle big meshes; choose one.")
     if args.progressive_faces is not None:
         from algorithms.deform.progressive import ProgressiveParams, progressive_cubic_iter
 
@@ -176,7 +316,9 @@ def cmd_cubic(args: argparse.Namespace) -> int:
                                                     "preview_every": 0})
         steps = progressive_cubic_iter(data.V, data.F, params, prog)
     else:
-        steps = cubic_stylization_iter(data.V, data.F, params)
+        steps = cubic_stylization_iter(data.V, data.F, params,
+                                       backend="multigrid" if args.global_solver == "multigrid"
+                                       else "auto")
     for last in steps:
         if "energy" in last.metrics and not args.json and not args.quiet:
             print(f"  iteration {last.iteration}: energy {last.metrics['energy']:.6g}, "
@@ -363,7 +505,49 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--clean", action="store_true",
                    help="clean the mesh first when it has fixable problems (says what it fixed)")
     add_params_arguments(s, SmoothParams)
+    d = s.add_argument_group(
+        "data smoothing (thesis Eq. 8.6, surface multigrid)",
+        "Any of these switches from the flow above to data smoothing: minimize "
+        "α E(u) + (1-α) ∫|u - f|² for a signal f; the flow options are then not used.")
+    d.add_argument("--signal", metavar="positions|noise|FIELD",
+                   help="positions (writes the smoothed mesh), noise (a noisy test field made "
+                        "here; writes the smoothed values) or a per-vertex field file "
+                        "(.npy/.txt/.csv; writes the smoothed values). Default: positions.")
+    d.add_argument("--energy", choices=("dirichlet", "bilaplacian", "hessian"),
+                   help="smoothness energy E. Default: dirichlet.")
+    d.add_argument("--alpha", type=float, metavar="A",
+                   help="smoothness α in (0, 1), for the mesh scaled to unit area (so it does "
+                        "not depend on units); larger is smoother. Typical: 1e-3 (dirichlet), "
+                        "1e-6 (bilaplacian). Default: 1e-3.")
+    d.add_argument("--solver", choices=("multigrid", "direct"),
+                   help="multigrid V-cycles (default) or a direct Cholesky solve.")
+    d.add_argument("--rtol", type=float, default=1e-5,
+                   help="relative residual at which the V-cycles stop. Default: 1e-5.")
+    d.add_argument("--max-cycles", type=int, default=200,
+                   help="at most this many V-cycles. Default: 200.")
+    d.add_argument("--noise", type=float, default=0.4,
+                   help="noise of --signal noise, relative to the pattern's spread. Default: 0.4.")
+    d.add_argument("--seed", type=int, default=0, help="random seed of --signal noise.")
     s.set_defaults(func=cmd_smooth)
+
+    s = sub.add_parser("multigrid-info",
+                       help="build the surface-multigrid hierarchy and report it (thesis ch. 8)",
+                       description="Build the multigrid hierarchy of a mesh (successive "
+                                   "self-parameterization) and report levels, sizes, time and "
+                                   "whether every fine vertex has valid barycentric coordinates "
+                                   "in one coarse triangle. Exit status 1 when not.")
+    s.add_argument("mesh")
+    s.add_argument("--json", action="store_true", help="print the report as JSON")
+    s.add_argument("--clean", action="store_true", help="clean the mesh first")
+    s.add_argument("--ratio", type=float, default=0.25,
+                   help="triangles kept per level. Default: 0.25.")
+    s.add_argument("--min-vertices", type=int, default=500,
+                   help="coarsest level keeps at least this many vertices. Default: 500.")
+    s.add_argument("--strategy", choices=("midpoint", "qslim"), default="midpoint",
+                   help="edge-collapse strategy. Default: midpoint.")
+    s.add_argument("--prolongation", choices=("intrinsic", "closest_point"), default="intrinsic",
+                   help="intrinsic (self-parameterization, default) or closest_point.")
+    s.set_defaults(func=cmd_multigrid_info)
 
     from algorithms.deform.cubic import CubicParams
 
@@ -382,6 +566,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--progressive-faces", type=int, metavar="M",
                    help="affine progressive meshes (thesis Alg. 4): stylize a decimated copy "
                         "with M triangles, then put the details back; for big meshes")
+    s.add_argument("--global-solver", choices=("direct", "multigrid"), default="direct",
+                   help="solver of the global step: direct (prefactored sparse Cholesky/LU) or "
+                        "multigrid (surface multigrid V-cycles, warm-started; for very large "
+                        "meshes). Default: direct.")
     add_params_arguments(s, CubicParams)
     s.set_defaults(func=cmd_cubic)
 

@@ -183,11 +183,12 @@ class MainWindow(QMainWindow):
     def _build_panels(self) -> None:
         from app.panels.analogies import AnalogiesPanel
         from app.panels.cubic import CubicPanel
+        from app.panels.multigrid import MultigridPanel
         from app.panels.smooth import SmoothPanel
         from app.panels.spectral import SpectralPanel
 
         self.panels = {}
-        for cls in (CubicPanel, AnalogiesPanel, SmoothPanel, SpectralPanel):
+        for cls in (CubicPanel, AnalogiesPanel, SmoothPanel, MultigridPanel, SpectralPanel):
             panel = cls(self)
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, panel)
             self.panels[cls.title] = panel
@@ -401,16 +402,19 @@ class MainWindow(QMainWindow):
         return True
 
     # ------------------------------------------------------------------------------ jobs
-    def start_positions_job(self, name: str, factory, merge_id: int = -1) -> None:
+    def start_positions_job(self, name: str, factory, merge_id: int = -1, commit=None) -> None:
         """Run a Step generator whose vertices replace the document's positions when it ends.
         With ``merge_id`` > 0, the result merges with a directly preceding command of the same id
-        into one undo step (live re-runs)."""
+        into one undo step (live re-runs). ``commit(before, last_step) -> MeshState`` makes the
+        new document state instead (e.g. a job whose result is a per-vertex field); by default
+        it is ``before`` with the last step's positions."""
         if self.document.is_empty:
             return
         self.last_job_name = name
         self._job_before = self.document.state
         self._job_merge_id = merge_id
         self._job_kind = "positions"
+        self._job_commit = commit
         self.runner.start(name, factory)
 
     def start_analysis_job(self, name: str, factory) -> None:
@@ -472,7 +476,8 @@ class MainWindow(QMainWindow):
             dialogs.error(self, f"{self.last_job_name} failed",
                           "The method returned an invalid result; your mesh was not changed.")
             return
-        after = before.with_positions(step.V)
+        commit = getattr(self, "_job_commit", None)
+        after = before.with_positions(step.V) if commit is None else commit(before, step)
         self.undo_stack.push(StateCommand(self.document, before, after, self.last_job_name,
                                           merge_id=getattr(self, "_job_merge_id", -1)))
         self._job_before = None

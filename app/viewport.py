@@ -200,6 +200,23 @@ class Viewport(QWidget):
                                   pickable=False)
         self.render()
 
+    def show_overlay(self, V: np.ndarray | None, F: np.ndarray | None = None,
+                     color: str = "#e8d2b0") -> None:
+        """Show another triangle mesh with its edges *instead of* the document's mesh (e.g. a
+        coarse level of a multigrid hierarchy, which lies partly inside the fine surface); None
+        removes it and shows the document's mesh again."""
+        self.plotter.remove_actor("overlay", render=False)
+        if V is not None and F is not None and len(F):
+            poly = pv.PolyData(np.asarray(V, dtype=np.float64), _faces_vtk(np.asarray(F)))
+            self.plotter.add_mesh(poly, name="overlay", color=color, show_edges=True,
+                                  edge_color="#8b1a1a", line_width=1.0, smooth_shading=False,
+                                  reset_camera=False, pickable=False)
+            if self.mesh_actor is not None:
+                self.mesh_actor.SetVisibility(False)
+        elif self.mesh_actor is not None:
+            self.mesh_actor.SetVisibility(True)
+        self.render()
+
     def show_handles(self, handles: dict | None) -> None:
         """Draw point handles: a sphere at each target, a line from its vertex to the target."""
         self.plotter.remove_actor(["handles", "handle_lines"], render=False)
@@ -224,7 +241,7 @@ class Viewport(QWidget):
         poly.point_data["Normals"] = vertex_normals(np.asarray(V, dtype=np.float64), self._F)
         poly.point_data.active_normals_name = "Normals"
         self.poly = poly
-        self.plotter.remove_actor("mesh", render=False)
+        self.plotter.remove_actor(["mesh", "overlay"], render=False)
         self.mesh_actor = self.plotter.add_mesh(
             poly, name="mesh", color=MESH_COLOR, smooth_shading=False, show_edges=self._edges,
             edge_color="#404040", line_width=0.5, specular=0.25, specular_power=20,
@@ -294,7 +311,8 @@ class Viewport(QWidget):
     def show_field(self, name: str | None, values: np.ndarray | None = None,
                    cmap: str = "viridis", clim: tuple[float, float] | None = None,
                    categorical: bool = False) -> None:
-        """Colour the mesh by a per-vertex scalar field (None: plain colour). ``categorical``
+        """Colour the mesh by a scalar field (None: plain colour): one value per vertex, or one
+        per triangle (then each triangle is drawn in one colour). ``categorical`` per-vertex
         labels blend colours across a triangle instead of running through the colour map."""
         if self.poly is None or self.mesh_actor is None:
             return
@@ -303,8 +321,18 @@ class Viewport(QWidget):
             mapper.scalar_visibility = False
             self._field_name = None
         else:
-            self.poly.point_data[name] = np.asarray(values, dtype=np.float64)
-            self.poly.point_data.active_scalars_name = name
+            values = np.asarray(values, dtype=np.float64)
+            if len(values) == self.poly.n_points:
+                self.poly.point_data[name] = values
+                self.poly.point_data.active_scalars_name = name
+                mapper.SetScalarModeToUsePointData()
+            elif len(values) == self.poly.n_cells:
+                self.poly.cell_data[name] = values
+                self.poly.cell_data.active_scalars_name = name
+                mapper.SetScalarModeToUseCellData()
+            else:
+                raise ValueError(f"a field needs {self.poly.n_points} vertex values or "
+                                 f"{self.poly.n_cells} triangle values, got {len(values)}")
             mapper.lookup_table = pv.LookupTable(cmap, nan_color="#9a9a9a")
             lo, hi = clim if clim else (float(np.min(values)), float(np.max(values)))
             mapper.scalar_range = (lo, hi if hi > lo else lo + 1.0)

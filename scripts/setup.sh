@@ -56,6 +56,8 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   # torch first, exactly pinned: it then satisfies every later requirement without a CUDA download.
   pipi "torch==2.13.0"
   pipi -e ".[test]"
+  # compile the Numba kernels now (cached next to the sources) rather than on first use
+  .venv/bin/python -m algorithms.warmup >>"$log" 2>&1 || echo "!! kernel warm-up failed (see $log); they compile on first use" >&2
   echo "$want" > "$stamp"
   echo ">> installed (log: $log)"
 fi

@@ -301,6 +301,33 @@ def _as_index_array(x, n: int, what: str) -> np.ndarray:
     return idx
 
 
+class MultigridGlobalSolver:
+    """The global step by multigrid: a drop-in for :class:`SPDSolver` in :class:`ArapSystem`.
+
+    The connectivity and the matrix never change, so the Galerkin hierarchy is built once; each
+    solve starts from the previous solution (consecutive ARAP iterates are close), which makes a
+    global step a few V-cycles.
+    """
+
+    backend = "multigrid"
+
+    def __init__(self, mg, A, fixed, *, rtol: float = 1e-7, maxiter: int = 200):
+        self.fixed = np.asarray(fixed, dtype=np.int64)
+        self.solver = mg.solver(A, fixed=self.fixed if self.fixed.size else None)
+        self.rtol, self.maxiter = float(rtol), int(maxiter)
+        self._last: np.ndarray | None = None
+        self.cycles: list[int] = []
+
+    def solve(self, b: np.ndarray, x_fixed: np.ndarray | None = None) -> np.ndarray:
+        b = np.asarray(b, dtype=np.float64)
+        x0 = self._last if self._last is not None and self._last.shape == b.shape else None
+        x = self.solver.solve(b, x0=x0, rtol=self.rtol, maxiter=self.maxiter,
+                              fixed_values=x_fixed if self.fixed.size else None)
+        self.cycles.append(int(self.solver.last_info.get("cycles", 0)))
+        self._last = x
+        return x
+
+
 class ArapSystem:
     """Precomputed ARAP local-global machinery for one mesh and one set of constraints.
 
@@ -317,7 +344,12 @@ class ArapSystem:
         Soft point handles adding ``weights_h / 2 ||u_h - p_h||^2`` to the energy; targets ``p`` are
         given at solve time. Weights are absolute (compare with ``Q.diagonal()``).
     backend : str
-        SPDSolver backend ("auto", "cholmod", "superlu").
+        SPDSolver backend ("auto", "cholmod", "superlu"), or "multigrid": the global step by
+        surface-multigrid V-cycles (thesis ch. 8) warm-started from the previous solution, for
+        very large meshes where a factorization is too slow or too big.
+    multigrid : SurfaceMultigrid, optional
+        Hierarchy of this mesh for ``backend="multigrid"`` (built with defaults when omitted).
+    multigrid_rtol : relative residual at which the V-cycles of one global step stop.
     cells : {"spokes_and_rims", "faces"}
         One rotation per vertex with its spokes-and-rims cell (default, ARAP), or one rotation
         per triangle with the triangle's three edges (face-only ARAP, thesis Eq. 6.4).
@@ -337,7 +369,8 @@ class ArapSystem:
     """
 
     def __init__(self, V, F, *, fixed=None, coord_constraints=None, soft_handles=None,
-                 backend: str = "auto", cells: str = "spokes_and_rims"):
+                 backend: str = "auto", cells: str = "spokes_and_rims", multigrid=None,
+                 multigrid_rtol: float = 1e-7):
         V = np.array(V, dtype=np.float64, copy=True)
         F = np.asarray(F, dtype=np.int64)
         if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
@@ -432,7 +465,16 @@ class ArapSystem:
                     and np.array_equal(constrained[:, e], constrained[:, dim])]
             done += same
             fx = np.flatnonzero(constrained[:, dim])
-            self._groups.append((same, fx, SPDSolver(A, fx, backend=backend)))
+            if backend == "multigrid":
+                if multigrid is None:
+                    from ..multigrid import surface_multigrid
+
+                    multigrid = surface_multigrid(V, F)
+                solver = MultigridGlobalSolver(multigrid, A, fx, rtol=multigrid_rtol)
+            else:
+                solver = SPDSolver(A, fx, backend=backend)
+            self._groups.append((same, fx, solver))
+        self.multigrid = multigrid
         self.backend = self._groups[0][2].backend
 
     def _check_definite(self) -> None:

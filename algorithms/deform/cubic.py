@@ -931,7 +931,8 @@ class CubicStylizer:
 
 def cubic_stylization_iter(V, F, params: CubicParams = CubicParams(), *, lam_per_vertex=None,
                            lam_axes=None, fixed=None, handles=None, coord_constraints=None,
-                           rotation=None, style_matrix=None, frames=None) -> Iterator[Step]:
+                           rotation=None, style_matrix=None, frames=None,
+                           backend: str = "auto") -> Iterator[Step]:
     """Cubic stylization (thesis Alg. 3), one :class:`~algorithms.steps.Step` per iteration.
 
     Parameters
@@ -948,6 +949,8 @@ def cubic_stylization_iter(V, F, params: CubicParams = CubicParams(), *, lam_per
     style_matrix : (m, 3), optional, overrides ``params.style``.
     frames : (n, 3, 3), optional, per-vertex cube orientations (rotation matrices, columns =
         axes); take precedence over ``rotation`` (see :meth:`CubicStylizer.steps`).
+    backend : global-step solver: "auto" (direct), "cholmod", "superlu" or "multigrid" (surface
+        multigrid V-cycles, warm-started; see :class:`~algorithms.deform.arap.ArapSystem`).
 
     Yields
     ------
@@ -955,7 +958,8 @@ def cubic_stylization_iter(V, F, params: CubicParams = CubicParams(), *, lam_per
     """
     validate_params(params)
     st = CubicStylizer(V, F, fixed=fixed, handles=handles, coord_constraints=coord_constraints,
-                       normalize=params.normalize, pin_one_vertex=params.pin_one_vertex)
+                       normalize=params.normalize, pin_one_vertex=params.pin_one_vertex,
+                       backend=backend)
     yield from st.steps(params, lam_per_vertex=lam_per_vertex, lam_axes=lam_axes,
                         rotation=rotation, style_matrix=style_matrix, frames=frames)
 

@@ -104,6 +104,11 @@ class MethodPanel(QDockWidget):
     def build_steps(self, state: MeshState, params: Any) -> Iterator[Step]:
         raise NotImplementedError
 
+    def commit_function(self):
+        """``commit(before, last_step) -> MeshState`` for the job being started, or None to
+        take the last step's positions (see MainWindow.start_positions_job)."""
+        return None
+
     @property
     def merge_id(self) -> int:
         return MethodPanel._merge_ids.setdefault(type(self).__name__,
@@ -131,7 +136,8 @@ class MethodPanel(QDockWidget):
         self.plot.clear()
         self.status_label.setText("Starting…")
         self.window_.start_positions_job(self.title, lambda: self.build_steps(start, params),
-                                         merge_id=self.merge_id if live else -1)
+                                         merge_id=self.merge_id if live else -1,
+                                         commit=self.commit_function())
 
     def shutdown(self) -> None:
         """Stop pending live re-runs (window closing)."""

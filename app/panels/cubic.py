@@ -119,6 +119,16 @@ class CubicPanel(MethodPanel):
         self.progressive_box.toggled.connect(lambda _on: self._on_params_changed(None))
         self.progressive_form.changed.connect(self._on_params_changed)
         lay.insertWidget(lay.indexOf(self.form) + 1, self.progressive_box)
+        self.multigrid_box = QCheckBox("Multigrid global step (full resolution, big meshes)")
+        self.multigrid_box.setToolTip(
+            "Solve each global step with surface multigrid V-cycles instead of a sparse "
+            "factorization (thesis ch. 8): the full-resolution mesh is stylized, with less memory "
+            "and no factorization. Builds a hierarchy once per mesh. Not combined with "
+            "progressive meshes.")
+        self.multigrid_box.toggled.connect(self._on_multigrid_toggled)
+        self.progressive_box.toggled.connect(
+            lambda on: on and self.multigrid_box.setChecked(False))
+        lay.insertWidget(lay.indexOf(self.progressive_box) + 1, self.multigrid_box)
         box = QGroupBox("Tools")
         v = QVBoxLayout(box)
         self.tool_group = QButtonGroup(self)
@@ -258,6 +268,11 @@ class CubicPanel(MethodPanel):
         if after.fields != st.fields or after.handles != st.handles:
             self.window_.undo_stack.push(StateCommand(doc, st, after, "Clear painting"))
 
+    def _on_multigrid_toggled(self, on: bool) -> None:
+        if on and self.progressive_box.isChecked():
+            self.progressive_box.setChecked(False)
+        self._on_params_changed(None)
+
     # -- the method ------------------------------------------------------------------------------
     def build_steps(self, state, params):
         fixed, handles, plane = constraints_of(state, self._plane_axis)
@@ -267,13 +282,15 @@ class CubicPanel(MethodPanel):
                None if plane is None else (plane[0].tobytes(), plane[1].tobytes(),
                                            plane[2].tobytes()),
                params.normalize, params.pin_one_vertex,
-               None if prog is None else (prog.target_faces, prog.strategy, prog.tikhonov))
+               None if prog is None else (prog.target_faces, prog.strategy, prog.tikhonov),
+               self._multigrid)
         if self._cache is not None and self._cache[0] == key:
             solver = self._cache[1]
         elif prog is None:
             solver = CubicStylizer(state.V, state.F, fixed=fixed, handles=handles,
                                    coord_constraints=plane, normalize=params.normalize,
-                                   pin_one_vertex=params.pin_one_vertex)
+                                   pin_one_vertex=params.pin_one_vertex,
+                                   backend="multigrid" if self._multigrid else "auto")
         else:
             solver = ProgressiveCubic(state.V, state.F, target_faces=prog.target_faces,
                                       strategy=prog.strategy, tikhonov=prog.tikhonov,
@@ -298,4 +315,5 @@ class CubicPanel(MethodPanel):
         self._plane_axis = self.plane_axis.currentIndex()  # read on the GUI thread
         self._progressive = (self.progressive_form.params() if self.progressive_box.isChecked()
                              else None)
+        self._multigrid = self.multigrid_box.isChecked() and self._progressive is None
         super().run(live)

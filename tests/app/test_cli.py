@@ -234,3 +234,86 @@ def test_coarsen_bad_arguments(tmp_path):
                   "aniso:70", "--max-iterations", "20", "--json")
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["methods"]["ours"]["iterations"] <= 20
+
+
+# ----------------------------------------------------------------------------- multigrid (ch. 8)
+def test_smooth_noise_signal_multigrid_matches_direct_and_reduces_error(tmp_path):
+    outs = {}
+    for solver in ("multigrid", "direct"):
+        out = tmp_path / f"{solver}.txt"
+        r = stylize3d("smooth", SAMPLES / "blob.obj", "-o", out, "--signal", "noise",
+                      "--energy", "dirichlet", "--alpha", "5e-4", "--solver", solver, "--json")
+        assert r.returncode == 0, r.stderr
+        d = json.loads(r.stdout)
+        assert d["signal"] == "noise" and d["params"]["solver"] == solver
+        # the noisy test field gets much closer to the clean pattern
+        assert d["rms_error_after"] < 0.5 * d["rms_error_before"]
+        outs[solver] = np.loadtxt(out)
+        if solver == "multigrid":
+            assert d["levels"][0] == 3232 and len(d["levels"]) >= 2
+            assert d["cycles"] >= 1 and d["converged"] and d["relative_residual"] <= 1e-5
+    scale = np.abs(outs["direct"]).max()
+    assert np.abs(outs["multigrid"] - outs["direct"]).max() < 1e-3 * scale
+
+
+def test_smooth_positions_bilaplacian_writes_a_smoothed_mesh(tmp_path):
+    out = tmp_path / "smooth.obj"
+    r = stylize3d("smooth", SAMPLES / "bumpy.obj", "-o", out, "--signal", "positions",
+                  "--energy", "bilaplacian", "--alpha", "1e-5")
+    assert r.returncode == 0, r.stderr
+    assert "V-cycles" in r.stdout
+    before, after = read_mesh(SAMPLES / "bumpy.obj"), read_mesh(out)
+    np.testing.assert_array_equal(before.F, after.F)
+    from algorithms.mesh.operators import cotangent_laplacian, mass_matrix
+
+    def willmore(V, F):  # ∫H² dA: scale-invariant bending, falls as the bumps go
+        m = mass_matrix(V, F).diagonal()
+        HN = (cotangent_laplacian(V, F) @ V) / m[:, None]
+        return float((m * (HN ** 2).sum(axis=1)).sum() / 4)
+    assert willmore(after.V, after.F) < 0.7 * willmore(before.V, before.F)
+
+
+def test_smooth_data_mode_errors(tmp_path, bad_files):
+    # a field file with the wrong number of values: exit 2, nothing written
+    f = tmp_path / "values.txt"
+    f.write_text("1\n2\n")
+    out = tmp_path / "o.txt"
+    r = stylize3d("smooth", SAMPLES / "blob.obj", "-o", out, "--signal", f)
+    assert r.returncode == 2 and "has 2 values" in r.stderr and not out.exists()
+    r = stylize3d("smooth", SAMPLES / "blob.obj", "-o", tmp_path / "o.obj", "--signal", "noise")
+    assert r.returncode == 5 and "one value per vertex" in r.stderr
+    r = stylize3d("smooth", SAMPLES / "blob.obj", "-o", tmp_path / "o.txt", "--alpha", "1.5")
+    assert r.returncode == 5 and "Traceback" not in r.stderr
+    r = stylize3d("smooth", bad_files["nonmanifold"], "-o", tmp_path / "o2.obj", "--alpha", "0.01")
+    assert r.returncode == 4 and not (tmp_path / "o2.obj").exists()
+
+
+def test_multigrid_info_json_reports_a_bijective_hierarchy():
+    r = stylize3d("multigrid-info", shared_mesh("camelhead.off"), "--json", "--min-vertices",
+                  "300")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["bijective"] and d["prolongation"] == "intrinsic" and d["n_levels"] >= 3
+    sizes = [lv["vertices"] for lv in d["levels"]]
+    assert sizes[0] == d["vertices"] and sizes == sorted(sizes, reverse=True)
+    assert sizes[-1] >= 300 and d["hierarchy_seconds"] > 0
+    for lv in d["levels"][1:]:
+        assert lv["bijective"] and lv["min_barycentric"] >= -1e-8
+        assert lv["prolongation_nnz_per_row"] == 3 and lv["max_row_sum_error"] <= 1e-8
+    r = stylize3d("multigrid-info", SAMPLES / "blob.obj")
+    assert r.returncode == 0 and "level 1" in r.stdout and "bijective" in r.stdout
+
+
+def test_cubic_with_multigrid_global_step_matches_direct(tmp_path):
+    outs = {}
+    for solver in ("direct", "multigrid"):
+        out = tmp_path / f"{solver}.obj"
+        r = stylize3d("cubic", SAMPLES / "blob.obj", "-o", out, "--global-solver", solver,
+                      "--max-iterations", "15", "--json")
+        assert r.returncode == 0, r.stderr
+        outs[solver] = read_mesh(out).V
+    diag = np.linalg.norm(np.ptp(outs["direct"], axis=0))
+    assert np.abs(outs["direct"] - outs["multigrid"]).max() < 1e-3 * diag
+    r = stylize3d("cubic", SAMPLES / "blob.obj", "-o", tmp_path / "x.obj", "--global-solver",
+                  "multigrid", "--progressive-faces", "500")
+    assert r.returncode == 5 and "choose one" in r.stderr

@@ -173,3 +173,27 @@ def test_frame_brush_paints_a_local_cube_frame(window, dialogs, qtbot):
     with qtbot.waitSignal(window.runner.finished, timeout=120000):
         panel.run_button.click()
     assert window.undo_stack.undoText() == "Cubic"
+
+
+def test_multigrid_global_step_option(window, dialogs, qtbot):
+    panel = open_cubic(window)
+    V0 = window.document.V.copy()
+    F = window.document.F
+    panel.form.editors["lam"].setValue(0.4)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.run_button.click()
+    direct = window.document.V.copy()
+    window.undo_stack.undo()
+    panel.progressive_box.setChecked(True)
+    panel.multigrid_box.setChecked(True)  # the two big-mesh modes exclude each other
+    assert not panel.progressive_box.isChecked()
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.run_button.click()
+    solver = panel._cache[1]
+    assert solver.system.backend == "multigrid" and solver.system.multigrid.n_levels >= 2
+    V1 = window.document.V
+    assert l1_of_normals(V1, F) < l1_of_normals(V0, F) - 0.01
+    diag = np.linalg.norm(np.ptp(V0, axis=0))
+    assert np.abs(V1 - direct).max() < 1e-3 * diag  # same result as the direct global step
+    panel.progressive_box.setChecked(True)
+    assert not panel.multigrid_box.isChecked()

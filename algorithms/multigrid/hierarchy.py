@@ -1,0 +1,307 @@
+"""Geometry-only multigrid hierarchy of a triangle mesh (thesis §8.4-8.5, Alg. 8 line 2).
+
+:func:`surface_multigrid` coarsens the mesh level by level (face count × ``ratio`` per level, 0.25
+by default) while the next level keeps at least ``min_vertices`` vertices (500 by default: the
+estimate ``ratio * |V_h|`` must reach it), and stores one prolongation per level: a sparse
+``|V_h| x |V_{h+1}|`` matrix with 3 non-zeros per row, the barycentric coordinates of each fine
+vertex in a triangle of the coarse mesh (rows sum to 1, so constants are reproduced exactly).
+
+Prolongation sources (pluggable, ``prolongation=``):
+
+``"intrinsic"`` (default, the thesis's method)
+    successive self-parameterization (:func:`algorithms.mesh.selfparam.self_parameterize`):
+    every fine vertex is tracked through the collapses of a mid-point decimation and its
+    barycentric coordinates on the coarse mesh come from the joint flattenings (§8.4.2-8.4.3).
+``"closest_point"`` (the naive extrinsic baseline of Fig. 8.15)
+    decimate with :func:`algorithms.mesh.decimate.decimate` and take, for every fine vertex,
+    the closest point on the coarse mesh (``igl.point_mesh_squared_distance``) and its
+    barycentric coordinates in that triangle (clamped to the triangle, renormalized).
+
+Nothing here depends on a linear system: :meth:`SurfaceMultigrid.solver` builds the Galerkin
+matrices ``A_{h+1} = P^T A_h P`` of a given matrix on the stored hierarchy (cheap, repeated every
+time the matrix changes).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import InvalidMeshError, ParameterError
+
+__all__ = ["SurfaceMultigrid", "surface_multigrid", "barycentric_prolongation",
+           "closest_point_prolongation", "PROLONGATIONS"]
+
+PROLONGATIONS = ("intrinsic", "closest_point")
+
+
+def barycentric_prolongation(face: np.ndarray, bary: np.ndarray, F_coarse: np.ndarray,
+                             n_coarse: int) -> sp.csr_matrix:
+    """Prolongation from per-fine-vertex (coarse face, barycentric coordinates).
+
+    Parameters
+    ----------
+    face : (n,) int, the coarse triangle of each fine vertex.
+    bary : (n, 3) float, its barycentric coordinates in that triangle (rows sum to 1).
+    F_coarse : (mc, 3) int coarse triangles.
+    n_coarse : number of coarse vertices.
+
+    Returns
+    -------
+    (n, n_coarse) csr_matrix, 3 stored entries per row (duplicates of a degenerate triangle summed).
+    """
+    face = np.asarray(face, dtype=np.int64)
+    bary = np.asarray(bary, dtype=np.float64)
+    n = len(face)
+    cols = np.asarray(F_coarse, dtype=np.int64)[face].ravel()
+    rows = np.repeat(np.arange(n), 3)
+    P = sp.csr_matrix((bary.ravel(), (rows, cols)), shape=(n, n_coarse))
+    P.sum_duplicates()
+    return P
+
+
+def _closest_barycentric(Q: np.ndarray, V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closest triangle of (V, F) for every point of Q and barycentric coordinates there."""
+    import igl
+
+    _, I, C = igl.point_mesh_squared_distance(np.ascontiguousarray(Q), np.ascontiguousarray(V),
+                                              np.ascontiguousarray(F, dtype=np.int64))
+    I = np.asarray(I, dtype=np.int64)
+    a, b, c = V[F[I, 0]], V[F[I, 1]], V[F[I, 2]]
+    v0, v1, v2 = b - a, c - a, C - a
+    d00 = np.einsum("ij,ij->i", v0, v0)
+    d01 = np.einsum("ij,ij->i", v0, v1)
+    d11 = np.einsum("ij,ij->i", v1, v1)
+    d20 = np.einsum("ij,ij->i", v2, v0)
+    d21 = np.einsum("ij,ij->i", v2, v1)
+    den = d00 * d11 - d01 * d01
+    ok = den > 0
+    den = np.where(ok, den, 1.0)
+    w1 = np.where(ok, (d11 * d20 - d01 * d21) / den, 1.0 / 3.0)
+    w2 = np.where(ok, (d00 * d21 - d01 * d20) / den, 1.0 / 3.0)
+    B = np.column_stack([1.0 - w1 - w2, w1, w2])
+    B = np.clip(B, 0.0, 1.0)
+    B /= B.sum(axis=1, keepdims=True)
+    return I, B
+
+
+def closest_point_prolongation(V_fine, V_coarse, F_coarse) -> sp.csr_matrix:
+    """Naive extrinsic prolongation: barycentric coordinates of the closest coarse point.
+
+    Parameters
+    ----------
+    V_fine : (n, 3) fine vertex positions.
+    V_coarse : (nc, 3), F_coarse : (mc, 3) the coarse mesh.
+
+    Returns
+    -------
+    (n, nc) csr_matrix with 3 non-zeros per row (rows sum to 1).
+    """
+    V_fine = np.asarray(V_fine, dtype=np.float64)
+    V_coarse = np.asarray(V_coarse, dtype=np.float64)
+    F_coarse = np.asarray(F_coarse, dtype=np.int64)
+    I, B = _closest_barycentric(V_fine, V_coarse, F_coarse)
+    return barycentric_prolongation(I, B, F_coarse, len(V_coarse))
+
+
+@dataclass
+class SurfaceMultigrid:
+    """A geometry-only multigrid hierarchy (build once per mesh, reuse for any matrix on it).
+
+    Attributes
+    ----------
+    levels : list of (V, F), level 0 is the input mesh, the last one the coarsest.
+    prolongations : list of csr matrices; ``prolongations[h]`` maps level ``h+1`` to level ``h``
+        (shape ``|V_h| x |V_{h+1}|``, 3 non-zeros per row, rows sum to 1).
+    build_seconds : wall time of the whole construction.
+    report : per-level sizes and seconds, the prolongation source, self-parameterization reports.
+    maps : with the intrinsic prolongation, the :class:`SelfParameterization` of each level
+        (``maps[h]`` maps level ``h`` onto level ``h+1``; compose them or chain ``query`` to
+        locate any fine surface point on any coarse level); empty for ``closest_point``.
+    """
+
+    levels: list
+    prolongations: list
+    build_seconds: float = 0.0
+    report: dict = field(default_factory=dict)
+    maps: list = field(default_factory=list)
+
+    def locate(self, level: int, faces=None, bary=None):
+        """Where points of the finest mesh lie on level ``level``: (coarse faces, barycentric
+        coordinates). Points are given as (finest faces, barycentric coordinates); by default
+        the centroid of every finest triangle. Needs the intrinsic prolongation."""
+        if not 0 <= int(level) < self.n_levels:
+            raise ParameterError(f"level must lie in 0..{self.n_levels - 1}.")
+        if int(level) > len(self.maps):
+            raise ParameterError("Locating points on coarse levels needs the intrinsic "
+                                 "prolongation (the self-parameterization maps).")
+        if faces is None:
+            faces = np.arange(len(self.levels[0][1]), dtype=np.int64)
+            bary = np.full((len(faces), 3), 1.0 / 3.0)
+        faces = np.asarray(faces, dtype=np.int64)
+        bary = np.asarray(bary, dtype=np.float64)
+        for h in range(int(level)):
+            faces, bary = self.maps[h].query(faces, bary)
+        return faces, bary
+
+    @property
+    def n_levels(self) -> int:
+        return len(self.levels)
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.levels[0][0])
+
+    def solver(self, A, *, fixed=None, smoother: str = "gauss_seidel", presmooth: int = 2,
+               postsmooth: int = 2, block: int | None = None):
+        """Galerkin multigrid solver of ``A`` on this hierarchy (only the matrices are built).
+
+        Parameters
+        ----------
+        A : (n, n) sparse symmetric positive (semi-)definite matrix, ``n = |V|`` or, with
+            ``block=b``, ``n = b |V|`` with the **interleaved** ordering: unknown ``k`` of vertex
+            ``i`` is row ``b*i + k`` (xyzxyz...; the prolongation is ``kron(P, I_b)``).
+        fixed : (k,) int indices of Dirichlet unknowns (in A's numbering); their values are given
+            to :meth:`MultigridSolver.solve` (``fixed_values``). The reduced system of App. 8.9.2.
+        smoother : "gauss_seidel" (serial, the thesis default) or "multicolor" (App. 8.9.1).
+        presmooth, postsmooth : relaxation sweeps before / after the coarse-grid correction.
+        block : None or the number of unknowns per vertex.
+
+        Returns
+        -------
+        MultigridSolver
+        """
+        from .solver import MultigridSolver
+
+        return MultigridSolver.from_hierarchy(self, A, fixed=fixed, smoother=smoother,
+                                              presmooth=presmooth, postsmooth=postsmooth,
+                                              block=block)
+
+    def block_prolongations(self, block: int | None) -> list:
+        """The prolongations for ``block`` unknowns per vertex (interleaved: ``kron(P, I_b)``)."""
+        if block in (None, 1):
+            return list(self.prolongations)
+        b = int(block)
+        I = sp.identity(b, format="csr")
+        return [sp.kron(P, I, format="csr") for P in self.prolongations]
+
+    def __repr__(self) -> str:
+        sizes = " -> ".join(f"{len(V):,}" for V, _ in self.levels)
+        return (f"SurfaceMultigrid({self.n_levels} levels: {sizes} vertices, "
+                f"{self.report.get('prolongation', '?')}, built in {self.build_seconds:.2f} s)")
+
+
+def _self_parameterize():
+    try:
+        from ..mesh.selfparam import self_parameterize
+    except ImportError as exc:  # pragma: no cover - depends on the build state
+        raise ParameterError(
+            "The intrinsic prolongation needs the successive self-parameterization "
+            "(algorithms.mesh.selfparam), which is not available in this installation. "
+            "Use prolongation='closest_point' instead.") from exc
+    return self_parameterize
+
+
+def surface_multigrid(V, F, *, ratio: float = 0.25, min_vertices: int = 500,
+                      strategy: str = "midpoint", prolongation: str = "intrinsic",
+                      progress: Callable[[float, str], None] | None = None) -> SurfaceMultigrid:
+    """Build the multigrid hierarchy of a triangle mesh (geometry only).
+
+    Parameters
+    ----------
+    V : (n, 3) float64 vertex positions.
+    F : (m, 3) int64 triangles (manifold, consistently oriented; boundaries and any genus allowed).
+    ratio : face-count ratio between consecutive levels, in (0, 1) (0.25: thesis default).
+    min_vertices : coarsen only while the next level would keep at least this many vertices
+        (estimated as ``ratio * |V_h|``); a mesh smaller than ``min_vertices / ratio`` gets a
+        single level (the solver is then a direct solve).
+    strategy : decimation strategy ("midpoint": uniform mid-point collapse, the thesis default;
+        "qslim").
+    prolongation : "intrinsic" (successive self-parameterization) or "closest_point".
+    progress : optional ``progress(fraction, message)`` called during and after each level.
+
+    Returns
+    -------
+    SurfaceMultigrid
+    """
+    t0 = time.perf_counter()
+    if prolongation not in PROLONGATIONS:
+        raise ParameterError(f"Unknown prolongation {prolongation!r}; choose one of "
+                             f"{', '.join(PROLONGATIONS)}.")
+    if not 0.0 < float(ratio) < 1.0:
+        raise ParameterError(f"The coarsening ratio must lie strictly between 0 and 1 (got {ratio}).")
+    if int(min_vertices) < 3:
+        raise ParameterError("min_vertices must be at least 3.")
+    V = np.ascontiguousarray(V, dtype=np.float64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
+        raise InvalidMeshError("The multigrid hierarchy needs a triangle mesh: V (n, 3) and a "
+                               "non-empty F (m, 3).")
+    if F.min() < 0 or F.max() >= len(V):
+        raise InvalidMeshError("Some faces refer to vertices that do not exist. Validate the "
+                               "mesh first.")
+    sp_fn = _self_parameterize() if prolongation == "intrinsic" else None
+
+    levels = [(V, F)]
+    Ps: list = []
+    maps: list = []
+    per_level = [dict(level=0, vertices=len(V), faces=len(F), seconds=0.0)]
+    notes: list[str] = []
+    # rough number of levels, for progress
+    n_expected = 0
+    nv = len(V)
+    while ratio * nv >= min_vertices:
+        nv *= ratio
+        n_expected += 1
+    while True:
+        Vh, Fh = levels[-1]
+        if ratio * len(Vh) < min_vertices:
+            break
+        target = max(1, int(round(ratio * len(Fh))))
+        t = time.perf_counter()
+        entry: dict = dict(level=len(levels))
+        if prolongation == "intrinsic":
+            sub = None
+            if progress is not None:
+                done, total = len(Ps), max(1, n_expected)
+
+                def sub(frac, _done=done, _total=total):
+                    progress(min(1.0, (_done + float(frac)) / _total),
+                             f"multigrid level {_done + 1}: self-parameterization")
+            res = sp_fn(Vh, Fh, target, strategy=strategy, progress=sub)
+            Vc = np.ascontiguousarray(res.V_coarse, dtype=np.float64)
+            Fc = np.ascontiguousarray(res.F_coarse, dtype=np.int64)
+            P = sp.csr_matrix(res.prolongation(), dtype=np.float64)
+            entry["selfparam"] = dict(getattr(res, "report", {}) or {})
+        else:
+            from ..mesh.decimate import decimate
+
+            dec = decimate(Vh, Fh, target, strategy=strategy)
+            Vc = np.ascontiguousarray(dec.V, dtype=np.float64)
+            Fc = np.ascontiguousarray(dec.F, dtype=np.int64)
+            P = closest_point_prolongation(Vh, Vc, Fc)
+            if dec.notes:
+                notes.extend(dec.notes)
+        if len(Vc) >= len(Vh):
+            notes.append(f"Level {len(levels)} could not be coarsened further; the hierarchy "
+                         f"stops at {len(levels)} levels.")
+            break
+        levels.append((Vc, Fc))
+        Ps.append(P)
+        if prolongation == "intrinsic":
+            maps.append(res)
+        entry.update(vertices=len(Vc), faces=len(Fc), seconds=time.perf_counter() - t)
+        per_level.append(entry)
+        if progress is not None:
+            progress(min(1.0, len(Ps) / max(1, n_expected)),
+                     f"multigrid level {len(Ps)}: {len(Vc):,} vertices")
+    seconds = time.perf_counter() - t0
+    report = dict(prolongation=prolongation, strategy=strategy, ratio=float(ratio),
+                  min_vertices=int(min_vertices), levels=per_level, notes=notes,
+                  build_seconds=seconds)
+    return SurfaceMultigrid(levels=levels, prolongations=Ps, build_seconds=seconds, report=report,
+                            maps=maps)

@@ -1,0 +1,141 @@
+"""The Multigrid smoothing panel with real widgets (pytest-qt)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from PySide6.QtCore import QTimer
+
+from algorithms.mesh.operators import cotangent_laplacian, face_areas
+from tests.conftest import SAMPLES
+
+
+def roughness(V, F, f):
+    """Dirichlet energy of a field (how noisy it is)."""
+    return float(f @ (-cotangent_laplacian(V, F) @ f))
+
+
+def open_panel(window):
+    assert window.open_path(SAMPLES / "blob.obj")
+    panel = window.panels["Multigrid smoothing"]
+    panel.raise_()
+    return panel
+
+
+def test_alpha_slider_resolves_live_without_blocking_the_ui(window, dialogs, qtbot):
+    panel = open_panel(window)
+    doc = window.document
+    panel.new_noise()
+    noisy = np.array(doc.state.fields["noisy input"])
+    assert window.undo_stack.count() == 1
+    assert panel.live_box.isChecked()  # live by default: a slider move re-solves
+
+    ticks = []
+    timer = QTimer()
+    timer.setInterval(5)
+    timer.timeout.connect(lambda: ticks.append(time.perf_counter()))
+    timer.start()
+    started = []
+    window.runner.started.connect(lambda _n: started.append(time.perf_counter()))
+    slider = panel.form.editors["alpha"].slider
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        slider.setValue(slider.value() + 150)
+    finished = time.perf_counter()
+    timer.stop()
+    # the event loop kept running while the hierarchy was built and the system solved
+    assert started and any(started[0] < t < finished for t in ticks)
+    smoothed = np.array(doc.state.fields["smoothed"])
+    V, F = doc.V, doc.F
+    assert roughness(V, F, smoothed) < 0.2 * roughness(V, F, noisy)
+    assert window.viewport.poly.point_data["signal"] is not None
+    np.testing.assert_allclose(np.array(window.viewport.poly.point_data["signal"]), smoothed)
+    assert "multigrid" in panel.times_label.text() and "levels" in panel.hier_label.text()
+    assert len(panel.plot.series.get("relative residual", [])) >= 1
+    assert panel.plot.series["relative residual"][-1] <= 1e-5
+    # a second move re-solves (hierarchy reused) and merges into the same undo step
+    first = smoothed
+    with qtbot.waitSignal(window.job_committed, timeout=60000):
+        slider.setValue(slider.value() + 150)
+    second = np.array(doc.state.fields["smoothed"])
+    assert roughness(V, F, second) < roughness(V, F, first)  # larger alpha, smoother
+    assert window.undo_stack.count() == 2
+    window.undo_stack.undo()
+    assert "smoothed" not in doc.state.fields and "noisy input" in doc.state.fields
+
+
+def test_positions_signal_smooths_the_shape_and_is_undoable(window, dialogs, qtbot):
+    panel = open_panel(window)
+    panel.live_box.setChecked(False)
+    panel.signal_combo.setCurrentIndex(1)  # vertex positions
+    V0 = window.document.V.copy()
+    F = window.document.F
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    V1 = window.document.V
+    assert np.abs(V1 - V0).max() > 1e-4
+    np.testing.assert_allclose(window.viewport.points, V1)
+    # positions smoothing lowers the bending of the surface: Dirichlet energy of coordinates
+    assert roughness(V1, F, V1[:, 0]) <= roughness(V0, F, V0[:, 0])
+    window.undo_stack.undo()
+    np.testing.assert_array_equal(window.document.V, V0)
+
+
+def test_hierarchy_views_solver_comparison_and_flow(window, dialogs, qtbot):
+    panel = open_panel(window)
+    panel.live_box.setChecked(False)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.build_button.click()
+    mg = panel.hierarchy(window.document.F)
+    assert mg is not None and mg.n_levels >= 2
+    panel.view_combo.setCurrentIndex(2)  # the coarse level's mesh instead of the fine one
+    assert "overlay" in window.viewport.plotter.actors
+    assert not window.viewport.mesh_actor.GetVisibility()
+    window.panels["Cubic"].raise_()  # another panel: the document's mesh comes back
+    qtbot.waitUntil(lambda: window.viewport.mesh_actor.GetVisibility(), timeout=5000)
+    assert "overlay" not in window.viewport.plotter.actors
+    panel.raise_()
+    qtbot.waitUntil(lambda: "overlay" in window.viewport.plotter.actors, timeout=5000)
+    panel.view_combo.setCurrentIndex(3)  # fine triangles coloured by coarse triangle
+    assert "overlay" not in window.viewport.plotter.actors
+    assert window.viewport.mesh_actor.GetVisibility()
+    labels = np.array(window.viewport.poly.cell_data["coarse_triangle"])
+    assert len(labels) == len(window.document.F) and len(np.unique(labels)) > 5
+
+    panel.new_noise()
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.compare_button.click()
+    text = panel.times_label.text()
+    assert "multigrid" in text and "direct" in text and " ms" in text
+    assert window.undo_stack.count() == 1  # comparing changes nothing
+
+    V0 = window.document.V.copy()
+    F = window.document.F
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.mcf_step_button.click()
+    assert face_areas(window.document.V, F).sum() < face_areas(V0, F).sum()
+    assert panel.hierarchy(F) is mg  # the flow reused the hierarchy
+    window.undo_stack.undo()
+    np.testing.assert_array_equal(window.document.V, V0)
+
+
+def test_bad_field_file_is_refused_and_nothing_changes(window, dialogs, qtbot, tmp_path):
+    panel = open_panel(window)
+    bad = tmp_path / "values.txt"
+    bad.write_text("1\n2\n3\n")
+    dialogs.open_paths.append(str(bad))
+    assert not panel.load_field_dialog()
+    assert dialogs.errors and "has 3 values" in dialogs.errors[0][1]
+    assert window.undo_stack.count() == 0 and not window.document.state.fields
+    good = tmp_path / "good.npy"
+    np.save(good, np.linspace(0, 1, len(window.document.V)))
+    dialogs.open_paths.append(str(good))
+    assert panel.load_field_dialog()
+    assert "loaded field" in window.document.state.fields
+    panel.live_box.setChecked(False)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    out = tmp_path / "smoothed.csv"
+    dialogs.save_paths.append(str(out))
+    assert panel.save_field_dialog()
+    assert len(np.loadtxt(out)) == len(window.document.V)
