@@ -15,13 +15,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QGridLayout, QGroupBox, QHBoxLayout,
                                QLabel, QPushButton, QSpinBox, QVBoxLayout)
 
 from algorithms.errors import Stylize3DError
 from algorithms.mesh.fields import FIELD_EXTENSIONS, field_file_filter, read_field, write_field
 from algorithms.mesh.operators import face_areas
-from algorithms.multigrid import surface_multigrid
+from algorithms.multigrid import greedy_coloring, surface_multigrid
 from algorithms.multigrid.applications import DataSmoother, mean_curvature_flow
 from algorithms.multigrid.params import DataSmoothingParams
 from algorithms.smoothing import noisy_test_field, unit_area
@@ -470,9 +471,19 @@ class MultigridPanel(MethodPanel):
             vp.show_overlay(Vc, Fc)
         else:
             labels, _bary = mg.locate(level)  # the coarse triangle of each fine centroid
-            perm = np.random.default_rng(1).permutation(len(mg.levels[level][1]))
-            vp.show_field("coarse_triangle", perm[labels].astype(float) % 20, "tab20",
+            colors = self._coarse_face_colors(mg, level)
+            vp.show_field("coarse_triangle", colors[labels].astype(float), "tab20",
                           (0.0, 19.0), categorical=True)
+
+    @staticmethod
+    def _coarse_face_colors(mg, level: int) -> np.ndarray:
+        """Colours 0..19 of the coarse triangles, different for triangles sharing a vertex
+        (greedy colouring of the face graph, Alg. 10; wraps around only past 20 colours)."""
+        Fc = mg.levels[level][1]
+        nv = int(Fc.max()) + 1
+        inc = sp.csr_matrix((np.ones(Fc.size), (np.repeat(np.arange(len(Fc)), 3), Fc.ravel())),
+                            shape=(len(Fc), nv))
+        return greedy_coloring(inc @ inc.T) % 20
 
     def _on_visibility(self, visible: bool) -> None:
         if not visible:  # another panel takes over the viewport: the document's mesh comes back

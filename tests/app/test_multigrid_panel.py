@@ -101,6 +101,13 @@ def test_hierarchy_views_solver_comparison_and_flow(window, dialogs, qtbot):
     assert window.viewport.mesh_actor.GetVisibility()
     labels = np.array(window.viewport.poly.cell_data["coarse_triangle"])
     assert len(labels) == len(window.document.F) and len(np.unique(labels)) > 5
+    from algorithms.mesh.topology import edge_flaps
+
+    colors = panel._coarse_face_colors(mg, 1)  # neighbouring coarse triangles differ
+    EF = edge_flaps(mg.levels[1][1])[2]
+    EF = EF[(EF >= 0).all(axis=1)]
+    assert (colors[EF[:, 0]] != colors[EF[:, 1]]).all()
+
 
     panel.new_noise()
     with qtbot.waitSignal(window.runner.finished, timeout=120000):
