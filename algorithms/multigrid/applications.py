@@ -7,9 +7,9 @@ Data smoothing (Eq. 8.6, 8.16-8.17)
 
     * ``"dirichlet"``: ``Q = -L`` (positive semi-definite cotangent Laplacian),
     * ``"bilaplacian"``: ``Q = L M^-1 L`` (squared Laplacian, natural boundary conditions),
-    * ``"hessian"``: the squared Hessian energy of Stein et al. 2020 (curved Hessian). **Optional**:
-      it needs ``gpytoolbox.biharmonic_energy(..., bc="curved_hessian")``; without gpytoolbox it
-      raises :class:`ParameterError` (the energy itself is not re-implemented here).
+    * ``"hessian"``: the squared Hessian energy of Stein et al. 2020 (curved Hessian), from
+      ``gpytoolbox.biharmonic_energy(..., bc="curved_hessian")`` (a pinned dependency; should it
+      be missing, a :class:`ParameterError` says so). Not re-implemented here.
 
     :class:`DataSmoother` precomputes the Galerkin parts ``P^T Q P`` and ``P^T M P`` on every level
     (App. 8.9.5) **on one shared sparsity pattern**, so a new alpha costs one vector operation

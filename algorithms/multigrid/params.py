@@ -65,12 +65,14 @@ class DataSmoothingParams:
     energy: str = param(
         "dirichlet", label="Smoothness energy", choices=ENERGIES,
         tooltip="dirichlet: penalizes gradients. bilaplacian: penalizes curvature of the signal, "
-                "smoother results. hessian: squared Hessian (needs the optional gpytoolbox).")
+                "smoother results. hessian: squared Hessian, smooth like bilaplacian but without "
+                "flattening the signal at open borders.")
     alpha: float = param(
         1e-3, label="Smoothness", minimum=1e-12, maximum=0.999999, step=1e-3, decimals=12,
         log_scale=True,
-        tooltip="Between 0 and 1: larger values smooth more. The useful range depends on the "
-                "mesh size; try decades (1e-5, 1e-4, 1e-3).")
+        tooltip="Between 0 and 1: larger values smooth more. The app and the command line "
+                "apply it to the mesh scaled to unit area, so it does not depend on units: "
+                "about 1e-4 to 1e-2 for dirichlet, 1e-7 to 1e-4 for bilaplacian.")
     solver: str = param(
         "multigrid", label="Solver", choices=("multigrid", "direct"),
         tooltip="multigrid: reuses the hierarchy, fast when alpha changes. direct: a new "

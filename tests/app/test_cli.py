@@ -317,3 +317,13 @@ def test_cubic_with_multigrid_global_step_matches_direct(tmp_path):
     r = stylize3d("cubic", SAMPLES / "blob.obj", "-o", tmp_path / "x.obj", "--global-solver",
                   "multigrid", "--progressive-faces", "500")
     assert r.returncode == 5 and "choose one" in r.stderr
+
+
+def test_smooth_hessian_energy(tmp_path):
+    out = tmp_path / "h.npy"
+    r = stylize3d("smooth", SAMPLES / "blob.obj", "-o", out, "--signal", "noise", "--energy",
+                  "hessian", "--alpha", "1e-6", "--json")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["converged"] and d["rms_error_after"] < 0.5 * d["rms_error_before"]
+    assert np.load(out).shape == (3232,)

@@ -8,7 +8,7 @@ import pytest
 from algorithms.errors import ParameterError
 from algorithms.mesh.operators import face_areas
 from algorithms.multigrid import galerkin_matrices
-from algorithms.multigrid.applications import DataSmoother, mean_curvature_flow
+from algorithms.multigrid.applications import DataSmoother, mean_curvature_flow, smoothness_matrix
 from algorithms.steps import Step
 from tests.algorithms.multigrid.mg_helpers import KINDS, hierarchy
 
@@ -82,17 +82,20 @@ def test_data_smoother_scalar_and_errors():
         DataSmoother(V, F, solver="jacobi")
 
 
-def test_hessian_energy_is_optional():
-    V, F, mg = hierarchy("sphere", "closest_point")
-    try:
-        import gpytoolbox  # noqa: F401
-    except ImportError:
-        with pytest.raises(ParameterError, match="gpytoolbox"):
-            DataSmoother(V, F, energy="hessian", mg=mg)
-    else:  # pragma: no cover - depends on the environment
-        ds = DataSmoother(V, F, energy="hessian", mg=mg)
-        u, info = ds.smooth(V[:, 0], 0.01, accel="cg", maxiter=300)
-        assert info["converged"]
+def test_hessian_energy_multigrid_matches_direct():
+    """The squared Hessian energy (Stein et al. 2020, through gpytoolbox): symmetric, constants
+    in its null space, and V-cycle-preconditioned CG reaches the direct solution."""
+    V, F, mg = hierarchy("sphere", "intrinsic")
+    f = V[:, 0] + 0.05 * RNG.standard_normal(len(V))
+    Q = smoothness_matrix(V, F, "hessian")
+    assert abs(Q - Q.T).max() < 1e-10 * abs(Q).max()
+    assert np.abs(Q @ np.ones(len(V))).max() < 1e-8 * abs(Q).max()
+    assert f @ (Q @ f) > 0
+    u, info = DataSmoother(V, F, energy="hessian", mg=mg).smooth(f, 0.01, accel="cg",
+                                                                   rtol=1e-10, maxiter=300)
+    ud, _ = DataSmoother(V, F, energy="hessian", solver="direct").smooth(f, 0.01)
+    assert info["converged"]
+    assert np.abs(u - ud).max() < 1e-7 * np.abs(ud).max()
 
 
 @pytest.mark.parametrize("kind", KINDS)
