@@ -69,7 +69,6 @@ Choices written down here:
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from typing import Iterator
 
@@ -77,6 +76,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidMeshError, ParameterError
+from ..compiled import KernelModule
 from ..linalg import SPDSolver
 from ..mesh.topology import connected_components
 from ..params import param, validate_params
@@ -102,7 +102,7 @@ HANDLE_MODES = ("hard", "soft")
 CELL_KINDS = ("spokes_and_rims", "faces")
 
 
-_KERNELS_STATE: dict[str, object] = {"enabled": None, "module": None}
+_KERNELS = KernelModule("algorithms.deform.kernels")
 
 
 def compiled_kernels():
@@ -112,19 +112,7 @@ def compiled_kernels():
     ``0``, or after :func:`set_compiled_kernels` (False). Imported lazily on first use, so that
     importing this module does not import Numba.
     """
-    st = _KERNELS_STATE
-    if st["enabled"] is None:
-        st["enabled"] = os.environ.get("STYLIZE3D_NUMBA", "1").strip() not in ("0", "false", "no")
-    if not st["enabled"]:
-        return None
-    if st["module"] is None:
-        try:
-            from . import kernels
-        except ImportError:
-            st["enabled"] = False
-            return None
-        st["module"] = kernels
-    return st["module"]
+    return _KERNELS.get()
 
 
 def set_compiled_kernels(enabled: bool) -> bool:
@@ -132,9 +120,7 @@ def set_compiled_kernels(enabled: bool) -> bool:
 
     Switching on where Numba is missing leaves them off (:func:`compiled_kernels` returns None).
     """
-    previous = compiled_kernels() is not None
-    _KERNELS_STATE["enabled"] = bool(enabled)
-    return previous
+    return _KERNELS.set(enabled)
 
 
 def procrustes_rotations(S: np.ndarray) -> np.ndarray:

@@ -12,11 +12,12 @@ See :mod:`algorithms.mesh.selfparam` for the method; this module only holds the 
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 
-_ENABLED = os.environ.get("STYLIZE3D_NUMBA", "1").strip() not in ("0", "false", "no")
+from ..compiled import numba_wanted
+
+_ENABLED = numba_wanted()
 try:
     if not _ENABLED:
         raise ImportError

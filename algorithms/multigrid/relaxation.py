@@ -18,41 +18,28 @@ aspreconditioner` needs for CG. (The thesis only says "Gauss-Seidel"; the direct
 
 from __future__ import annotations
 
-import os
 
 import numpy as np
 import scipy.sparse as sp
+
+from ..compiled import KernelModule
 
 __all__ = ["compiled_kernels", "set_compiled_kernels", "greedy_coloring", "is_valid_coloring",
            "GaussSeidel", "MultiColorGaussSeidel", "make_smoother", "SMOOTHERS"]
 
 SMOOTHERS = ("gauss_seidel", "multicolor")
 
-_STATE: dict = {"enabled": None, "module": None}
+_KERNELS = KernelModule("algorithms.multigrid.kernels")
 
 
 def compiled_kernels():
     """The Numba kernels module, or None (Numba missing, ``STYLIZE3D_NUMBA=0``, or switched off)."""
-    st = _STATE
-    if st["enabled"] is None:
-        st["enabled"] = os.environ.get("STYLIZE3D_NUMBA", "1").strip() not in ("0", "false", "no")
-    if not st["enabled"]:
-        return None
-    if st["module"] is None:
-        try:
-            from . import kernels
-        except ImportError:
-            st["enabled"] = False
-            return None
-        st["module"] = kernels
-    return st["module"]
+    return _KERNELS.get()
 
 
 def set_compiled_kernels(enabled: bool) -> bool:
     """Switch the compiled kernels on or off; returns the previous setting."""
-    previous = compiled_kernels() is not None
-    _STATE["enabled"] = bool(enabled)
-    return previous
+    return _KERNELS.set(enabled)
 
 
 def _csr(A) -> sp.csr_matrix:
