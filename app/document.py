@@ -61,7 +61,9 @@ class MeshState:
         return MeshState(V, F, fl, sel)
 
     def with_positions(self, V) -> "MeshState":
-        V = _frozen(V, np.float64)
+        if not (isinstance(V, np.ndarray) and V.dtype == np.float64 and not V.flags.writeable
+                and V.base is None):  # positions of another state are shared, not copied
+            V = _frozen(V, np.float64)
         if V.shape != self.V.shape:
             raise ValueError(f"positions have shape {V.shape}, expected {self.V.shape}")
         return replace(self, V=V)

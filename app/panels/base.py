@@ -130,7 +130,8 @@ class MethodPanel(QDockWidget):
         # result was computed from (with the current painted fields and handles), so moving a
         # slider back and forth never compounds the effect. A click on Run starts from the mesh
         # as it is (run again to apply the method again).
-        if live and self._last is not None and state.V is self._last[1].V:
+        if (live and self._last is not None and state.V is self._last[1].V
+                and self._last[0].V is not self._last[1].V):  # (a field result keeps V)
             start = state.with_positions(self._last[0].V)
         self._pending_input = start
         self.plot.clear()

@@ -49,3 +49,21 @@ def test_remap_follows_vertex_map():
     new = doc.remapped(V[::-1], F, vmap)
     assert new.fields["lam"][vmap[1]] == 1.0 and new.fields["lam"][vmap[5]] == 5.0
     assert new.selection[vmap[2]] and not new.selection[vmap[1]]
+
+
+def test_with_positions_shares_frozen_positions_and_copies_others():
+    import numpy as np
+
+    from app.document import MeshState
+
+    V = np.random.default_rng(0).random((4, 3))
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    a = MeshState.make(V, F)
+    b = a.with_positions(V + 1)
+    assert not b.V.flags.writeable and b.V is not a.V
+    c = b.with_positions(a.V)  # another state's (read-only, owning) array: shared
+    assert c.V is a.V
+    W = V.copy()
+    d = a.with_positions(W)  # a caller's writable array: copied, later edits do not leak in
+    W[0] = 99
+    assert d.V[0, 0] != 99 and not d.V.flags.writeable

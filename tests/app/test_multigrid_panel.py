@@ -59,6 +59,7 @@ def test_alpha_slider_resolves_live_without_blocking_the_ui(window, dialogs, qtb
         slider.setValue(slider.value() + 150)
     second = np.array(doc.state.fields["smoothed"])
     assert roughness(V, F, second) < roughness(V, F, first)  # larger alpha, smoother
+    assert "from the last α" in panel.times_label.text()  # warm-started from the first solve
     assert window.undo_stack.count() == 2
     window.undo_stack.undo()
     assert "smoothed" not in doc.state.fields and "noisy input" in doc.state.fields
