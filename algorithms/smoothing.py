@@ -83,7 +83,8 @@ def _centroid_and_area(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, float]
     return C, total
 
 
-def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParams()) -> Iterator[Step]:
+def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParams(), *,
+                multigrid=None, multigrid_rtol: float = 1e-5) -> Iterator[Step]:
     """Yield one :class:`~algorithms.steps.Step` per smoothing step.
 
     Parameters
@@ -91,11 +92,16 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
     V : (n, 3) float64 vertex positions (not modified).
     F : (m, 3) int64 triangle indices.
     params : SmoothParams.
+    multigrid : a :class:`~algorithms.multigrid.SurfaceMultigrid` of this mesh, optional. Each
+        step's system is then solved by surface-multigrid V-cycles warm-started from the current
+        positions, on the same hierarchy for every step (thesis Fig. 8.23: the matrix of mean
+        curvature flow changes every step), instead of a new factorization.
+    multigrid_rtol : relative residual at which the V-cycles of one step stop.
 
     Yields
     ------
     Step with ``V`` (n, 3) the positions after each step and metrics ``bending_energy`` and
-    ``displacement``.
+    ``displacement`` (and ``cycles`` with ``multigrid``).
     """
     validate_params(params)
     V0 = np.array(V, dtype=np.float64, copy=True)
@@ -129,10 +135,18 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
         hn = (cotangent_laplacian(X, F) @ X)[used] / np.maximum(m[used], 1e-300)[:, None]
         return float((m[used] * np.einsum("ij,ij->i", hn, hn)).sum() / 4.0)
 
+    if multigrid is not None and multigrid.n_vertices != len(V0):
+        raise InvalidMeshError("The multigrid hierarchy was built on another mesh.")
+
+    def factor(A):
+        if multigrid is None:
+            return SPDSolver(sp.csc_matrix(A), fixed)
+        return multigrid.solver(A, fixed=fixed if fixed.size else None)
+
     solver = None
     if params.flow == "laplacian":
         M0 = mass_matrix(V0, F)
-        solver = SPDSolver(M0 + h * K0, fixed)
+        solver = factor(M0 + h * K0)
 
     X = V0.copy()
     for it in range(1, params.iterations + 1):
@@ -141,8 +155,14 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
         else:
             M = mass_matrix(X, F)
             K = K0 if params.flow == "cmcf" else -cotangent_laplacian(X, F)
-            solver = SPDSolver(sp.csc_matrix(M + h * K), fixed)
-        Xn = solver.solve(M @ X, X[fixed] if fixed.size else None)
+            solver = factor(M + h * K)
+        extra = {}
+        if multigrid is None:
+            Xn = solver.solve(M @ X, X[fixed] if fixed.size else None)
+        else:
+            Xn = solver.solve(M @ X, x0=X, rtol=multigrid_rtol, maxiter=200,
+                              fixed_values=X[fixed] if fixed.size else None)
+            extra["cycles"] = float(solver.last_info["cycles"])
         C, area = _centroid_and_area(Xn, F)
         if not np.isfinite(Xn).all() or area <= 0:
             raise InvalidMeshError(
@@ -158,7 +178,7 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
         X = Xn
         yield Step(iteration=it, total=params.iterations, V=X.copy(),
                    metrics={"bending_energy": bending(X),
-                            "displacement": disp},
+                            "displacement": disp, **extra},
                    message=f"step {it}/{params.iterations}")
 
 

@@ -247,12 +247,7 @@ class SelfParameterization:
     def prolongation(self) -> sp.csr_matrix:
         """(n, m) CSR: row v holds the barycentric weights of fine vertex v on the coarse
         vertices of its coarse face (exactly 3 stored entries per row; rows sum to 1)."""
-        n = len(self.face)
-        indptr = np.arange(0, 3 * n + 1, 3, dtype=np.int64)
-        P = sp.csr_matrix((self.bary.reshape(-1).copy(), self.F_coarse[self.face].reshape(-1),
-                           indptr), shape=(n, len(self.V_coarse)))
-        P.sort_indices()
-        return P
+        return barycentric_prolongation(self.face, self.bary, self.F_coarse, len(self.V_coarse))
 
     def compose(self, coarser: "SelfParameterization") -> "SelfParameterization":
         """The map fine -> coarser.coarse, where ``coarser`` maps this coarse mesh further."""
@@ -275,6 +270,20 @@ class SelfParameterization:
 
 
 # ------------------------------------------------------------------------------ building blocks
+def barycentric_prolongation(face, bary, F_coarse, n_coarse: int) -> sp.csr_matrix:
+    """The (n, n_coarse) CSR matrix of points given as (coarse face, barycentric coordinates):
+    row i holds ``bary[i]`` on the three corners of ``F_coarse[face[i]]`` (exactly 3 stored
+    entries per row, in column order; rows sum to 1 when the coordinates do)."""
+    face = np.asarray(face, dtype=np.int64)
+    n = len(face)
+    indptr = np.arange(0, 3 * n + 1, 3, dtype=np.int64)
+    P = sp.csr_matrix((np.asarray(bary, dtype=np.float64).reshape(-1).copy(),
+                       np.asarray(F_coarse, dtype=np.int64)[face].reshape(-1), indptr),
+                      shape=(n, int(n_coarse)))
+    P.sort_indices()
+    return P
+
+
 def _corner_table(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """FF[f, c]: face across edge (F[f,c], F[f,c+1]) or -1; FFi: that edge's index there.
 

@@ -6,7 +6,8 @@ the Galerkin matrices of any matrix on that mesh and returns a :class:`Multigrid
 change of alpha, mean curvature flow) are in :mod:`algorithms.multigrid.applications`.
 """
 
-from .hierarchy import (PROLONGATIONS, SurfaceMultigrid, barycentric_prolongation,
+from ..mesh.selfparam import barycentric_prolongation
+from .hierarchy import (PROLONGATIONS, SurfaceMultigrid,
                         closest_point_prolongation, surface_multigrid)
 from .relaxation import SMOOTHERS, greedy_coloring, is_valid_coloring
 from .solver import Cycle, MultigridSolver, galerkin_matrices, reduce_dirichlet

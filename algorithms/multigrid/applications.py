@@ -27,30 +27,26 @@ Data smoothing (Eq. 8.6, 8.16-8.17)
     (with ``accel="cg"`` advised).
 
 Mean curvature flow (Fig. 8.23)
-    Conformalized mean curvature flow (Kazhdan et al. 2012): ``(M_t - dt L_0) V_{t+1} = M_t V_t``
-    with the stiffness ``L_0`` of the input and the mass matrix ``M_t`` of the current mesh. The
-    system changes every step; the hierarchy is built once (on the input) and reused, and
-    ``P^T L_0 P`` is computed once too, so each step only forms ``P^T M_t P`` (diagonal ``M_t``).
+    Not here: the one implementation of the smoothing flows is :func:`algorithms.smoothing.
+    smooth_iter`; pass it ``multigrid=`` (a hierarchy of the input, reused by every step while
+    the system changes) to solve each step with V-cycles.
 """
 
 from __future__ import annotations
 
 import time
-from typing import Iterator
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..errors import ParameterError
-from ..linalg import SPDSolver, cholmod_available
-from ..mesh.operators import cotangent_laplacian, face_areas, mass_matrix
-from ..steps import Step
+from ..linalg import SPDSolver
+from ..mesh.operators import cotangent_laplacian, cotangent_laplacian_psd, mass_matrix
 from .hierarchy import SurfaceMultigrid, surface_multigrid
 from .relaxation import greedy_coloring
 from .solver import MultigridSolver, pcg_iterate
 
-__all__ = ["ENERGIES", "smoothness_matrix", "DataSmoother", "mean_curvature_flow",
-           "AlignedPair"]
+__all__ = ["ENERGIES", "smoothness_matrix", "DataSmoother", "AlignedPair"]
 
 ENERGIES = ("dirichlet", "bilaplacian", "hessian")
 
@@ -58,7 +54,7 @@ ENERGIES = ("dirichlet", "bilaplacian", "hessian")
 def smoothness_matrix(V, F, energy: str = "dirichlet") -> sp.csr_matrix:
     """The positive semi-definite matrix ``Q`` of a smoothness energy (see the module docstring)."""
     if energy == "dirichlet":
-        return (-cotangent_laplacian(V, F)).tocsr()
+        return cotangent_laplacian_psd(V, F)
     if energy == "bilaplacian":
         L = cotangent_laplacian(V, F)
         m = mass_matrix(V, F).diagonal()
@@ -145,7 +141,7 @@ class DataSmoother:
                                      f"({self.mg.n_vertices:,} vertices, this one has "
                                      f"{len(self.V):,}).")
             Qh, Mh = self.Q, self.M
-            Lh = self.L = (-cotangent_laplacian(self.V, self.F)).tocsr()
+            Lh = self.L = cotangent_laplacian_psd(self.V, self.F)
             self.pairs.append(AlignedPair(Qh, Mh))
             bilap = energy == "bilaplacian"
             if bilap:
@@ -199,14 +195,12 @@ class DataSmoother:
         t0 = time.perf_counter()
         rhs = (1.0 - alpha) * (self.M @ f)
         if self.solver_kind == "direct":
-            A = self.system(alpha)
-            backend = "cholmod" if cholmod_available() else "superlu"
-            s = SPDSolver(A, backend=backend)
+            s = SPDSolver(self.system(alpha))  # CHOLMOD when installed, else SuperLU
             t1 = time.perf_counter()
             u = s.solve(rhs)
             t2 = time.perf_counter()
             return u, dict(seconds=t2 - t0, setup_seconds=t1 - t0, solve_seconds=t2 - t1,
-                           cycles=0, residuals=[], backend=backend)
+                           cycles=0, residuals=[], backend=s.backend)
         if self.energy == "bilaplacian" and preconditioner == "factored":
             return self._smooth_factored(f, alpha, rhs, rtol, maxiter, x0, callback, t0)
         if preconditioner not in ("galerkin", "factored"):
@@ -271,64 +265,3 @@ class DataSmoother:
                     vcycles=2 * k + 1, residuals=hist, converged=converged, method="factored")
         self.last_solver = S
         return X.reshape(shape), info
-
-
-def mean_curvature_flow(V, F, dt: float, steps: int, *, mg: SurfaceMultigrid | None = None,
-                        solver: str = "multigrid", rtol: float = 1e-5,
-                        maxiter: int = 100) -> Iterator[Step]:
-    """Conformalized mean curvature flow; yields one :class:`Step` per time step.
-
-    Parameters
-    ----------
-    V : (n, 3), F : (m, 3) the input mesh.
-    dt : time step, in the mesh's units (the flow ``(M - dt L) V' = M V`` shrinks features of
-        size about ``sqrt(dt)`` per step).
-    steps : number of steps.
-    mg : hierarchy of the input mesh (built when omitted and ``solver="multigrid"``).
-    solver : "multigrid" (hierarchy and ``P^T L P`` reused, warm start from the current
-        positions) or "direct" (a new factorization every step).
-    rtol, maxiter : V-cycle stopping rule per step.
-
-    Yields
-    ------
-    Step with ``V`` the new positions and metrics ``area``, ``solve_seconds``, ``cycles``.
-    """
-    if solver not in ("multigrid", "direct"):
-        raise ParameterError(f"Unknown solver {solver!r}; choose 'multigrid' or 'direct'.")
-    if not dt > 0:
-        raise ParameterError("The time step dt must be positive.")
-    if int(steps) < 1:
-        raise ParameterError("The number of steps must be at least 1.")
-    V = np.array(V, dtype=np.float64)
-    F = np.ascontiguousarray(F, dtype=np.int64)
-    K = (-cotangent_laplacian(V, F)).tocsr() * float(dt)  # dt * (-L0), PSD
-    Ks = [K]
-    Ps = []
-    if solver == "multigrid":
-        if mg is None:
-            mg = surface_multigrid(V, F)
-        Ps = [sp.csr_matrix(P) for P in mg.prolongations]
-        for P in Ps:
-            Ks.append((P.T @ (Ks[-1] @ P)).tocsr())
-    for it in range(1, int(steps) + 1):
-        t = time.perf_counter()
-        M = mass_matrix(V, F).tocsr()
-        rhs = M @ V
-        cycles = 0
-        if solver == "direct":
-            backend = "cholmod" if cholmod_available() else "superlu"
-            V = SPDSolver((M + K).tocsr(), backend=backend).solve(rhs)
-        else:
-            mats = [(M + K).tocsr()]
-            Mh = M
-            for P, Kh in zip(Ps, Ks[1:]):
-                Mh = (P.T @ (Mh @ P)).tocsr()
-                mats.append((Mh + Kh).tocsr())
-            s = MultigridSolver(mats, Ps)
-            V = s.solve(rhs, x0=V, rtol=rtol, maxiter=maxiter)
-            cycles = s.last_info["cycles"]
-        secs = time.perf_counter() - t
-        area = float(face_areas(V, F).sum())
-        yield Step(iteration=it, total=int(steps), V=V.copy(),
-                   metrics=dict(area=area, solve_seconds=secs, cycles=float(cycles)),
-                   message=f"step {it}/{steps}: area {area:.4g}")

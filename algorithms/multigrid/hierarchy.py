@@ -32,36 +32,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidMeshError, ParameterError
+from ..mesh.selfparam import barycentric_prolongation, self_parameterize
 
 __all__ = ["SurfaceMultigrid", "surface_multigrid", "barycentric_prolongation",
            "closest_point_prolongation", "PROLONGATIONS"]
 
 PROLONGATIONS = ("intrinsic", "closest_point")
-
-
-def barycentric_prolongation(face: np.ndarray, bary: np.ndarray, F_coarse: np.ndarray,
-                             n_coarse: int) -> sp.csr_matrix:
-    """Prolongation from per-fine-vertex (coarse face, barycentric coordinates).
-
-    Parameters
-    ----------
-    face : (n,) int, the coarse triangle of each fine vertex.
-    bary : (n, 3) float, its barycentric coordinates in that triangle (rows sum to 1).
-    F_coarse : (mc, 3) int coarse triangles.
-    n_coarse : number of coarse vertices.
-
-    Returns
-    -------
-    (n, n_coarse) csr_matrix, 3 stored entries per row (duplicates of a degenerate triangle summed).
-    """
-    face = np.asarray(face, dtype=np.int64)
-    bary = np.asarray(bary, dtype=np.float64)
-    n = len(face)
-    cols = np.asarray(F_coarse, dtype=np.int64)[face].ravel()
-    rows = np.repeat(np.arange(n), 3)
-    P = sp.csr_matrix((bary.ravel(), (rows, cols)), shape=(n, n_coarse))
-    P.sum_duplicates()
-    return P
 
 
 def _closest_barycentric(Q: np.ndarray, V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -71,19 +47,9 @@ def _closest_barycentric(Q: np.ndarray, V: np.ndarray, F: np.ndarray) -> tuple[n
     _, I, C = igl.point_mesh_squared_distance(np.ascontiguousarray(Q), np.ascontiguousarray(V),
                                               np.ascontiguousarray(F, dtype=np.int64))
     I = np.asarray(I, dtype=np.int64)
-    a, b, c = V[F[I, 0]], V[F[I, 1]], V[F[I, 2]]
-    v0, v1, v2 = b - a, c - a, C - a
-    d00 = np.einsum("ij,ij->i", v0, v0)
-    d01 = np.einsum("ij,ij->i", v0, v1)
-    d11 = np.einsum("ij,ij->i", v1, v1)
-    d20 = np.einsum("ij,ij->i", v2, v0)
-    d21 = np.einsum("ij,ij->i", v2, v1)
-    den = d00 * d11 - d01 * d01
-    ok = den > 0
-    den = np.where(ok, den, 1.0)
-    w1 = np.where(ok, (d11 * d20 - d01 * d21) / den, 1.0 / 3.0)
-    w2 = np.where(ok, (d00 * d21 - d01 * d20) / den, 1.0 / 3.0)
-    B = np.column_stack([1.0 - w1 - w2, w1, w2])
+    B = igl.barycentric_coordinates(np.ascontiguousarray(C, dtype=np.float64),
+                                    *(np.ascontiguousarray(V[F[I, k]]) for k in range(3)))
+    B = np.where(np.isfinite(B), B, 1.0 / 3.0)  # degenerate coarse triangles: the centroid
     B = np.clip(B, 0.0, 1.0)
     B /= B.sum(axis=1, keepdims=True)
     return I, B
@@ -195,17 +161,6 @@ class SurfaceMultigrid:
                 f"{self.report.get('prolongation', '?')}, built in {self.build_seconds:.2f} s)")
 
 
-def _self_parameterize():
-    try:
-        from ..mesh.selfparam import self_parameterize
-    except ImportError as exc:  # pragma: no cover - depends on the build state
-        raise ParameterError(
-            "The intrinsic prolongation needs the successive self-parameterization "
-            "(algorithms.mesh.selfparam), which is not available in this installation. "
-            "Use prolongation='closest_point' instead.") from exc
-    return self_parameterize
-
-
 def surface_multigrid(V, F, *, ratio: float = 0.25, min_vertices: int = 500,
                       strategy: str = "midpoint", prolongation: str = "intrinsic",
                       progress: Callable[[float, str], None] | None = None) -> SurfaceMultigrid:
@@ -244,7 +199,6 @@ def surface_multigrid(V, F, *, ratio: float = 0.25, min_vertices: int = 500,
     if F.min() < 0 or F.max() >= len(V):
         raise InvalidMeshError("Some faces refer to vertices that do not exist. Validate the "
                                "mesh first.")
-    sp_fn = _self_parameterize() if prolongation == "intrinsic" else None
 
     levels = [(V, F)]
     Ps: list = []
@@ -272,7 +226,7 @@ def surface_multigrid(V, F, *, ratio: float = 0.25, min_vertices: int = 500,
                 def sub(frac, _done=done, _total=total):
                     progress(min(1.0, (_done + float(frac)) / _total),
                              f"multigrid level {_done + 1}: self-parameterization")
-            res = sp_fn(Vh, Fh, target, strategy=strategy, progress=sub)
+            res = self_parameterize(Vh, Fh, target, strategy=strategy, progress=sub)
             Vc = np.ascontiguousarray(res.V_coarse, dtype=np.float64)
             Fc = np.ascontiguousarray(res.F_coarse, dtype=np.int64)
             P = sp.csr_matrix(res.prolongation(), dtype=np.float64)

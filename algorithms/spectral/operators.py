@@ -8,7 +8,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import ParameterError
-from ..mesh.operators import cotangent_laplacian, mass_matrix
+from ..mesh.operators import cotangent_laplacian_psd, mass_matrix
 
 __all__ = ["OPERATORS", "build_operator", "cotangent_operator", "intrinsic_delaunay_operator",
            "anisotropic_operator", "tensor_laplacian", "graph_operator", "point_cloud_operator"]
@@ -24,7 +24,7 @@ def _VF(V, F):
 
 def cotangent_operator(V, F):
     V, F = _VF(V, F)
-    return sp.csr_matrix(-cotangent_laplacian(V, F)), sp.csr_matrix(mass_matrix(V, F))
+    return cotangent_laplacian_psd(V, F), sp.csr_matrix(mass_matrix(V, F))
 
 
 def intrinsic_delaunay_operator(V, F):

@@ -21,11 +21,10 @@ from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QGridLayout, QGroupBox
 
 from algorithms.errors import Stylize3DError
 from algorithms.mesh.fields import FIELD_EXTENSIONS, field_file_filter, read_field, write_field
-from algorithms.mesh.operators import face_areas
 from algorithms.multigrid import greedy_coloring, surface_multigrid
-from algorithms.multigrid.applications import DataSmoother, mean_curvature_flow
+from algorithms.multigrid.applications import DataSmoother
 from algorithms.multigrid.params import DataSmoothingParams
-from algorithms.smoothing import noisy_test_field, unit_area
+from algorithms.smoothing import SmoothParams, noisy_test_field, smooth_iter, unit_area
 from algorithms.steps import Step, with_progress
 from app import dialogs
 from app.commands import StateCommand
@@ -440,12 +439,14 @@ class MultigridPanel(MethodPanel):
             return
         state = doc.state
         V, F = state.V, state.F
-        dt = self.dt_spin.value() * float(face_areas(V, F).sum())
+        # the one implementation of the flows, its linear solves by V-cycles on the hierarchy
+        params = SmoothParams(flow="cmcf", step_size=self.dt_spin.value(),
+                              iterations=int(steps_count))
         holder = self._holder = {}
 
         def steps():
             mg = yield from self._hierarchy_steps(V, F, holder)
-            yield from mean_curvature_flow(V, F, dt, int(steps_count), mg=mg)
+            yield from smooth_iter(V, F, params, multigrid=mg)
 
         self.plot.clear()
         self.status_label.setText("Mean curvature flow…")

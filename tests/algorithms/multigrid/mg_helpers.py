@@ -2,26 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
-
 import numpy as np
 from algorithms.mesh.primitives import icosphere
 from algorithms.multigrid import surface_multigrid
 
 
-def prolongation_kinds() -> list[str]:
-    """closest_point always; intrinsic when the self-parameterization module exists."""
-    kinds = ["closest_point"]
-    try:
-        ok = importlib.util.find_spec("algorithms.mesh.selfparam") is not None
-    except Exception:
-        ok = False
-    if ok:
-        kinds.append("intrinsic")
-    return kinds
-
-
-KINDS = prolongation_kinds()
+# both prolongations, always: the intrinsic one (self-parameterization) is the method of the
+# thesis, the closest-point one its naive baseline
+KINDS = ["closest_point", "intrinsic"]
 
 
 def sphere_cap(subdivisions: int = 4, z_cut: float = 0.5):

@@ -6,10 +6,8 @@ import numpy as np
 import pytest
 
 from algorithms.errors import ParameterError
-from algorithms.mesh.operators import face_areas
 from algorithms.multigrid import galerkin_matrices
-from algorithms.multigrid.applications import DataSmoother, mean_curvature_flow, smoothness_matrix
-from algorithms.steps import Step
+from algorithms.multigrid.applications import DataSmoother, smoothness_matrix
 from tests.algorithms.multigrid.mg_helpers import KINDS, hierarchy
 
 RNG = np.random.default_rng(11)
@@ -96,24 +94,6 @@ def test_hessian_energy_multigrid_matches_direct():
     ud, _ = DataSmoother(V, F, energy="hessian", solver="direct").smooth(f, 0.01)
     assert info["converged"]
     assert np.abs(u - ud).max() < 1e-7 * np.abs(ud).max()
-
-
-@pytest.mark.parametrize("kind", KINDS)
-def test_mean_curvature_flow_multigrid_vs_direct(kind):
-    V, F, mg = hierarchy("sphere", kind)
-    V = V * np.array([1.0, 0.7, 0.5]) + 0.01 * RNG.standard_normal(V.shape)  # noisy ellipsoid
-    dt, steps = 1e-2, 4
-    a0 = face_areas(V, F).sum()
-    mgs = list(mean_curvature_flow(V, F, dt, steps, mg=mg, rtol=1e-8))
-    dirs = list(mean_curvature_flow(V, F, dt, steps, solver="direct"))
-    assert all(isinstance(s, Step) for s in mgs) and [s.iteration for s in mgs] == [1, 2, 3, 4]
-    areas = [a0] + [s.metrics["area"] for s in mgs]
-    assert all(areas[i + 1] < areas[i] for i in range(steps))
-    for a, b in zip(mgs, dirs):
-        assert np.abs(a.V - b.V).max() < 1e-5
-        assert a.metrics["cycles"] >= 1
-    with pytest.raises(ParameterError):
-        next(mean_curvature_flow(V, F, -1.0, 2, mg=mg))
 
 
 def test_params_describe_and_validate():
