@@ -66,7 +66,7 @@ def _read_valid(path: str, *, clean: bool = False, quiet: bool = False):
         data = MeshData(res.V, res.F, list(data.notes) + list(res.actions))
         report = validate_mesh(data.V, data.F, notes=data.notes)
     if report.errors or report.needs_cleaning:
-        hint = ("" if clean else
+        hint = ("" if clean or not report.needs_cleaning else
                 f"\nAdd --clean to fix what can be fixed first, or run: "
                 f"stylize3d clean {path} -o cleaned{Path(path).suffix}")
         raise InvalidMeshError(f"{path} cannot be processed as it is:\n{report.summary()}{hint}")
@@ -109,7 +109,7 @@ def cmd_clean(args: argparse.Namespace) -> int:
 
     _check_output(args.output, args.overwrite, args.mesh)
     data = read_mesh(args.mesh)
-    result = clean_mesh(data.V, data.F)
+    result = clean_mesh(data.V, data.F, remove_invalid_faces=args.remove_invalid_faces)
     after = validate_mesh(result.V, result.F)
     if after.errors:
         raise InvalidMeshError("Clean could not fix everything, so nothing was written:\n"
@@ -291,6 +291,35 @@ def cmd_multigrid_info(args: argparse.Namespace) -> int:
     return 0 if all_ok else 1
 
 
+def _progressive_choice(args: argparse.Namespace, n_faces: int, command: str, *,
+                        auto_ok: bool = True):
+    """ProgressiveParams when the command should run through affine progressive meshes, else None.
+
+    ``--progressive-faces M`` asks for it; above ``AUTO_PROGRESSIVE_FACES`` triangles it is on by
+    default (as in the app), said on stderr, unless ``--no-progressive``.
+    """
+    from algorithms.deform.progressive import AUTO_PROGRESSIVE_FACES, ProgressiveParams
+
+    if args.progressive_faces is not None and args.no_progressive:
+        raise ParameterError("--progressive-faces and --no-progressive contradict each other; "
+                             "choose one.")
+    faces = args.progressive_faces
+    if faces is None:
+        if args.no_progressive or not auto_ok or n_faces <= AUTO_PROGRESSIVE_FACES:
+            return None
+        faces = min(ProgressiveParams().target_faces, n_faces // 2)
+        if not args.quiet:
+            _say(f"stylize3d {command}: this mesh has {n_faces:,} triangles (more than "
+                 f"{AUTO_PROGRESSIVE_FACES:,}), so it is stylized through affine progressive "
+                 f"meshes: on a {faces:,}-triangle copy, then the details are put back. Pass "
+                 f"--no-progressive to work on every triangle directly (slower), or "
+                 f"--progressive-faces M to choose the copy's size.")
+    if faces >= n_faces:
+        raise ParameterError(f"--progressive-faces must be below the mesh's own triangle count "
+                             f"({n_faces:,}).")
+    return params_from_dict(ProgressiveParams, {"target_faces": faces, "preview_every": 0})
+
+
 def cmd_cubic(args: argparse.Namespace) -> int:
     from algorithms.deform.cubic import CubicParams, cubic_stylization_iter, mean_l1_of_normals
     from algorithms.mesh import write_mesh
@@ -309,11 +338,11 @@ def cmd_cubic(args: argparse.Namespace) -> int:
     if args.progressive_faces is not None and args.global_solver == "multigrid":
         raise ParameterError("--progressive-faces and --global-solver multigrid are two ways to "
                              "handle big meshes; choose one.")
-    if args.progressive_faces is not None:
-        from algorithms.deform.progressive import ProgressiveParams, progressive_cubic_iter
+    prog = _progressive_choice(args, len(data.F), "cubic",
+                               auto_ok=args.global_solver != "multigrid")
+    if prog is not None:
+        from algorithms.deform.progressive import progressive_cubic_iter
 
-        prog = params_from_dict(ProgressiveParams, {"target_faces": args.progressive_faces,
-                                                    "preview_every": 0})
         steps = progressive_cubic_iter(data.V, data.F, params, prog)
     else:
         steps = cubic_stylization_iter(data.V, data.F, params,
@@ -330,7 +359,8 @@ def cmd_cubic(args: argparse.Namespace) -> int:
         _print_json({"input": args.mesh, "output": args.output, "params": params_to_dict(params),
                      "iterations": last.iteration, "seconds": seconds,
                      "final_relative_displacement": last.metrics.get("displacement"),
-                     "progressive_faces": args.progressive_faces,
+                     "progressive_faces": None if prog is None else prog.target_faces,
+                     "progressive_auto": prog is not None and args.progressive_faces is None,
                      "l1_normals_before": l1_before, "l1_normals_after": l1_after})
     else:
         print(f"Stylized {args.mesh} in {seconds:.2f} s ({last.iteration} iterations); mean L1 "
@@ -356,8 +386,15 @@ def cmd_analogy(args: argparse.Namespace) -> int:
     before = angles(data.V)
     t0 = time.perf_counter()
     last = None
-    for last in ShapeAnalogy(data.V, data.F, target_map).steps(params):
-        if not args.json and not args.quiet:
+    prog = _progressive_choice(args, len(data.F), "analogy")
+    if prog is not None:
+        from algorithms.deform.progressive import progressive_analogy_iter
+
+        steps = progressive_analogy_iter(data.V, data.F, target_map, params, prog)
+    else:
+        steps = ShapeAnalogy(data.V, data.F, target_map).steps(params)
+    for last in steps:
+        if not args.json and not args.quiet and "mean_angle_to_targets" in last.metrics:
             print(f"  iteration {last.iteration}: mean angle to targets "
                   f"{last.metrics['mean_angle_to_targets']:.2f}°", file=sys.stderr)
     seconds = time.perf_counter() - t0
@@ -367,6 +404,8 @@ def cmd_analogy(args: argparse.Namespace) -> int:
         _print_json({"input": args.mesh, "output": args.output, "style": args.style,
                      "style_map": what, "params": params_to_dict(params),
                      "iterations": last.iteration, "seconds": seconds,
+                     "progressive_faces": None if prog is None else prog.target_faces,
+                     "progressive_auto": prog is not None and args.progressive_faces is None,
                      "mean_angle_before": before[0], "max_angle_before": before[1],
                      "mean_angle_after": after[0], "max_angle_after": after[1]})
     else:
@@ -472,6 +511,17 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
 
 
 # ----------------------------------------------------------------------------- parser
+def _add_progressive_arguments(s: argparse.ArgumentParser) -> None:
+    from algorithms.deform.progressive import AUTO_PROGRESSIVE_FACES
+
+    s.add_argument("--progressive-faces", type=int, metavar="M",
+                   help="affine progressive meshes (thesis Alg. 4): stylize a decimated copy "
+                        "with M triangles, then put the details back; for big meshes. On by "
+                        f"default (M = 20,000) above {AUTO_PROGRESSIVE_FACES:,} triangles")
+    s.add_argument("--no-progressive", action="store_true",
+                   help="never use progressive meshes, even for big meshes (slower)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from algorithms.smoothing import SmoothParams
 
@@ -494,6 +544,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, help="where to write the cleaned mesh")
     s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
     s.add_argument("--json", action="store_true")
+    s.add_argument("--remove-invalid-faces", action="store_true",
+                   help="also delete triangles that use missing vertices or NaN coordinates "
+                        "(a damaged file; this opens holes, so it is not done by default)")
     s.set_defaults(func=cmd_clean)
 
     s = sub.add_parser("smooth", help="implicit Laplacian / mean-curvature smoothing of the shape")
@@ -563,9 +616,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="clean the mesh first when it has fixable problems (says what it fixed)")
     s.add_argument("--lambda-xyz", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="per-axis λ factors (turns on per-axis λ): λ_x = λ·X, ...")
-    s.add_argument("--progressive-faces", type=int, metavar="M",
-                   help="affine progressive meshes (thesis Alg. 4): stylize a decimated copy "
-                        "with M triangles, then put the details back; for big meshes")
+    _add_progressive_arguments(s)
     s.add_argument("--global-solver", choices=("direct", "multigrid"), default="direct",
                    help="solver of the global step: direct (prefactored sparse Cholesky/LU) or "
                         "multigrid (surface multigrid V-cycles, warm-started; for very large "
@@ -592,6 +643,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quiet", action="store_true", help="no per-iteration progress")
     s.add_argument("--clean", action="store_true",
                    help="clean the mesh first when it has fixable problems (says what it fixed)")
+    _add_progressive_arguments(s)
     add_params_arguments(s, AnalogyParams)
     s.set_defaults(func=cmd_analogy)
 
@@ -627,13 +679,67 @@ def main(argv: list[str]) -> int:
         parser.print_help()
         return 0
     try:
-        return int(args.func(args))
+        code = int(args.func(args))
+        sys.stdout.flush()  # a closed pipe (`stylize3d info MESH | head`) shows up here
+        return code
     except Stylize3DError as e:
-        print(f"stylize3d {args.command}: {e}", file=sys.stderr)
+        _say(f"stylize3d {args.command}: {e}")
         return e.exit_code
     except KeyboardInterrupt:
-        print("stylize3d: interrupted; nothing was written.", file=sys.stderr)
+        _say("stylize3d: interrupted; nothing was written.")
         return 130
+    except BrokenPipeError:
+        # the reader of our output went away (e.g. `| head`): not an error of ours, and Python
+        # must not print a second traceback when it flushes stdout at exit
+        _silence_stdout()
+        return 0
+    except MemoryError:
+        _say(f"stylize3d {args.command}: this machine ran out of memory; nothing was written. "
+             "Try a smaller mesh (decimate it first) or the options for big meshes "
+             "(e.g. --progressive-faces for cubic, --solver multigrid for smooth).")
+        return INTERNAL_ERROR_EXIT
+    except Exception as e:  # a defect of ours: say so plainly, never a bare traceback
+        import traceback
+
+        log = _write_crash_log(traceback.format_exc())
+        _say(f"stylize3d {args.command}: an unexpected error stopped the command "
+             f"({type(e).__name__}: {e}); nothing was written. This is a bug in Stylize3D"
+             + (f"; the details are in {log}." if log else "."))
+        return INTERNAL_ERROR_EXIT
+
+
+#: exit status of an unexpected failure (a defect, or the machine ran out of memory)
+INTERNAL_ERROR_EXIT = 70
+
+
+def _say(text: str) -> None:
+    """Print a message to stderr; a closed stderr is not worth a traceback."""
+    try:
+        print(text, file=sys.stderr)
+        sys.stderr.flush()
+    except (BrokenPipeError, OSError, ValueError):
+        pass
+
+
+def _silence_stdout() -> None:
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def _write_crash_log(text: str) -> str | None:
+    """Keep a traceback for the bug report in a temporary file (never on the user's screen)."""
+    import tempfile
+
+    try:
+        fd, path = tempfile.mkstemp(prefix="stylize3d-crash-", suffix=".txt")
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        return path
+    except OSError:
+        return None
 
 
 # ----------------------------------------------------------------------------- GUI

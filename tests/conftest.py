@@ -1,4 +1,9 @@
-"""Shared fixtures: paths to the shared meshes, bad input files, and the GUI harness.
+"""Shared fixtures: paths to the test meshes, bad input files, and the GUI harness.
+
+Real meshes: the small ones live in ``tests/data/`` (with their licence lines in
+``tests/data/SOURCES.md``), so a fresh clone runs the whole suite. The big ones (koala, igea,
+stanford-bunny) stay outside the repository; the few tests that use them look in
+``$STYLIZE3D_MESHES`` or ``../shared/meshes`` and skip, saying so, where they are absent.
 
 GUI tests need an X display for the VTK viewport. ``scripts/setup.sh test`` runs pytest with the
 pytest-xvfb plugin, which starts a virtual X server; where none can be started the viewport tests
@@ -21,7 +26,8 @@ if os.environ.get("CI"):
     settings.load_profile("ci")
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_MESHES = ROOT.parent / "shared" / "meshes"
+TEST_DATA = ROOT / "tests" / "data"
+SHARED_MESHES = Path(os.environ.get("STYLIZE3D_MESHES", ROOT.parent / "shared" / "meshes"))
 SAMPLES = ROOT / "resources" / "samples"
 
 
@@ -32,11 +38,20 @@ def pytest_configure(config):
         os.environ["QT_QPA_PLATFORM"] = "offscreen"
 
 
+def find_mesh(name: str) -> Path | None:
+    """Path of a real test mesh: ``tests/data/`` first, then the big-mesh folder; None if absent."""
+    for folder in (TEST_DATA, SHARED_MESHES):
+        p = folder / name
+        if p.exists():
+            return p
+    return None
+
+
 def shared_mesh(name: str) -> Path:
-    """Path of a mesh in ../shared/meshes, skipping the calling test when it is not there."""
-    p = SHARED_MESHES / name
-    if not p.exists():
-        pytest.skip(f"shared mesh {name} not found in {SHARED_MESHES}")
+    """Path of a real test mesh, skipping the calling test when it is not there (big meshes only)."""
+    p = find_mesh(name)
+    if p is None:
+        pytest.skip(f"big mesh {name} is not in the repository and not found in {SHARED_MESHES}")
     return p
 
 

@@ -125,9 +125,12 @@ from .arap import procrustes_rotations
 from .cubic import CubicParams, CubicStylizer
 
 __all__ = [
+    "AUTO_PROGRESSIVE_FACES",
     "ProgressiveParams",
     "AffineSplits",
+    "AffineProgressiveMesh",
     "ProgressiveCubic",
+    "progressive_analogy_iter",
     "progressive_cubic_iter",
     "progressive_cubic",
 ]
@@ -469,12 +472,17 @@ def _constraint_vertices(n: int, fixed, handles, coord_constraints):
     return ids
 
 
-class ProgressiveCubic:
-    """Cubic stylization through an affine progressive mesh (thesis Alg. 4), precomputed once.
+#: Above this many triangles the app and the CLI stylize through affine progressive meshes unless
+#: told not to (a direct cubic iteration at 300k triangles costs ~1 s; progressive: 20k coarse).
+AUTO_PROGRESSIVE_FACES = 300_000
 
-    Construction does the pre-processing (decimation, split weights and schedule, the coarse
-    stylizer's factorizations); :meth:`stylize` / :meth:`steps` then run for any λ, style,
-    orientation or painted λ without redoing it.
+
+class AffineProgressiveMesh:
+    """An affine progressive mesh (thesis §5.3.2): a recorded decimation and its affine splits.
+
+    The deformation-independent half of Alg. 4, shared by every method that deforms a coarse
+    mesh and puts the details back (cubic stylization, shape analogies): construct once, deform
+    :attr:`V_coarse`, then :meth:`prolong` the coarse positions to the input mesh.
 
     Parameters
     ----------
@@ -483,62 +491,51 @@ class ProgressiveCubic:
     target_faces : int, triangles of the coarse mesh (``m`` of Alg. 4), below ``len(F)``.
     strategy : decimation strategy ("qslim" or "midpoint").
     tikhonov : dimensionless Tikhonov weight of the affine fits (module docstring).
-    fixed, handles, coord_constraints : as :class:`~algorithms.deform.cubic.CubicStylizer`, in
-        input vertex ids; these vertices are kept in the coarse mesh.
-    normalize, pin_one_vertex, backend : passed to the coarse CubicStylizer.
+    keep : (k,) int, optional, input vertices never removed nor moved by the decimation.
+    what : str, the method's name for error messages.
 
     Attributes
     ----------
-    decimation : :class:`~algorithms.mesh.decimate.Decimation`.
+    decimation : :class:`~algorithms.mesh.decimate.Decimation`; ``V_coarse``, ``F_coarse``.
     splits : :class:`AffineSplits`.
-    stylizer : the coarse :class:`~algorithms.deform.cubic.CubicStylizer`.
-    timings : dict of pre-processing seconds: ``decimate``, ``splits``, ``stylizer``, ``total``.
+    clusters : (n,) int64, the coarse vertex each input vertex was merged into.
+    timings : dict of pre-processing seconds: ``decimate``, ``splits``, ``total`` (subclasses
+        add their own).
     notes : plain-language remarks (e.g. the decimation stopped early).
     """
 
     def __init__(self, V, F, *, target_faces: int = 20000, strategy: str = "qslim",
-                 tikhonov: float = 1e-6, fixed=None, handles=None, coord_constraints=None,
-                 normalize: bool = True, pin_one_vertex: bool = True, backend: str = "auto"):
+                 tikhonov: float = 1e-6, keep=None, what: str = "Cubic stylization"):
         t0 = time.perf_counter()
         V = np.array(V, dtype=np.float64, copy=True)
         F = np.asarray(F)
         if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
-            raise InvalidMeshError("Cubic stylization needs a triangle mesh with at least one "
-                                   "triangle.")
+            raise InvalidMeshError(f"{what} needs a triangle mesh with at least one triangle.")
         F = np.ascontiguousarray(F, dtype=np.int64)
         if not (tikhonov >= 0 and np.isfinite(tikhonov)):
             raise ParameterError("The Tikhonov weight must be a finite number >= 0.")
-        n = len(V)
-        keep = _constraint_vertices(n, fixed, handles, coord_constraints)
-        self.V, self.F, self.n = V, F, n
+        self.V, self.F, self.n = V, F, len(V)
         self.decimation = dec = decimate(V, F, target_faces, strategy=strategy, keep=keep)
         t1 = time.perf_counter()
         self.splits = AffineSplits(dec, tikhonov)
         t2 = time.perf_counter()
-        f2c = dec.fine_to_coarse
-        c_fixed = None if fixed is None else f2c[np.asarray(fixed, dtype=np.int64).reshape(-1)]
-        c_handles = None
-        if handles is not None:
-            idx, tgt = handles
-            c_handles = (f2c[np.asarray(idx, dtype=np.int64).reshape(-1)], tgt)
-        c_coord = None
-        if coord_constraints is not None:
-            ci, ca, cv = coord_constraints
-            c_coord = (f2c[np.asarray(ci, dtype=np.int64).reshape(-1)], ca, cv)
-        self.stylizer = CubicStylizer(dec.V, dec.F, fixed=c_fixed, handles=c_handles,
-                                      coord_constraints=c_coord, normalize=normalize,
-                                      pin_one_vertex=pin_one_vertex, backend=backend)
-        t3 = time.perf_counter()
-        # painted lambda: area-weighted mean over each coarse vertex's cluster
         self.clusters = dec.clusters()
         area = barycentric_vertex_areas(V, F)
-        nc = len(dec.V)
-        self._cluster_area = np.bincount(self.clusters, weights=area, minlength=nc)
+        self._cluster_area = np.bincount(self.clusters, weights=area, minlength=len(dec.V))
         self._area = area
-        t4 = time.perf_counter()
-        self.timings = {"decimate": t1 - t0, "splits": t2 - t1, "stylizer": t3 - t2,
-                        "total": t4 - t0}
+        self.timings = {"decimate": t1 - t0, "splits": t2 - t1,
+                        "total": time.perf_counter() - t0}
         self.notes = list(dec.notes)
+
+    @property
+    def V_coarse(self) -> np.ndarray:
+        """(nc, 3) positions of the coarse mesh."""
+        return self.decimation.V
+
+    @property
+    def F_coarse(self) -> np.ndarray:
+        """(mc, 3) triangles of the coarse mesh."""
+        return self.decimation.F
 
     @property
     def n_coarse_faces(self) -> int:
@@ -566,6 +563,82 @@ class ProgressiveCubic:
         """Affine vertex splits (Alg. 4 line 7): coarse positions (nc, 3) -> input ones (n, 3)."""
         return self.splits.apply(coarse_positions)
 
+    def prolonged_steps(self, coarse_steps: Iterator[Step], preview_every: int = 10
+                        ) -> Iterator[Step]:
+        """Full-resolution Steps of a run on the coarse mesh (module docstring, "Steps").
+
+        ``coarse_steps`` yields Steps with coarse positions ``V`` (nc, 3); this yields a
+        full-resolution preview every ``preview_every`` coarse iterations (0: none), then the
+        final prolonged result with ``replay_seconds`` added to its metrics.
+        """
+        prev = None
+        for st in coarse_steps:
+            if prev is not None and preview_every and prev.iteration % preview_every == 0:
+                yield Step(iteration=prev.iteration, total=prev.total,
+                           V=self.prolong(prev.V), metrics=dict(prev.metrics),
+                           message=f"coarse {prev.message} (full-resolution preview)")
+            prev = st
+        if prev is None:
+            return
+        t = time.perf_counter()
+        Vf = self.prolong(prev.V)
+        metrics = dict(prev.metrics)
+        metrics["replay_seconds"] = time.perf_counter() - t
+        yield Step(iteration=prev.iteration, total=prev.total, V=Vf, metrics=metrics,
+                   message=f"converged after {prev.iteration} coarse iterations on "
+                           f"{self.n_coarse_faces:,} triangles; details restored on "
+                           f"{len(self.F):,} triangles")
+
+class ProgressiveCubic(AffineProgressiveMesh):
+    """Cubic stylization through an affine progressive mesh (thesis Alg. 4), precomputed once.
+
+    Construction does the pre-processing (decimation, split weights and schedule, the coarse
+    stylizer's factorizations); :meth:`stylize` / :meth:`steps` then run for any λ, style,
+    orientation or painted λ without redoing it.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 input positions.
+    F : (m, 3) int64 triangles (manifold; never changed).
+    target_faces : int, triangles of the coarse mesh (``m`` of Alg. 4), below ``len(F)``.
+    strategy : decimation strategy ("qslim" or "midpoint").
+    tikhonov : dimensionless Tikhonov weight of the affine fits (module docstring).
+    fixed, handles, coord_constraints : as :class:`~algorithms.deform.cubic.CubicStylizer`, in
+        input vertex ids; these vertices are kept in the coarse mesh.
+    normalize, pin_one_vertex, backend : passed to the coarse CubicStylizer.
+
+    Attributes
+    ----------
+    decimation, splits, clusters, notes : see :class:`AffineProgressiveMesh`.
+    stylizer : the coarse :class:`~algorithms.deform.cubic.CubicStylizer`.
+    timings : dict of pre-processing seconds: ``decimate``, ``splits``, ``stylizer``, ``total``.
+    """
+
+    def __init__(self, V, F, *, target_faces: int = 20000, strategy: str = "qslim",
+                 tikhonov: float = 1e-6, fixed=None, handles=None, coord_constraints=None,
+                 normalize: bool = True, pin_one_vertex: bool = True, backend: str = "auto"):
+        n = len(V) if np.ndim(V) == 2 else 0
+        keep = _constraint_vertices(n, fixed, handles, coord_constraints)
+        super().__init__(V, F, target_faces=target_faces, strategy=strategy, tikhonov=tikhonov,
+                         keep=keep, what="Cubic stylization")
+        dec = self.decimation
+        t2 = time.perf_counter()
+        f2c = dec.fine_to_coarse
+        c_fixed = None if fixed is None else f2c[np.asarray(fixed, dtype=np.int64).reshape(-1)]
+        c_handles = None
+        if handles is not None:
+            idx, tgt = handles
+            c_handles = (f2c[np.asarray(idx, dtype=np.int64).reshape(-1)], tgt)
+        c_coord = None
+        if coord_constraints is not None:
+            ci, ca, cv = coord_constraints
+            c_coord = (f2c[np.asarray(ci, dtype=np.int64).reshape(-1)], ca, cv)
+        self.stylizer = CubicStylizer(dec.V, dec.F, fixed=c_fixed, handles=c_handles,
+                                      coord_constraints=c_coord, normalize=normalize,
+                                      pin_one_vertex=pin_one_vertex, backend=backend)
+        self.timings["stylizer"] = time.perf_counter() - t2
+        self.timings["total"] += self.timings["stylizer"]
+
     def steps(self, params: CubicParams = CubicParams(), *, lam_per_vertex=None, lam_axes=None,
               rotation=None, style_matrix=None, preview_every: int = 10) -> Iterator[Step]:
         """Stylize the coarse mesh and replay the splits, as Steps (module docstring).
@@ -589,22 +662,9 @@ class ProgressiveCubic:
         if preview_every < 0:
             raise ParameterError("'Preview every' must be 0 or a positive number of iterations.")
         lam_c = None if lam_per_vertex is None else self.coarse_lambda(lam_per_vertex)
-        prev = None
-        for st in self.stylizer.steps(params, lam_per_vertex=lam_c, lam_axes=lam_axes,
-                                      rotation=rotation, style_matrix=style_matrix):
-            if prev is not None and preview_every and prev.iteration % preview_every == 0:
-                yield Step(iteration=prev.iteration, total=prev.total,
-                           V=self.prolong(prev.V), metrics=dict(prev.metrics),
-                           message=f"coarse {prev.message} (full-resolution preview)")
-            prev = st
-        t = time.perf_counter()
-        Vf = self.prolong(prev.V)
-        metrics = dict(prev.metrics)
-        metrics["replay_seconds"] = time.perf_counter() - t
-        yield Step(iteration=prev.iteration, total=prev.total, V=Vf, metrics=metrics,
-                   message=f"converged after {prev.iteration} coarse iterations on "
-                           f"{self.n_coarse_faces:,} triangles; details restored on "
-                           f"{len(self.F):,} triangles")
+        yield from self.prolonged_steps(
+            self.stylizer.steps(params, lam_per_vertex=lam_c, lam_axes=lam_axes,
+                                rotation=rotation, style_matrix=style_matrix), preview_every)
 
     def stylize(self, params: CubicParams = CubicParams(), *, lam_per_vertex=None,
                 lam_axes=None, rotation=None, style_matrix=None,
@@ -669,3 +729,59 @@ def progressive_cubic(V, F, params: CubicParams = CubicParams(),
                       progressive: ProgressiveParams = ProgressiveParams(), **kwargs) -> np.ndarray:
     """Run :func:`progressive_cubic_iter` to the end and return the (n, 3) stylized positions."""
     return run_to_end(progressive_cubic_iter(V, F, params, progressive, **kwargs)).V
+
+
+def progressive_analogy_iter(V, F, target_map, params=None,
+                             progressive: ProgressiveParams = ProgressiveParams(), *,
+                             fixed=None, handles=None, lam_per_vertex=None) -> Iterator[Step]:
+    """Normal-driven shape analogy (thesis ch. 6) of a big mesh through an affine progressive mesh.
+
+    The thesis introduces affine progressive meshes for cubic stylization (§5.3.2, Alg. 4); shape
+    analogies run on the same local-global ARAP core, so the same pre-processing applies: the
+    analogy runs on the decimated mesh (fixed and handle vertices are kept by the decimation),
+    then the affine vertex splits put the details back. Painted λ goes to the coarse mesh as
+    area-weighted cluster means, as for cubic stylization.
+
+    Parameters
+    ----------
+    V : (n, 3) float64, F : (m, 3) int64, the input mesh (the output uses the same F).
+    target_map : the style (see :class:`~algorithms.deform.analogies.ShapeAnalogy`).
+    params : AnalogyParams (default: the thesis's).
+    progressive : ProgressiveParams.
+    fixed, handles, lam_per_vertex : as :class:`~algorithms.deform.analogies.ShapeAnalogy` /
+        its ``steps`` (input vertex ids).
+
+    Yields
+    ------
+    Step: ``iteration = 0`` with the input positions once pre-processing is done, then
+    full-resolution previews every ``progressive.preview_every`` coarse iterations, then the
+    final result.
+    """
+    from .analogies import AnalogyParams, ShapeAnalogy
+
+    params = AnalogyParams() if params is None else params
+    validate_params(params)
+    validate_params(progressive)
+    n = len(V) if np.ndim(V) == 2 else 0
+    keep = _constraint_vertices(n, fixed, handles, None)
+    t0 = time.perf_counter()
+    apm = AffineProgressiveMesh(V, F, target_faces=progressive.target_faces,
+                                strategy=progressive.strategy, tikhonov=progressive.tikhonov,
+                                keep=keep, what="Shape analogies")
+    f2c = apm.decimation.fine_to_coarse
+    c_fixed = None if fixed is None else f2c[np.asarray(fixed, dtype=np.int64).reshape(-1)]
+    c_handles = None
+    if handles is not None:
+        c_handles = (f2c[np.asarray(handles[0], dtype=np.int64).reshape(-1)], handles[1])
+    analogy = ShapeAnalogy(apm.V_coarse, apm.F_coarse, target_map, fixed=c_fixed,
+                           handles=c_handles)
+    seconds = time.perf_counter() - t0
+    msg = (f"pre-processing done in {seconds:.1f} s: {len(apm.F):,} -> "
+           f"{apm.n_coarse_faces:,} triangles")
+    if apm.notes:
+        msg += ". " + " ".join(apm.notes)
+    yield Step(iteration=0, total=None, V=apm.V.copy(),
+               metrics={"preprocess_seconds": seconds}, message=msg)
+    lam_c = None if lam_per_vertex is None else apm.coarse_lambda(lam_per_vertex)
+    yield from apm.prolonged_steps(analogy.steps(params, lam_per_vertex=lam_c),
+                                   progressive.preview_every)

@@ -126,6 +126,37 @@ class MeshIssue:
         }
 
 
+#: Short names of the problems, for one-line advice (status bar, CLI hints).
+_SHORT_NAMES = {
+    "bad_shape": "unreadable coordinates or triangles",
+    "empty": "no triangles",
+    "nonfinite": "NaN/infinite coordinates",
+    "index_out_of_range": "triangles using missing vertices",
+    "repeated_index_in_face": "triangles using a vertex twice",
+    "degenerate_faces": "zero-area triangles",
+    "duplicate_faces": "duplicate triangles",
+    "unreferenced_vertices": "unused vertices",
+    "duplicate_vertices": "duplicate vertices",
+    "nonmanifold_edges": "edges shared by 3+ triangles",
+    "nonmanifold_vertices": "non-manifold vertices",
+    "inconsistent_orientation": "inconsistent orientation",
+    "inward_orientation": "inside-out parts",
+}
+
+#: What a user can do about a problem Clean cannot fix.
+_REMEDIES = {
+    "bad_shape": "the file is damaged: export the model again",
+    "empty": "open a file that has triangles",
+    "nonfinite": "the file's coordinates are damaged: export the model again",
+    "index_out_of_range": ("the file is damaged: export the model again (or 'stylize3d clean' "
+                           "with --remove-invalid-faces deletes those triangles)"),
+    "inconsistent_orientation": ("the surface is one-sided (like a Moebius strip): delete the "
+                                 "triangles along the listed edges in a mesh editor (e.g. "
+                                 "Blender or MeshLab) and fill the hole, or export the model "
+                                 "again; methods still run, but normals flip across that seam"),
+}
+
+
 @dataclass
 class MeshReport:
     """Result of :func:`validate_mesh`: a list of issues and a dict of statistics.
@@ -163,6 +194,32 @@ class MeshReport:
     def needs_cleaning(self) -> bool:
         """True when some error or warning can be fixed by :func:`clean_mesh`."""
         return any(i.fixable and i.severity in ("error", "warning") for i in self.issues)
+
+    @property
+    def advice(self) -> str:
+        """One line saying what to do about the errors and warnings ("" when there are none).
+
+        It names 'Clean' only for what :func:`clean_mesh` fixes; for the rest it says what the
+        user can do instead, so the two never disagree.
+        """
+        problems = self.errors + self.warnings
+        if not problems:
+            return ""
+        fixable = [i for i in problems if i.fixable]
+        stuck = [i for i in problems if not i.fixable]
+        parts = []
+        if fixable:
+            what = ", ".join(_SHORT_NAMES.get(i.code, i.code) for i in fixable)
+            parts.append(f"Use 'Clean' to fix: {what}")
+        if stuck:
+            what = ", ".join(_SHORT_NAMES.get(i.code, i.code) for i in stuck)
+            remedies = []
+            for i in stuck:
+                r = _REMEDIES.get(i.code, "re-export the model from the program that made it")
+                if r not in remedies:
+                    remedies.append(r)
+            parts.append(f"'Clean' cannot fix: {what}; " + "; ".join(remedies))
+        return ". ".join(parts) + "."
 
     @property
     def codes(self) -> list[str]:
@@ -210,10 +267,10 @@ class MeshReport:
                 lines.extend(f"  - {i.message}" for i in group)
         if not self.errors and not self.warnings:
             lines.append("No problems found.")
-        elif self.needs_cleaning:
-            lines.append("Use 'Clean' to fix the problems marked as fixable.")
-        elif self.errors:
-            lines.append("The errors above must be fixed before the mesh can be processed.")
+        else:
+            lines.append(self.advice)
+            if self.errors and not self.needs_cleaning:
+                lines.append("The errors above must be fixed before the mesh can be processed.")
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import struct
 from pathlib import Path
 
@@ -23,9 +22,8 @@ from algorithms.mesh.io import (
     write_mesh,
 )
 from algorithms.mesh.primitives import cube, icosphere, torus
+from tests.conftest import shared_mesh
 
-SHARED = Path(os.environ.get("STYLIZE3D_MESHES", Path(__file__).resolve().parents[4] / "shared" / "meshes"))
-needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason="shared test meshes not available")
 
 # name -> (V, F) from SOURCES.md
 SHARED_COUNTS = {
@@ -54,10 +52,9 @@ def write_text(path: Path, text: str) -> Path:
 # --------------------------------------------------------------------------------------------
 
 
-@needs_shared
 @pytest.mark.parametrize("name", sorted(SHARED_COUNTS))
 def test_read_shared_mesh_counts(name):
-    mesh = read_mesh(SHARED / name)
+    mesh = read_mesh(shared_mesh(name))
     assert isinstance(mesh, MeshData)
     assert mesh.V.dtype == np.float64 and mesh.V.shape == (SHARED_COUNTS[name][0], 3)
     assert mesh.F.dtype == np.int64 and mesh.F.shape == (SHARED_COUNTS[name][1], 3)
@@ -66,20 +63,18 @@ def test_read_shared_mesh_counts(name):
     assert mesh.n_vertices == mesh.V.shape[0] and mesh.n_faces == mesh.F.shape[0]
 
 
-@needs_shared
 @pytest.mark.parametrize("name", ["bob.obj", "spot_lowres.obj", "fertility.off", "camelhead.off", "igea.ply"])
 def test_read_matches_libigl(name):
     igl = pytest.importorskip("igl")
-    V_ref, F_ref = igl.read_triangle_mesh(str(SHARED / name))
-    mesh = read_mesh(SHARED / name)
+    V_ref, F_ref = igl.read_triangle_mesh(str(shared_mesh(name)))
+    mesh = read_mesh(shared_mesh(name))
     np.testing.assert_array_equal(mesh.F, F_ref)
     np.testing.assert_allclose(mesh.V, V_ref, rtol=0, atol=1e-12)
 
 
-@needs_shared
 def test_read_igea_binary_ply():
     # speed is measured in benchmarks/mesh_core.py; here: the large binary PLY reads correctly
-    mesh = read_mesh(SHARED / "igea.ply")
+    mesh = read_mesh(shared_mesh("igea.ply"))
     assert mesh.V.shape == (134345, 3) and mesh.F.shape == (268686, 3)
     assert mesh.F.min() == 0 and mesh.F.max() == 134344 and np.isfinite(mesh.V).all()
 

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
 
 import igl
 import numpy as np
@@ -14,15 +12,12 @@ from algorithms.errors import InvalidMeshError
 from algorithms.mesh import topology as T
 from algorithms.mesh.io import read_mesh
 from algorithms.mesh.primitives import cube, grid, icosphere, organic_sample, torus
+from tests.conftest import shared_mesh
 
-SHARED = Path(os.environ.get("STYLIZE3D_MESHES", Path(__file__).resolve().parents[4] / "shared" / "meshes"))
-needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason="shared test meshes not available")
 
 
 def shared(name):
-    if not SHARED.is_dir():
-        pytest.skip("shared test meshes not available")
-    m = read_mesh(SHARED / name)
+    m = read_mesh(shared_mesh(name))
     return m.V, m.F
 
 
@@ -116,7 +111,6 @@ def test_edge_flaps_match_libigl():
     _compare_flaps(organic_sample("pretzel")[1])
 
 
-@needs_shared
 @pytest.mark.parametrize("name", ["hand_lowres.obj", "camelhead.off", "fertility.off"])
 def test_edge_flaps_match_libigl_shared(name):
     _compare_flaps(shared(name)[1])
@@ -208,7 +202,6 @@ def test_manifold_checks_match_libigl():
     assert T.is_manifold(torus()[1])
 
 
-@needs_shared
 def test_shared_meshes_are_vertex_manifold_like_libigl():
     V, F = shared("stanford-bunny.obj")
     ours = np.zeros(V.shape[0], bool)
@@ -250,7 +243,6 @@ def test_boundary_loops_match_libigl(mesh):
         assert all((int(a), int(b)) in H for a, b in zip(loop, np.roll(loop, -1)))
 
 
-@needs_shared
 def test_bunny_boundary_counts():
     F = shared("stanford-bunny.obj")[1]
     loops = T.boundary_loops(F)
@@ -311,7 +303,6 @@ def test_genus():
     assert T.genus(holed) == 1 and len(T.boundary_loops(holed)) == 1
 
 
-@needs_shared
 @pytest.mark.parametrize("name,g", [("fertility.off", 4), ("bob.obj", 1), ("rocker-arm.obj", 1), ("camelhead.off", 0), ("stanford-bunny.obj", 0)])
 def test_genus_shared(name, g):
     V, F = shared(name)
@@ -357,7 +348,6 @@ def test_referenced_vertices():
     np.testing.assert_array_equal(mask, [True, False, True, True, False])
 
 
-@needs_shared
 def test_topology_on_igea():
     # speed is measured in benchmarks/mesh_core.py; here: the large closed mesh is consistent
     V, F = shared("igea.ply")

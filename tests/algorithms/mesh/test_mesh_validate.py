@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,9 +14,8 @@ from algorithms.mesh.io import read_mesh
 from algorithms.mesh.operators import signed_volume
 from algorithms.mesh.primitives import cube, grid, icosphere, torus
 from algorithms.mesh.validate import CleanResult, MeshIssue, MeshReport, clean_mesh, validate_mesh
+from tests.conftest import shared_mesh
 
-SHARED = Path(os.environ.get("STYLIZE3D_MESHES", Path(__file__).resolve().parents[4] / "shared" / "meshes"))
-needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason="shared test meshes not available")
 
 # name -> (V, F, genus, boundary loops) from SOURCES.md
 SHARED_TOPOLOGY = {
@@ -382,10 +379,9 @@ def test_remove_invalid_faces_with_nan_corners():
 # --------------------------------------------------------------------------------------------
 
 
-@needs_shared
 @pytest.mark.parametrize("name", sorted(SHARED_TOPOLOGY))
 def test_validate_shared_meshes_match_sources(name):
-    mesh = read_mesh(SHARED / name)
+    mesh = read_mesh(shared_mesh(name))
     r = validate_mesh(mesh.V, mesh.F, mesh.notes)
     nv, nf, g, loops = SHARED_TOPOLOGY[name]
     s = r.stats
@@ -405,18 +401,16 @@ def test_validate_shared_meshes_match_sources(name):
     json.dumps(r.to_dict())
 
 
-@needs_shared
 def test_validate_igea():
     # speed is measured in benchmarks/mesh_core.py
-    mesh = read_mesh(SHARED / "igea.ply")
+    mesh = read_mesh(shared_mesh("igea.ply"))
     r = validate_mesh(mesh.V, mesh.F)
     assert r.ok and not r.needs_cleaning
     assert r.stats["genus"] == 0 and r.stats["closed"] and r.stats["faces"] == 268686
 
 
-@needs_shared
 def test_clean_bunny():
-    mesh = read_mesh(SHARED / "stanford-bunny.obj")
+    mesh = read_mesh(shared_mesh("stanford-bunny.obj"))
     res = clean_mesh(mesh.V, mesh.F)
     assert res.actions == ["Removed 1,113 unused vertices."]
     assert res.V.shape == (34834, 3) and res.F.shape == mesh.F.shape
@@ -502,3 +496,44 @@ def test_clean_fixes_random_corruption(case):
     if name != "grid":
         assert after.stats["closed"] or after.stats["boundary_loops"] > 0
         assert signed_volume(res.V, res.F) > 0 or not after.stats["closed"]
+
+
+# ------------------------------------------------------------------------------ advice (issue 10)
+def _mobius(n=16):
+    """An open Moebius strip (non-orientable): Clean cannot orient it."""
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    V = np.vstack([np.column_stack([(1 + w * np.cos(t / 2)) * np.cos(t),
+                                    (1 + w * np.cos(t / 2)) * np.sin(t), w * np.sin(t / 2)])
+                   for w in (-0.3, 0.3)])
+    F = []
+    for i in range(n):
+        a, b = i, n + i
+        c, d = (i + 1, n + i + 1) if i < n - 1 else (n, 0)
+        F += [[a, c, b], [b, c, d]]
+    return V, np.array(F)
+
+
+def test_advice_never_offers_clean_for_what_clean_cannot_fix():
+    V, F = _mobius()
+    report = validate_mesh(V, F)
+    issue = report.get("inconsistent_orientation")
+    assert issue is not None and not issue.fixable and not report.needs_cleaning
+    assert "Use 'Clean'" not in report.advice and "Use 'Clean'" not in report.summary()
+    assert "'Clean' cannot fix: inconsistent orientation" in report.advice
+    assert "mesh editor" in report.advice and report.advice in report.summary()
+    # and Clean indeed leaves it: the advice after cleaning is the same
+    res = clean_mesh(V, F)
+    after = validate_mesh(res.V, res.F)
+    assert "inconsistent_orientation" in after and after.advice == report.advice
+
+
+def test_advice_splits_fixable_and_unfixable_problems():
+    V, F = _mobius()
+    V2 = np.vstack([V, [[5.0, 5.0, 5.0]]])  # an unused vertex: Clean fixes that
+    report = validate_mesh(V2, F)
+    assert report.needs_cleaning
+    assert report.advice.startswith("Use 'Clean' to fix: unused vertices.")
+    assert "'Clean' cannot fix: inconsistent orientation" in report.advice
+    # a clean mesh needs no advice
+    Vt, Ft = torus()
+    assert validate_mesh(Vt, Ft).advice == ""

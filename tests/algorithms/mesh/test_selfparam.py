@@ -271,8 +271,7 @@ def test_query_rejects_bad_input():
 
 # ------------------------------------------------------------------------------ composition
 def test_composition_equals_chaining():
-    V, F = _mesh("bob.obj") if (ROOT.parent / "shared" / "meshes" / "bob.obj").exists() \
-        else torus()
+    V, F = _mesh("bob.obj")
     a = self_parameterize(V, F, len(F) // 4)
     b = self_parameterize(a.V_coarse, a.F_coarse, len(a.F_coarse) // 4)
     c = a.compose(b)

@@ -1,0 +1,44 @@
+"""The status bar never sends the user to Clean for a problem Clean cannot fix (issue 10)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from algorithms.mesh import write_mesh
+
+
+def _mobius(n=16):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    V = np.vstack([np.column_stack([(1 + w * np.cos(t / 2)) * np.cos(t),
+                                    (1 + w * np.cos(t / 2)) * np.sin(t), w * np.sin(t / 2)])
+                   for w in (-0.3, 0.3)])
+    F = []
+    for i in range(n):
+        a, b = i, n + i
+        c, d = (i + 1, n + i + 1) if i < n - 1 else (n, 0)
+        F += [[a, c, b], [b, c, d]]
+    return V, np.array(F)
+
+
+def test_status_bar_advice_for_non_orientable_mesh(window, dialogs, tmp_path):
+    V, F = _mobius()
+    path = tmp_path / "mobius.obj"
+    write_mesh(path, V, F)
+    assert window.open_path(path)  # only a warning Clean cannot fix: opens without a question
+    assert not dialogs.questions
+    text = window.stats_label.text()
+    assert "problem" in text and "Clean Mesh" not in text and "Clean cannot fix" in text
+    assert "cannot fix" in window.stats_label.toolTip()
+    # Clean itself agrees: nothing it can do, and it says so
+    assert not window.clean_mesh()
+    assert "Not fixed" in dialogs.infos[-1][1] and "not orientable" in dialogs.infos[-1][1]
+    assert "Clean Mesh" not in window.stats_label.text()
+
+
+def test_status_bar_sends_to_clean_when_clean_can_fix(window, dialogs, tmp_path):
+    V, F = _mobius()
+    path = tmp_path / "loose.obj"
+    write_mesh(path, np.vstack([V, [[5.0, 5.0, 5.0]]]), F)
+    dialogs.answers.append("Open as it is")
+    assert window.open_path(path)
+    assert "Edit > Clean Mesh" in window.stats_label.text()
