@@ -36,6 +36,9 @@ def main() -> int:
     mg = surface_multigrid(V4, F4, min_vertices=100)
     for smoother in ("gauss_seidel", "multicolor"):
         DataSmoother(V4, F4, mg=mg, smoother=smoother).smooth(V4[:, 0], 1e-3)
+    from .render import look_at, rasterize
+    for projection in ("orthographic", "perspective"):
+        rasterize(V4, F4, look_at((0, 0, 3), (0, 0, 0), projection=projection, resolution=16))
     print(f"warm-up: compiled kernels ready in {time.perf_counter() - t0:.1f} s")
     return 0
 
