@@ -14,3 +14,21 @@ def median_seconds(fn, repeat: int) -> float:
         fn()
         ts.append(time.perf_counter() - t)
     return statistics.median(ts)
+
+
+def mesh_path(name: str):
+    """Where a benchmark finds a real mesh: tests/data/ (the small ones, in the repository), then
+    ``$STYLIZE3D_MESHES`` (the big ones: stanford-bunny, koala, igea), then ``../shared/meshes``
+    beside the checkout. Returns a Path (which may not exist: callers say so and skip)."""
+    import os
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    folders = [root / "tests" / "data"]
+    if os.environ.get("STYLIZE3D_MESHES"):
+        folders.append(Path(os.environ["STYLIZE3D_MESHES"]))
+    folders.append(root.parent / "shared" / "meshes")
+    for folder in folders:
+        if (folder / name).exists():
+            return folder / name
+    return folders[-1] / name

@@ -1,6 +1,6 @@
 """Normal-driven shape analogies: iterations per second per regularizer, libigl's ARAP as the peer.
 
-Meshes (default): armadillo (../shared/meshes, 14,587 vertices) and a procedural ~20k-vertex mesh
+Meshes (default): armadillo (tests/data, 14,587 vertices) and a procedural ~20k-vertex mesh
 ("bumpy20k": organic_sample("bumpy") after one Loop subdivision, 19,722 vertices). For each mesh
 and regularizer (arap, farap, acap), cube style, λ = 1, fixed and dynamic targets, a fixed
 number of iterations (the stopping rule off):
@@ -43,7 +43,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from _timing import median_seconds  # noqa: E402
+from _timing import median_seconds, mesh_path  # noqa: E402
 
 import igl  # noqa: E402
 from algorithms.deform.analogies import (  # noqa: E402
@@ -61,7 +61,6 @@ from algorithms.deform.arap import (  # noqa: E402
 from algorithms.deform.targets import ClosestNormals  # noqa: E402
 from algorithms.mesh import loop_subdivide, organic_sample, read_mesh  # noqa: E402
 
-SHARED = ROOT.parent / "shared" / "meshes"
 DEFAULT = ["armadillo.obj", "bumpy20k"]
 CUBE = ClosestNormals.primitive("cube")
 
@@ -70,7 +69,7 @@ def load(name: str):
     if name == "bumpy20k":
         V, F = organic_sample("bumpy")
         return loop_subdivide(V, F, 1)
-    path = SHARED / name
+    path = mesh_path(name)
     if not path.exists():
         return None
     m = read_mesh(path)

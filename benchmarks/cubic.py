@@ -1,6 +1,6 @@
 """Cubic stylization: ms per local-global iteration, local/global split, libigl's ARAP as the peer.
 
-Meshes (default): spot_lowres, bob, rocker-arm, armadillo (../shared/meshes) and a procedural
+Meshes (default): spot_lowres, bob, rocker-arm, armadillo (tests/data) and a procedural
 ~20k-vertex mesh ("bumpy20k": organic_sample("bumpy") after one Loop subdivision, 19,722
 vertices). For each mesh, with the thesis defaults (lambda 0.2, stop at relative move 3e-3):
 
@@ -46,7 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from _timing import median_seconds  # noqa: E402
+from _timing import median_seconds, mesh_path  # noqa: E402
 
 import igl  # noqa: E402
 from algorithms.deform.arap import (  # noqa: E402
@@ -62,7 +62,6 @@ from algorithms.deform.cubic import (  # noqa: E402
 )
 from algorithms.mesh import loop_subdivide, organic_sample, read_mesh  # noqa: E402
 
-SHARED = ROOT.parent / "shared" / "meshes"
 DEFAULT = ["spot_lowres.obj", "bob.obj", "rocker-arm.obj", "armadillo.obj", "bumpy20k"]
 
 
@@ -70,7 +69,7 @@ def load(name: str):
     if name == "bumpy20k":
         V, F = organic_sample("bumpy")
         return loop_subdivide(V, F, 1)
-    path = SHARED / name
+    path = mesh_path(name)
     if not path.exists():
         return None
     m = read_mesh(path)
@@ -174,7 +173,7 @@ def main() -> None:
     for name in args.meshes:
         mesh = load(name)
         if mesh is None:
-            print(f"{name}: not in {SHARED}, skipped")
+            print(f"{name}: not found (tests/data or $STYLIZE3D_MESHES), skipped")
             continue
         V, F = mesh
         t_pre = median_seconds(lambda: CubicStylizer(V, F), args.repeat)

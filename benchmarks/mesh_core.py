@@ -24,13 +24,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from _timing import median_seconds  # noqa: E402
+from _timing import median_seconds, mesh_path  # noqa: E402
 
 from algorithms.mesh import read_mesh, validate_mesh  # noqa: E402
 from algorithms.mesh.operators import vertex_normals  # noqa: E402
 from algorithms.mesh.topology import boundary_loops, unique_edges  # noqa: E402
 
-SHARED = ROOT.parent / "shared" / "meshes"
 DEFAULT = ["spot_lowres.obj", "camelhead.off", "stanford-bunny.obj", "koala.obj", "igea.ply"]
 
 
@@ -41,9 +40,9 @@ def main() -> None:
     args = ap.parse_args()
     print(f"{'mesh':20s} {'V':>8s} {'F':>8s} {'task':9s} {'ours ms':>9s} {'libigl ms':>10s} {'ratio':>6s}")
     for name in args.meshes:
-        path = SHARED / name
+        path = mesh_path(name)
         if not path.exists():
-            print(f"{name}: not found in {SHARED}, skipped")
+            print(f"{name}: not found (tests/data or $STYLIZE3D_MESHES), skipped")
             continue
         mesh = read_mesh(path)
         V, F = mesh.V, mesh.F

@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from _timing import median_seconds  # noqa: E402
+from _timing import median_seconds, mesh_path  # noqa: E402
 
 from algorithms.deform.cubic import CubicParams, CubicStylizer  # noqa: E402
 from algorithms.deform.progressive import ProgressiveCubic  # noqa: E402
@@ -45,7 +45,6 @@ from algorithms.mesh.operators import (  # noqa: E402
     vertex_normals,
 )
 
-SHARED = ROOT.parent / "shared" / "meshes"
 
 
 def mean_l1(V, F) -> float:
@@ -67,7 +66,7 @@ def main() -> None:
     params = CubicParams(lam=args.lam)
 
     t = time.perf_counter()
-    md = read_mesh(SHARED / args.mesh)
+    md = read_mesh(mesh_path(args.mesh))
     V, F = md.V, md.F
     if args.upsample:
         V, F = loop_subdivide(V, F, args.upsample)
