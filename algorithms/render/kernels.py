@@ -56,12 +56,46 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
         j0 = max(0, int(math.ceil(xmin)))
         j1 = min(res - 1, int(math.floor(xmax)))
         area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-        if area == 0.0:
+        if area == 0.0 or not math.isfinite(area):
             continue
         inv = 1.0 / area
+        # Edge functions are affine in the column: w_e(px) = a_e px + b_e(py). Each row's span
+        # of columns where all three are >= 0 is found analytically, widened by one pixel on
+        # each side, and the exact test below (the NumPy formulas) decides, so the result is
+        # the same as testing the whole bounding box.
+        a0 = -(y2 - y1) * inv
+        a1 = -(y0 - y2) * inv
         for i in range(i0, i1 + 1):
             py = float(i)
-            for j in range(j0, j1 + 1):
+            lo = float(j0)
+            hi = float(j1)
+            c0 = (x1 * (y2 - py) - x2 * (y1 - py)) * inv
+            c1 = (x2 * (y0 - py) - x0 * (y2 - py)) * inv
+            c2 = 1.0 - c0 - c1
+            a2 = -a0 - a1
+            empty = False
+            for e in range(3):
+                if e == 0:
+                    a = a0
+                    c = c0
+                elif e == 1:
+                    a = a1
+                    c = c1
+                else:
+                    a = a2
+                    c = c2
+                if a == 0.0:
+                    if c < -1e-12:
+                        empty = True
+                    continue
+                t = min(max(-c / a, j0 - 2.0), j1 + 2.0)   # clamped: no int overflow
+                if a > 0.0:
+                    lo = max(lo, math.ceil(t) - 1.0)
+                else:
+                    hi = min(hi, math.floor(t) + 1.0)
+            if empty or hi < lo:
+                continue
+            for j in range(int(lo), int(hi) + 1):
                 px = float(j)
                 w0 = ((x1 - px) * (y2 - py) - (x2 - px) * (y1 - py)) * inv
                 w1 = ((x2 - px) * (y0 - py) - (x0 - px) * (y2 - py)) * inv

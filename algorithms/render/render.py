@@ -87,9 +87,12 @@ def render(V, F, camera: Camera, shading: Shading | None = None, *, albedo=None,
     r = rasterize(V, F, camera, backend=backend)
     fid = r.face_id
     mask = fid >= 0
-    faces, inv = np.unique(fid[mask], return_inverse=True)
-    slot = np.full(fid.shape, -1, dtype=np.int64)
-    slot[mask] = inv
+    seen = fid[mask]
+    faces = np.flatnonzero(np.bincount(seen, minlength=len(F)))   # O(pixels + faces), no sort
+    lookup = np.full(len(F) + 1, -1, dtype=np.int64)
+    lookup[faces] = np.arange(len(faces))
+    slot = lookup[fid]                                              # fid = -1 -> lookup[-1] = -1
+    inv = slot[mask]
     N = face_unit_normals(V, F[faces])
     alb = None if albedo is None else np.asarray(albedo, dtype=np.float64)[faces]
     colors = shading.face_colors(N, camera, alb)
