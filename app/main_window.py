@@ -28,17 +28,41 @@ from app.viewport import Viewport
 APP_NAME = "Stylize3D"
 MAX_RECENT = 8
 
-SHORTCUTS_TEXT = """<table>
-<tr><td><b>Ctrl+O</b></td><td>Open a mesh (or drop a file on the window)</td></tr>
-<tr><td><b>Ctrl+S / Ctrl+Shift+S</b></td><td>Save / Save as</td></tr>
-<tr><td><b>Ctrl+Z / Ctrl+Shift+Z</b></td><td>Undo / Redo</td></tr>
-<tr><td><b>Esc</b></td><td>Stop the running job (the mesh goes back to how it was)</td></tr>
-<tr><td><b>R</b></td><td>Reset the camera</td></tr>
-<tr><td><b>W</b></td><td>Show / hide edges</td></tr>
-<tr><td><b>F</b></td><td>Flat / smooth shading</td></tr>
-<tr><td><b>G</b></td><td>Show the original mesh as a ghost</td></tr>
-<tr><td><b>Mouse</b></td><td>Left drag: rotate · Right drag / wheel: zoom · Middle drag or Shift+left: pan</td></tr>
-</table>"""
+#: Every key the app binds: (keys as the user reads them, " or " between alternatives; what
+#: they do; the action's name in ``MainWindow.actions_by_name`` or None). The actions take their
+#: shortcuts from here and the shortcut sheet (Help > Keyboard Shortcuts) is made from it, so the
+#: two cannot disagree; tests/app/test_novice.py presses every key listed.
+SHORTCUTS: list[tuple[str, str, str | None]] = [
+    ("Ctrl+O", "Open a mesh (or drop a file on the window)", "open"),
+    ("Ctrl+S", "Save", "save"),
+    ("Ctrl+Shift+S", "Save as (another name or format)", "save_as"),
+    ("Ctrl+Shift+E", "Export a screenshot of the 3D view", "screenshot"),
+    ("Ctrl+Z", "Undo", "undo"),
+    ("Ctrl+Shift+Z or Ctrl+Y", "Redo", "redo"),
+    ("Ctrl+Shift+C", "Clean the mesh (duplicates, degenerate triangles, ...)", "clean"),
+    ("Esc", "Stop the running job (the mesh goes back to how it was)", None),
+    ("R", "Reset the camera", "reset_camera"),
+    ("W", "Show / hide edges", "wireframe"),
+    ("F", "Flat / smooth shading", "flat"),
+    ("G", "Show the original mesh as a ghost", "ghost"),
+    ("F1", "This list of shortcuts", "shortcuts"),
+    ("Ctrl+Q", "Quit", "quit"),
+]
+
+
+def shortcut_keys(action: str) -> list[QKeySequence]:
+    """The key sequences of ``action`` in :data:`SHORTCUTS` (empty when it has none)."""
+    for keys, _what, name in SHORTCUTS:
+        if name == action:
+            return [QKeySequence(k.strip()) for k in keys.split(" or ")]
+    return []
+
+
+SHORTCUTS_TEXT = ("<table>" + "".join(
+    f"<tr><td><b>{keys.replace(' or ', ' / ')}</b></td><td>{what}</td></tr>"
+    for keys, what, _name in SHORTCUTS)
+    + "<tr><td><b>Mouse</b></td><td>Left drag: rotate · Right drag / wheel: zoom · Middle drag "
+      "or Shift+left: pan</td></tr></table>")
 
 
 class MainWindow(QMainWindow):
@@ -88,10 +112,12 @@ class MainWindow(QMainWindow):
         self._update_stats()
 
     # ------------------------------------------------------------------------------ building
-    def _action(self, name: str, text: str, slot, shortcut=None, checkable=False, tip="") -> QAction:
+    def _action(self, name: str, text: str, slot, checkable=False, tip="") -> QAction:
+        """An action named ``name``; its keys come from :data:`SHORTCUTS`."""
         a = QAction(text, self)
-        if shortcut is not None:
-            a.setShortcut(QKeySequence(shortcut))
+        keys = shortcut_keys(name)
+        if keys:
+            a.setShortcuts(keys)
         a.setCheckable(checkable)
         if tip:
             a.setStatusTip(tip)
@@ -103,31 +129,33 @@ class MainWindow(QMainWindow):
     def _build_actions(self) -> None:
         self.actions_by_name: dict[str, QAction] = {}
         A = self._action
-        A("open", "&Open…", lambda: self.open_dialog(), QKeySequence.StandardKey.Open,
-          tip="Open a mesh file (OBJ, PLY, STL, OFF)")
-        A("save", "&Save", lambda: self.save(), QKeySequence.StandardKey.Save, tip="Save the mesh")
-        A("save_as", "Save &As…", lambda: self.save_as(), QKeySequence("Ctrl+Shift+S"),
+        A("open", "&Open…", lambda: self.open_dialog(), tip="Open a mesh file (OBJ, PLY, STL, OFF)")
+        A("save", "&Save", lambda: self.save(), tip="Save the mesh")
+        A("save_as", "Save &As…", lambda: self.save_as(),
           tip="Save the mesh under a new name or format (OBJ, PLY, STL, OFF, glTF .glb)")
         A("screenshot", "Export &Screenshot…", lambda: self.export_screenshot_dialog(),
-          QKeySequence("Ctrl+Shift+E"), tip="Save the 3D view as a PNG image")
-        A("quit", "&Quit", self.close, QKeySequence.StandardKey.Quit)
+          tip="Save the 3D view as a PNG image")
+        A("quit", "&Quit", self.close)
         undo = self.undo_stack.createUndoAction(self, "&Undo")
-        undo.setShortcut(QKeySequence.StandardKey.Undo)
+        undo.setShortcuts(shortcut_keys("undo"))
+        # one binding per key: StandardKey.Redo already is Ctrl+Shift+Z on Linux, and a key
+        # bound twice is "ambiguous" to Qt and does nothing
         redo = self.undo_stack.createRedoAction(self, "&Redo")
-        redo.setShortcuts([QKeySequence.StandardKey.Redo, QKeySequence("Ctrl+Shift+Z")])
+        redo.setShortcuts(shortcut_keys("redo"))
         self.actions_by_name["undo"], self.actions_by_name["redo"] = undo, redo
-        A("clean", "&Clean Mesh", lambda: self.clean_mesh(), QKeySequence("Ctrl+Shift+C"),
+        A("clean", "&Clean Mesh", lambda: self.clean_mesh(),
           tip="Fix duplicate or loose vertices, degenerate or extra triangles, flipped triangles "
               "(undoable; says what it changed)")
-        A("reset_camera", "&Reset Camera", lambda: self.viewport.reset_camera(), QKeySequence("R"))
-        A("wireframe", "Show &Edges", self.viewport.set_wireframe, QKeySequence("W"), checkable=True,
+        A("reset_camera", "&Reset Camera", lambda: self.viewport.reset_camera(),
+          tip="Look at the whole mesh from the front, three-quarter view (R)")
+        A("wireframe", "Show &Edges", self.viewport.set_wireframe, checkable=True,
           tip="Draw the triangle edges on the surface")
-        A("flat", "&Flat Shading", self.viewport.set_flat_shading, QKeySequence("F"),
+        A("flat", "&Flat Shading", self.viewport.set_flat_shading,
           checkable=True, tip="Shade each triangle with one colour (shows facets)")
-        A("ghost", "Show &Original as Ghost", self._toggle_ghost, QKeySequence("G"),
+        A("ghost", "Show &Original as Ghost", self._toggle_ghost,
           checkable=True, tip="Overlay the mesh as it was when opened, translucent")
         A("about", "&About Stylize3D", self.show_about)
-        A("shortcuts", "&Keyboard Shortcuts", self.show_shortcuts, QKeySequence.StandardKey.HelpContents)
+        A("shortcuts", "&Keyboard Shortcuts", self.show_shortcuts)
 
     def _build_menus(self) -> None:
         a = self.actions_by_name
@@ -532,7 +560,8 @@ class MainWindow(QMainWindow):
                 f"genus {genus}   components {s['components']}")
         problems = len(r.errors) + len(r.warnings)
         if problems:
-            text += f"   ⚠ {problems} problem{'s' if problems > 1 else ''} (Edit > Clean Mesh)"
+            hint = "Edit > Clean Mesh" if r.needs_cleaning else "Clean cannot fix it: see tooltip"
+            text += f"   ⚠ {problems} problem{'s' if problems > 1 else ''} ({hint})"
             self.stats_label.setToolTip(r.summary())
         else:
             self.stats_label.setToolTip("Vertices, triangles, boundary loops and genus of the open mesh")

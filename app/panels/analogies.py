@@ -301,8 +301,12 @@ class AnalogiesPanel(MethodPanel):
             self.window_.viewport.show_field("gaussian_curvature", K, "coolwarm", (-lim, lim))
 
     def _on_doc(self, what: str) -> None:
-        if what in ("mesh", "positions", "topology") and self.view_combo.currentIndex():
+        if (what in ("mesh", "positions", "topology") and self.view_combo.currentIndex()
+                and self.is_shown()):
             self.show_view()
+
+    def refresh_view(self) -> None:
+        self.show_view()
 
     # -- the method --------------------------------------------------------------------------------
     def run(self, live: bool = False) -> None:

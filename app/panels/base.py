@@ -99,6 +99,7 @@ class MethodPanel(QDockWidget):
         runner.finished.connect(self._on_finished)
         runner.cancelled.connect(self._on_stopped)
         runner.failed.connect(lambda msg, _d: self._on_stopped(msg))
+        self.visibilityChanged.connect(self._on_visibility_changed)
 
     # -- to implement -------------------------------------------------------------------------
     def build_steps(self, state: MeshState, params: Any) -> Iterator[Step]:
@@ -113,6 +114,29 @@ class MethodPanel(QDockWidget):
     def merge_id(self) -> int:
         return MethodPanel._merge_ids.setdefault(type(self).__name__,
                                                  1000 + len(MethodPanel._merge_ids))
+
+    # -- on screen or not ----------------------------------------------------------------------
+    def is_shown(self) -> bool:
+        """Whether the user can see this panel now: open and not behind another panel's tab.
+
+        A dock behind another tab still answers ``isVisible() == True``; only the panel in
+        front (or one docked on its own, or floating) may drive the shared viewport. Panels
+        draw their colour views only when this is True, and redraw them in
+        :meth:`refresh_view` when they come to the front (the one mechanism; see
+        ``_on_visibility_changed``)."""
+        return self.isVisible() and not self.visibleRegion().isEmpty()
+
+    def refresh_view(self) -> None:
+        """Draw this panel's colour view / overlays on the viewport (subclasses). Called when
+        the panel comes to the front; not called while it is behind another tab."""
+
+    def _on_visibility_changed(self, visible: bool) -> None:
+        if visible:  # the tab bar switches after this signal: look once the layout settled
+            QTimer.singleShot(0, self._refresh_if_shown)
+
+    def _refresh_if_shown(self) -> None:
+        if self.is_shown() and not self.window_.document.is_empty:
+            self.refresh_view()
 
     # -- behaviour ----------------------------------------------------------------------------
     def _mine(self) -> bool:

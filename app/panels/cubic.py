@@ -241,7 +241,7 @@ class CubicPanel(MethodPanel):
                 self.status_label.setText(
                     f"This mesh has {len(st.F):,} triangles: progressive meshes are on, so λ "
                     "changes take about a second after a one-time preparation.")
-        if what in ("fields", "mesh", "topology"):
+        if what in ("fields", "mesh", "topology") and self.is_shown():
             self._show_field(self.show_combo.currentIndex())
         if what in ("handles", "mesh", "topology"):
             st = self.window_.document.state
@@ -255,6 +255,9 @@ class CubicPanel(MethodPanel):
         if (what in ("fields", "handles") and changed and self.live_box.isChecked()
                 and self._last is not None and st is not None and st.V is self._last[1].V):
             self._debounce.start()
+
+    def refresh_view(self) -> None:
+        self._show_field(self.show_combo.currentIndex())
 
     def clear_constraints(self) -> None:
         doc = self.window_.document

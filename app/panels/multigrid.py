@@ -510,7 +510,7 @@ class MultigridPanel(MethodPanel):
             self.solve_times = {}
             self._show_times()
             self._show_hierarchy_info()
-        if self.isVisible() and what in ("mesh", "topology", "fields"):
+        if self.is_shown() and what in ("mesh", "topology", "fields"):
             self.show_view()
 
     def analysis_finished(self) -> None:
