@@ -15,7 +15,11 @@ from .camera import PROJECTIONS, Camera, look_at
 from .raster import Raster, compiled_kernels, rasterize, set_compiled_kernels
 from .render import Rendering, face_unit_normals, image_vjp, normal_vjp, render
 from .shading import MAPPINGS, LambertianShading, Shading, light_frame
+from .sh import (ENVIRONMENTS, SHGradients, SHShading, environment, sh_basis, sh_image_vjp,
+                 sh_render)
 
 __all__ = ["Camera", "look_at", "PROJECTIONS", "Raster", "rasterize", "compiled_kernels",
            "set_compiled_kernels", "Rendering", "render", "image_vjp", "normal_vjp",
-           "face_unit_normals", "Shading", "LambertianShading", "light_frame", "MAPPINGS"]
+           "face_unit_normals", "Shading", "LambertianShading", "light_frame", "MAPPINGS",
+           "SHShading", "SHGradients", "sh_render", "sh_image_vjp", "sh_basis", "environment",
+           "ENVIRONMENTS"]
