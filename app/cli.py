@@ -19,7 +19,8 @@ from typing import Any, Callable
 from algorithms.errors import InvalidMeshError, MeshWriteError, ParameterError, Stylize3DError
 from algorithms.params import describe, params_from_dict, params_to_dict
 
-SUBCOMMANDS = ("info", "clean", "smooth", "multigrid-info", "cubic", "analogy", "coarsen")
+SUBCOMMANDS = ("info", "clean", "smooth", "multigrid-info", "cubic", "analogy", "coarsen",
+               "study")
 
 
 # ----------------------------------------------------------------------------- Params -> flags
@@ -511,6 +512,42 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
 
 
 # ----------------------------------------------------------------------------- parser
+def cmd_study(args: argparse.Namespace) -> int:
+    """``stylize3d study replay|summary``: user-study logs, headless (no Qt)."""
+    if args.study_command == "summary":
+        from app.study.summary import summary_csv
+
+        if args.output:
+            _check_output(args.output, args.overwrite)
+        text, warnings = summary_csv(args.logs, args.output)
+        for w in warnings:
+            _say(f"stylize3d study summary: {w}")
+        if not args.output:
+            print(text, end="")
+        else:
+            n = text.count("\n") - 1
+            print(f"Wrote {args.output} ({n} row{'s' if n != 1 else ''}).")
+        return 0
+    from app.study.replay import replay_or_raise
+
+    report = replay_or_raise(args.log, args.output)
+    for w in report.warnings:
+        _say(f"stylize3d study replay: {w}")
+    c = report.counts
+    if args.json:
+        _print_json(report.to_dict())
+    else:
+        for r in report.runs:
+            extra = f" ({r.reason})" if r.reason else ""
+            if r.max_difference is not None:
+                extra += f"; largest vertex difference {r.max_difference:.2e} of the diagonal"
+            print(f"run {r.index} [{r.task}] {r.method}: {r.status}{extra}")
+        print(f"{c.get('match', 0)} of {len(report.runs)} finished runs reproduced their "
+              f"logged result exactly; {c.get('mismatch', 0)} differ; "
+              f"{c.get('not replayable', 0)} not replayable; {c.get('failed', 0)} failed.")
+    return 0 if not c.get("mismatch") and not c.get("failed") else 1
+
+
 def _add_progressive_arguments(s: argparse.ArgumentParser) -> None:
     from algorithms.deform.progressive import AUTO_PROGRESSIVE_FACES
 
@@ -647,6 +684,19 @@ def build_parser() -> argparse.ArgumentParser:
     add_params_arguments(s, AnalogyParams)
     s.set_defaults(func=cmd_analogy)
 
+    s = sub.add_parser("study", help="user-study logs: replay a session, summarize sessions")
+    ss = s.add_subparsers(dest="study_command", metavar="replay|summary", required=True)
+    r = ss.add_parser("replay", help="re-run a session's logged runs headless and check every "
+                                     "result hash")
+    r.add_argument("log", help="a session log (.jsonl)")
+    r.add_argument("-o", "--output", metavar="DIR", help="write each replayed result here (OBJ)")
+    r.add_argument("--json", action="store_true", help="print the report as JSON")
+    r = ss.add_parser("summary", help="one CSV row per participant and task")
+    r.add_argument("logs", nargs="+", help="session logs (.jsonl)")
+    r.add_argument("-o", "--output", metavar="CSV", help="write the CSV here (default: print it)")
+    r.add_argument("--overwrite", action="store_true", help="replace CSV if it exists")
+    s.set_defaults(func=cmd_study)
+
     from algorithms.spectral.coarsen import CoarsenParams
 
     s = sub.add_parser("coarsen", help="spectral coarsening of a mesh operator (thesis ch. 7)")
@@ -750,7 +800,29 @@ def gui_main(argv: list[str]) -> int:
     p.add_argument("mesh", nargs="?", help="mesh file to open")
     p.add_argument("--screenshot", metavar="PNG",
                    help="save a screenshot of the window once the mesh is shown, then quit")
+    g = p.add_argument_group("user-study mode")
+    g.add_argument("--study", metavar="PROTOCOL",
+                   help="run a study session from a protocol file (.json or .toml)")
+    g.add_argument("--participant", metavar="CODE",
+                   help="participant code (otherwise the start dialog asks)")
+    g.add_argument("--condition", metavar="NAME",
+                   help="study condition (otherwise the start dialog asks)")
+    g.add_argument("--log-dir", metavar="DIR",
+                   help="where session logs and results go (default: logs/ next to the protocol)")
     args = p.parse_args(argv)
+    study = None
+    if args.study:
+        from app.study.protocol import load_protocol
+
+        try:  # a malformed protocol is a plain message before any window opens
+            load_protocol(args.study)
+        except Stylize3DError as e:
+            _say(f"stylize3d: {e}")
+            return e.exit_code
+        study = {"protocol": args.study, "participant": args.participant,
+                 "condition": args.condition, "log_dir": args.log_dir}
     from app.gui import run_app  # Qt is imported only here
 
-    return run_app(args.mesh, screenshot=args.screenshot)
+    if study is None:
+        return run_app(args.mesh, screenshot=args.screenshot)
+    return run_app(args.mesh, screenshot=args.screenshot, study=study)

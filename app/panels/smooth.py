@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from algorithms.smoothing import SmoothParams, smooth_iter
+from algorithms.smoothing import SmoothParams
+from app.recipes import smooth_steps
 from app.panels.base import MethodPanel
 
 
@@ -15,4 +16,4 @@ class SmoothPanel(MethodPanel):
     plot_title = "Bending energy ∫H² dA"
 
     def build_steps(self, state, params):
-        return smooth_iter(state.V, state.F, params)
+        return smooth_steps(state, params)

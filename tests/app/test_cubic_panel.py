@@ -134,7 +134,7 @@ def test_progressive_mode_runs_and_reuses_its_preprocessing(window, dialogs, qtb
         panel.run_button.click()
     from algorithms.deform.progressive import ProgressiveCubic
 
-    solver = panel._cache[1]
+    solver = panel._recipe_cache["solver"]
     assert isinstance(solver, ProgressiveCubic)
     assert l1_of_normals(window.document.V, F) < l1_of_normals(V0, F) - 0.01
     np.testing.assert_array_equal(window.document.F, F)  # faces never change
@@ -142,7 +142,7 @@ def test_progressive_mode_runs_and_reuses_its_preprocessing(window, dialogs, qtb
     panel.form.editors["lam"].setValue(0.3)
     with qtbot.waitSignal(window.runner.finished, timeout=120000):
         panel.run_button.click()
-    assert panel._cache[1] is solver  # λ changed: decimation reused
+    assert panel._recipe_cache["solver"] is solver  # λ changed: decimation reused
 
 
 def test_frame_brush_paints_a_local_cube_frame(window, dialogs, qtbot):
@@ -189,7 +189,7 @@ def test_multigrid_global_step_option(window, dialogs, qtbot):
     assert not panel.progressive_box.isChecked()
     with qtbot.waitSignal(window.runner.finished, timeout=120000):
         panel.run_button.click()
-    solver = panel._cache[1]
+    solver = panel._recipe_cache["solver"]
     assert solver.system.backend == "multigrid" and solver.system.multigrid.n_levels >= 2
     V1 = window.document.V
     assert l1_of_normals(V1, F) < l1_of_normals(V0, F) - 0.01

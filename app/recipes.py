@@ -1,0 +1,171 @@
+"""Job recipes: what a panel's Run computes, as a Qt-free function of the document state.
+
+A recipe turns ``(state, params, options)`` into the method's Step generator, where ``state`` is
+an immutable :class:`~app.document.MeshState`, ``params`` the panel's Params and ``options`` the
+JSON-able settings that are not in its form (``MethodPanel.job_options()``). The panel's
+``build_steps`` calls its recipe, and the study replay (``stylize3d study replay``) calls the same
+recipe headless, so a logged run can be re-computed exactly as the app computed it.
+
+``cache`` is a dict the caller keeps between runs (the panel keeps one; replay passes a fresh
+one): recipes put their precomputation there (factorizations, decimations).
+
+Panels without a recipe still run and are logged; replay reports their runs as not replayable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Iterator
+
+import numpy as np
+
+from algorithms.steps import Step
+
+#: Per-vertex fields the Cubic panel paints (names shared with its tools).
+LAMBDA_FIELD = "lambda_scale"
+FIXED_FIELD = "fixed"
+PLANE_FIELD = "plane"
+FRAME_FIELDS = ("frame_rx", "frame_ry", "frame_rz")
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A panel's job as a function of the document state (module docstring)."""
+
+    title: str
+    params: Callable[[], type]  # the Params dataclass (resolved lazily: light imports)
+    steps: Callable[..., Iterator[Step]]  # (state, params, options, cache) -> steps
+    deterministic: bool = True
+    note: str = ""
+
+
+RECIPES: dict[str, Recipe] = {}
+
+
+def register(recipe: Recipe) -> Recipe:
+    RECIPES[recipe.title] = recipe
+    return recipe
+
+
+# ------------------------------------------------------------------------------ Smooth
+def smooth_steps(state, params, options=None, cache=None) -> Iterator[Step]:
+    from algorithms.smoothing import smooth_iter
+
+    return smooth_iter(state.V, state.F, params)
+
+
+def _smooth_params():
+    from algorithms.smoothing import SmoothParams
+
+    return SmoothParams
+
+
+# ------------------------------------------------------------------------------ Cubic
+def frames_of(state, global_rotation: np.ndarray) -> np.ndarray | None:
+    """(n, 3, 3) per-vertex cube frames from the painted angles, or None when none is painted;
+    vertices without a painted frame use ``global_rotation``."""
+    from algorithms.deform.cubic import rotation_from_degrees
+
+    if FRAME_FIELDS[0] not in state.fields:
+        return None
+    ang = np.stack([np.asarray(state.fields.get(f, np.full(len(state.V), np.nan)))
+                    for f in FRAME_FIELDS], axis=1)
+    frames = np.broadcast_to(global_rotation, (len(ang), 3, 3)).copy()
+    ok = np.isfinite(ang).all(axis=1)
+    if ok.any():
+        uniq, inv = np.unique(ang[ok], axis=0, return_inverse=True)
+        mats = np.stack([rotation_from_degrees(*a) for a in uniq])
+        frames[ok] = mats[inv.reshape(-1)]
+    return frames
+
+
+def constraints_of(state, plane_axis: int):
+    """(fixed vertices, (handle indices, targets), (plane indices, axes, values)) of a state."""
+    n = len(state.V)
+    fixed = np.flatnonzero(state.fields.get(FIXED_FIELD, np.zeros(n)) > 0.5)
+    h = state.handle_dict
+    handles = None
+    if h:
+        idx = np.array(sorted(h), dtype=np.int64)
+        handles = (idx, np.array([h[i] for i in idx], dtype=np.float64))
+    plane = None
+    pv = np.flatnonzero(state.fields.get(PLANE_FIELD, np.zeros(n)) > 0.5)
+    if pv.size:
+        value = float(state.V[pv, plane_axis].mean())
+        plane = (pv, np.full(pv.size, plane_axis), np.full(pv.size, value))
+    return fixed, handles, plane
+
+
+def cubic_steps(state, params, options: dict | None = None, cache: dict | None = None
+                ) -> Iterator[Step]:
+    """The Cubic panel's run. ``options``: ``plane_axis`` (0-2), ``progressive`` (a
+    ProgressiveParams dict or None), ``multigrid`` (bool)."""
+    from algorithms.deform.cubic import CubicStylizer, rotation_from_degrees
+    from algorithms.deform.progressive import ProgressiveCubic, ProgressiveParams
+    from algorithms.errors import ParameterError
+    from algorithms.params import params_from_dict
+
+    options = options or {}
+    cache = {} if cache is None else cache
+    plane_axis = int(options.get("plane_axis", 0))
+    prog = options.get("progressive")
+    prog = None if prog is None else params_from_dict(ProgressiveParams, prog)
+    multigrid = bool(options.get("multigrid", False)) and prog is None
+    fixed, handles, plane = constraints_of(state, plane_axis)
+    key = (id(state.V), id(state.F), fixed.tobytes(),
+           None if handles is None else (handles[0].tobytes(), handles[1].tobytes()),
+           None if plane is None else (plane[0].tobytes(), plane[1].tobytes(),
+                                       plane[2].tobytes()),
+           params.normalize, params.pin_one_vertex,
+           None if prog is None else (prog.target_faces, prog.strategy, prog.tikhonov),
+           multigrid)
+    if cache.get("key") == key:
+        solver = cache["solver"]
+    elif prog is None:
+        solver = CubicStylizer(state.V, state.F, fixed=fixed, handles=handles,
+                               coord_constraints=plane, normalize=params.normalize,
+                               pin_one_vertex=params.pin_one_vertex,
+                               backend="multigrid" if multigrid else "auto")
+    else:
+        solver = ProgressiveCubic(state.V, state.F, target_faces=prog.target_faces,
+                                  strategy=prog.strategy, tikhonov=prog.tikhonov,
+                                  fixed=fixed, handles=handles, coord_constraints=plane,
+                                  normalize=params.normalize,
+                                  pin_one_vertex=params.pin_one_vertex)
+    cache["key"], cache["solver"] = key, solver
+    scale = state.fields.get(LAMBDA_FIELD)
+    lam_v = None if scale is None else params.lam * np.asarray(scale)
+    rotation = rotation_from_degrees(params.rot_x, params.rot_y, params.rot_z)
+    frames = frames_of(state, rotation)
+    extra = {} if frames is None else {"frames": frames}
+    if prog is None:
+        return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation, **extra)
+    if frames is not None:
+        raise ParameterError("Painted local cube frames do not work with progressive meshes "
+                             "yet: switch progressive meshes off, or clear the frames.")
+    return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation,
+                        preview_every=prog.preview_every)
+
+
+def _cubic_params():
+    from algorithms.deform.cubic import CubicParams
+
+    return CubicParams
+
+
+register(Recipe("Smooth", _smooth_params, smooth_steps))
+register(Recipe("Cubic", _cubic_params, cubic_steps))
+
+
+def run_recipe(title: str, state, params_dict: dict, options: dict | None = None,
+               cache: dict | None = None) -> Step | None:
+    """Run a recipe to its end; returns the last Step (None if it yielded nothing)."""
+    from algorithms.params import params_from_dict
+
+    recipe = RECIPES[title]
+    params = params_from_dict(recipe.params(), params_dict)
+    last = None
+    for last in recipe.steps(state, params, options or {}, cache):
+        pass
+    return last
+

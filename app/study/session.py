@@ -1,0 +1,567 @@
+"""The Qt side of user-study mode: start dialog, task bar, questionnaire, locking, logging.
+
+:class:`StudySession` attaches to a running :class:`~app.main_window.MainWindow` from outside and
+logs through the app's ONE job runner and ONE undo stack, so every panel (including panels added
+later) is logged without code of its own:
+
+* ``runner.started`` -> ``run`` (the panel's Params as a dict, its ``job_options()``, the hash of
+  the input state, which is saved once per hash under ``<log>_files/states/`` for replay);
+  ``finished`` / ``cancelled`` / ``failed`` -> ``result`` (``job_committed`` gives the result's
+  hash);
+* the undo stack's index -> ``undo`` / ``redo`` / ``edit`` (every other undoable change, e.g. a
+  brush stroke: its text and before/after hashes);
+* panel switches (a dock brought forward), camera moves (polled twice a second, logged when the
+  camera stopped moving), ``open``.
+
+A task locks the app to what the protocol allows in the session's condition: panels not allowed
+are hidden (and cannot be re-opened from the Panels menu), locked panels are shown disabled, and
+locked parameters keep their protocol values (their editors are disabled; Defaults cannot change
+them). Results are saved next to the log: ``<log>_files/<task>.obj`` and
+``<log>_files/<task>_answers.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+from PySide6.QtCore import QObject, Qt, QTimer, Signal
+from PySide6.QtWidgets import (QButtonGroup, QComboBox, QDialog, QDialogButtonBox, QFormLayout,
+                               QHBoxLayout, QLabel, QLineEdit, QPlainTextEdit, QPushButton,
+                               QRadioButton, QScrollArea, QToolBar, QVBoxLayout, QWidget)
+
+from algorithms.errors import Stylize3DError
+from algorithms.params import params_to_dict
+
+from .log import LogData, SessionLog, state_hash
+from .protocol import Protocol, StudyError, Task, check_against_panels
+
+CAMERA_POLL_MS = 500
+
+
+def _state_hash(state) -> str:
+    return state_hash(state.V, state.F, state.fields, state.handles)
+
+
+# ------------------------------------------------------------------------------ dialogs
+class StartDialog(QDialog):
+    """Participant code and condition; says when a session for that code can be resumed."""
+
+    def __init__(self, protocol: Protocol, log_dir: Path, parent=None):
+        super().__init__(parent)
+        self.setWindowTitle(f"Start study session — {protocol.study}")
+        self.protocol, self.log_dir = protocol, Path(log_dir)
+        lay = QFormLayout(self)
+        self.code = QLineEdit()
+        self.code.setPlaceholderText("e.g. P07")
+        self.code.setToolTip("The participant code from your study plan. Nothing else about the "
+                             "participant is recorded.")
+        self.condition = QComboBox()
+        self.condition.addItems(list(protocol.conditions))
+        self.condition.setToolTip("The study condition this participant is in.")
+        self.note = QLabel("")
+        self.note.setWordWrap(True)
+        lay.addRow("Participant code", self.code)
+        lay.addRow("Condition", self.condition)
+        lay.addRow(self.note)
+        self.buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Ok
+                                        | QDialogButtonBox.StandardButton.Cancel)
+        self.buttons.button(QDialogButtonBox.StandardButton.Ok).setText("Start")
+        self.buttons.accepted.connect(self.accept)
+        self.buttons.rejected.connect(self.reject)
+        lay.addRow(self.buttons)
+        self.code.textChanged.connect(self._update)
+        self._update()
+
+    def log_path(self) -> Path:
+        return log_path_for(self.log_dir, self.protocol.study, self.code.text().strip())
+
+    def _update(self) -> None:
+        code = self.code.text().strip()
+        ok = bool(code) and code.replace("-", "").replace("_", "").isalnum()
+        self.buttons.button(QDialogButtonBox.StandardButton.Ok).setEnabled(ok)
+        if ok and self.log_path().exists():
+            self.note.setText(f"A session for {code} exists: Start resumes it where it stopped.")
+        elif code and not ok:
+            self.note.setText("Use letters, digits, '-' or '_' only.")
+        else:
+            self.note.setText("")
+
+
+class QuestionnaireDialog(QDialog):
+    """Likert items (one row of radio buttons each) and free-text items; OK once every Likert
+    item is answered."""
+
+    def __init__(self, task: Task, parent=None):
+        super().__init__(parent)
+        self.setWindowTitle(f"Questions about '{task.title}'")
+        self.task = task
+        outer = QVBoxLayout(self)
+        intro = QLabel("Please answer these questions about the task you just did.")
+        intro.setWordWrap(True)
+        outer.addWidget(intro)
+        body = QWidget()
+        form = QVBoxLayout(body)
+        self.groups: dict[str, QButtonGroup] = {}
+        self.texts: dict[str, QPlainTextEdit] = {}
+        for k, item in enumerate(task.questionnaire, start=1):
+            q = QLabel(f"{k}. {item.text}")
+            q.setWordWrap(True)
+            q.setStyleSheet("font-weight: bold; margin-top: 6px;")
+            form.addWidget(q)
+            if item.type == "likert":
+                row = QHBoxLayout()
+                row.addWidget(QLabel(item.labels[0]))
+                g = QButtonGroup(self)
+                for v in range(1, item.scale + 1):
+                    b = QRadioButton(str(v))
+                    b.setToolTip(f"{v} of {item.scale}")
+                    g.addButton(b, v)
+                    row.addWidget(b)
+                row.addWidget(QLabel(item.labels[1]))
+                row.addStretch(1)
+                g.idClicked.connect(lambda _v: self._update())
+                self.groups[item.id] = g
+                form.addLayout(row)
+            else:
+                t = QPlainTextEdit()
+                t.setPlaceholderText("(optional)")
+                t.setMaximumHeight(70)
+                self.texts[item.id] = t
+                form.addWidget(t)
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setWidget(body)
+        outer.addWidget(scroll, 1)
+        self.buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Ok)
+        self.buttons.accepted.connect(self.accept)
+        outer.addWidget(self.buttons)
+        self.resize(640, 520)
+        self._update()
+
+    def set_answer(self, item_id: str, value) -> None:
+        """Answer one item as the participant would (tests, scripted sessions)."""
+        if item_id in self.groups:
+            self.groups[item_id].button(int(value)).click()
+        else:
+            self.texts[item_id].setPlainText(str(value))
+        self._update()
+
+    def answers(self) -> dict:
+        out = {k: g.checkedId() for k, g in self.groups.items() if g.checkedId() > 0}
+        out.update({k: t.toPlainText() for k, t in self.texts.items()})
+        return out
+
+    def _update(self) -> None:
+        done = all(g.checkedId() > 0 for g in self.groups.values())
+        self.buttons.button(QDialogButtonBox.StandardButton.Ok).setEnabled(done)
+
+
+class TaskBar(QToolBar):
+    """Instructions, elapsed time, Done and Skip."""
+
+    def __init__(self, parent=None):
+        super().__init__("Study task", parent)
+        self.setObjectName("study_task_bar")
+        self.setMovable(False)
+        w = QWidget()
+        lay = QHBoxLayout(w)
+        lay.setContentsMargins(6, 2, 6, 2)
+        self.title = QLabel("")
+        self.title.setStyleSheet("font-weight: bold;")
+        self.instructions = QLabel("")
+        self.instructions.setWordWrap(True)
+        self.instructions.setMinimumWidth(300)
+        self.clock = QLabel("0:00")
+        self.clock.setToolTip("Time spent on this task")
+        self.clock.setStyleSheet("font-family: monospace; font-size: 14px;")
+        self.more = QPushButton("Instructions…")
+        self.more.setToolTip("Show the whole instructions (and their picture) again.")
+        self.done = QPushButton("Done")
+        self.done.setToolTip("I have finished this task: save the result and go on.")
+        self.done.setStyleSheet("font-weight: bold;")
+        self.skip = QPushButton("Skip")
+        self.skip.setToolTip("Give up this task and go on to the next one.")
+        lay.addWidget(self.title)
+        lay.addWidget(self.instructions, 1)
+        lay.addWidget(self.clock)
+        lay.addWidget(self.more)
+        lay.addWidget(self.skip)
+        lay.addWidget(self.done)
+        self.addWidget(w)
+
+
+def log_path_for(log_dir: Path, study: str, participant: str) -> Path:
+    return Path(log_dir) / f"{study}_{participant}.jsonl"
+
+
+# ------------------------------------------------------------------------------ the session
+class StudySession(QObject):
+    """Runs a study protocol in a MainWindow and logs every action (module docstring)."""
+
+    task_started = Signal(str)
+    task_ended = Signal(str, str)
+    session_ended = Signal()
+
+    def __init__(self, window, protocol: Protocol, log: SessionLog, *,
+                 resumed: LogData | None = None):
+        super().__init__(window)
+        self.window, self.protocol, self.log = window, protocol, log
+        self.condition = log.header["condition"]
+        self.order: list[str] = list(log.header["task_order"])
+        done = set(resumed.finished_tasks) if resumed else set()
+        self.remaining = [t for t in self.order if t not in done]
+        self.task: Task | None = None
+        self.questionnaire_dialog: QuestionnaireDialog | None = None
+        self._task_t0 = 0.0
+        self._locked: dict[str, dict] = {}
+        self._saved_states: set[str] = set()
+        self._pending_runs: dict[str, dict] = {}
+        self.finished = False
+        check_against_panels(protocol, {t: getattr(p, "params_cls", object)
+                                        for t, p in window.panels.items()})
+        # the task bar
+        self.bar = TaskBar(window)
+        window.addToolBar(Qt.ToolBarArea.TopToolBarArea, self.bar)
+        window.insertToolBarBreak(self.bar)
+        self.bar.show()
+        self.bar.done.clicked.connect(lambda: self.end_task("done"))
+        self.bar.skip.clicked.connect(lambda: self.end_task("skipped"))
+        self.bar.more.clicked.connect(self.show_instructions)
+        self._tick = QTimer(self)
+        self._tick.setInterval(1000)
+        self._tick.timeout.connect(self._on_tick)
+        # logging hooks: the one job runner, the one undo stack
+        r = window.runner
+        r.started.connect(self._on_run_started)
+        r.finished.connect(lambda step: self._on_run_ended("done", ""))
+        r.cancelled.connect(lambda msg: self._on_run_ended("cancelled", msg))
+        r.failed.connect(lambda msg, _d: self._on_run_ended("failed", msg))
+        window.job_committed.connect(self._on_committed)
+        self._snapshot_undo()
+        window.undo_stack.indexChanged.connect(self._on_undo_index)
+        for title, panel in window.panels.items():
+            panel.visibilityChanged.connect(
+                lambda vis, t=title: vis and self.log.task and self._log("panel", title=t))
+            form = getattr(panel, "form", None)
+            if form is not None:
+                form.changed.connect(lambda _p, t=title: self._reapply_locks(t))
+        self._camera = None
+        self._camera_moving = False
+        self._cam_timer = QTimer(self)
+        self._cam_timer.setInterval(CAMERA_POLL_MS)
+        self._cam_timer.timeout.connect(self._poll_camera)
+        self._cam_timer.start()
+
+    # -- flow ----------------------------------------------------------------------------------
+    def start(self) -> None:
+        """Begin (or continue) with the first task not finished yet."""
+        if self.log.task and self.log.task in self.remaining:  # resumed mid-task
+            self.remaining.remove(self.log.task)
+            self._begin(self.log.task, resumed=True)
+        else:
+            self._next()
+
+    def _next(self) -> None:
+        if not self.remaining:
+            self._finish_session()
+            return
+        self._begin(self.remaining.pop(0))
+
+    def _begin(self, task_id: str, resumed: bool = False) -> None:
+        task = self.protocol.task(task_id)
+        self.task = task
+        self.log.task = task.id
+        if not resumed:
+            self._log("task_start", title=task.title)
+        mesh = task.mesh
+        if mesh.startswith("sample:"):
+            from algorithms.mesh.samples import sample_path
+
+            mesh = str(sample_path(mesh.split(":", 1)[1]))
+        self.window.undo_stack.setClean()
+        self.window.document.modified = False
+        if not self.window.open_path(mesh):
+            self._log("task_end", status="failed", message=f"could not open {mesh}")
+            self.task_ended.emit(task.id, "failed")
+            self._next()
+            return
+        self._snapshot_undo()
+        st = self.window.document.state
+        self._log("open", mesh=task.mesh, mesh_hash=_state_hash(st))
+        self._apply_setup(task)
+        self.bar.title.setText(f"Task {len(self.order) - len(self.remaining)} of "
+                               f"{len(self.order)}: {task.title}")
+        self.bar.instructions.setText(task.instructions)
+        self._task_t0 = time.monotonic()
+        self._tick.start()
+        self._on_tick()
+        self.task_started.emit(task.id)
+        if not resumed and task.image:
+            self.show_instructions()
+
+    def end_task(self, status: str = "done") -> None:
+        """Done / Skip / time up: save the result, ask the questions, go on."""
+        task = self.task
+        if task is None:
+            return
+        if self.window.runner.busy:
+            self.window.runner.cancel()
+            self.window.runner.wait(30000)
+        self._tick.stop()
+        st = self.window.document.state
+        h = _state_hash(st) if st is not None else ""
+        if st is not None:
+            from algorithms.mesh import write_mesh
+
+            try:
+                write_mesh(self.log.results_dir / f"{task.id}.obj", st.V, st.F)
+            except Stylize3DError as e:
+                self._log("note", message=f"result not saved: {e}")
+        self._log("task_end", status=status, result_hash=h,
+                  seconds=round(time.monotonic() - self._task_t0, 3))
+        self.task_ended.emit(task.id, status)
+        if task.questionnaire:
+            self.questionnaire_dialog = QuestionnaireDialog(task, self.window)
+            self.questionnaire_dialog.accepted.connect(self._on_answers)
+            self.questionnaire_dialog.open()
+        else:
+            self._after_task()
+
+    def _on_answers(self) -> None:
+        dlg, self.questionnaire_dialog = self.questionnaire_dialog, None
+        answers = dlg.answers()
+        self._log("questionnaire", answers=answers, name=self.task.questionnaire_name)
+        path = self.log.results_dir / f"{self.task.id}_answers.json"
+        path.write_text(json.dumps(answers, indent=2, ensure_ascii=False))
+        dlg.deleteLater()
+        self._after_task()
+
+    def _after_task(self) -> None:
+        self._unlock()
+        self.task = None
+        self.log.task = None
+        self._next()
+
+    def _finish_session(self) -> None:
+        self._log("session_end")
+        self.finished = True
+        self._cam_timer.stop()
+        self.bar.title.setText("Session complete")
+        self.bar.instructions.setText("Thank you! You can close the app now.")
+        for b in (self.bar.done, self.bar.skip, self.bar.more):
+            b.setEnabled(False)
+        self.session_ended.emit()
+
+    def show_instructions(self) -> None:
+        if self.task is None:
+            return
+        from app import dialogs
+
+        text = self.task.instructions
+        if self.task.image:
+            text += f"\n\n(Picture: {Path(self.task.image).name})"
+        dialogs.info(self.window, self.task.title, text)
+
+    def _on_tick(self) -> None:
+        if self.task is None:
+            return
+        s = int(time.monotonic() - self._task_t0)
+        lim = self.task.time_limit_s
+        if lim:
+            left = max(0, int(lim) - s)
+            self.bar.clock.setText(f"{s // 60}:{s % 60:02d} ({left // 60}:{left % 60:02d} left)")
+            if s >= lim:
+                self.end_task("timeout")
+        else:
+            self.bar.clock.setText(f"{s // 60}:{s % 60:02d}")
+
+    # -- locking -------------------------------------------------------------------------------
+    def _apply_setup(self, task: Task) -> None:
+        setup = task.setup(self.condition)
+        self._locked = {name: dict(values) for name, values in setup.params.items()}
+        for title, panel in self.window.panels.items():
+            allowed = setup.panels is None or title in setup.panels or title in setup.locked_panels
+            locked = title in setup.locked_panels
+            panel.toggleViewAction().setEnabled(allowed)
+            panel.setVisible(allowed)
+            body = panel.widget()
+            if body is not None:
+                body.setEnabled(not locked)
+                body.setToolTip("Locked in this task." if locked else "")
+            form = getattr(panel, "form", None)
+            if form is None:
+                continue
+            for name, w in form.editors.items():
+                w.setEnabled(name not in self._locked.get(title, {}))
+            self._reapply_locks(title)
+
+    def _reapply_locks(self, title: str) -> None:
+        values = self._locked.get(title)
+        panel = self.window.panels.get(title)
+        if not values or panel is None:
+            return
+        form = panel.form
+        current = params_to_dict(form.params())
+        if any(current.get(k) != v for k, v in values.items()):
+            from algorithms.params import params_from_dict
+
+            form.set_params(params_from_dict(form.params_cls, {**current, **values}))
+
+    def _unlock(self) -> None:
+        self._locked = {}
+        for panel in self.window.panels.values():
+            panel.toggleViewAction().setEnabled(True)
+            if panel.widget() is not None:
+                panel.widget().setEnabled(True)
+            form = getattr(panel, "form", None)
+            if form is not None:
+                for w in form.editors.values():
+                    w.setEnabled(True)
+
+    # -- logging -------------------------------------------------------------------------------
+    def _log(self, action: str, **fields) -> None:
+        try:
+            self.log.write(action, **fields)
+        except (OSError, StudyError) as e:  # never lose the participant's work over the log
+            from app import dialogs
+
+            dialogs.error(self.window, "Study log", f"The session log could not be written: {e}")
+
+    def _save_state(self, state) -> tuple[str, str]:
+        """Save a document state for replay (once per hash); returns (hash, relative file)."""
+        h = _state_hash(state)
+        rel = f"states/{h[:32]}.npz"
+        if h not in self._saved_states:
+            d = self.log.results_dir / "states"
+            d.mkdir(exist_ok=True)
+            arrays = {"V": state.V, "F": state.F}
+            arrays.update({f"field_{k}": v for k, v in state.fields.items()})
+            if state.handles:
+                arrays["handle_ids"] = np.array([v for v, _ in state.handles], np.int64)
+                arrays["handle_pos"] = np.array([p for _, p in state.handles], np.float64)
+            np.savez(d / f"{h[:32]}.npz", **arrays)
+            self._saved_states.add(h)
+        return h, rel
+
+    def _on_run_started(self, name: str) -> None:
+        if self.log.task is None:
+            return
+        panel = self.window.panels.get(name)
+        req = getattr(panel, "last_request", None) if panel is not None else None
+        rec: dict = {"method": name}
+        if req is not None:
+            rec["params"] = params_to_dict(req["params"])
+            rec["options"] = req.get("options", {})
+            h, rel = self._save_state(req["input"])
+            rec["input_hash"], rec["input_file"] = h, rel
+        elif self.window.document.state is not None:
+            rec["input_hash"] = _state_hash(self.window.document.state)
+        self._pending_runs[name] = rec
+        self._log("run", **rec)
+
+    def _on_run_ended(self, status: str, message: str) -> None:
+        name = self.window.runner.name or getattr(self.window, "last_job_name", None)
+        name = name or "?"
+        rec = self._pending_runs.get(name, {"method": name})
+        if status != "done":
+            self._pending_runs.pop(name, None)
+            self._log("result", method=name, status=status, message=message,
+                      params=rec.get("params", {}),
+                      seconds=round(self.window.runner.last_duration, 3))
+
+    def _on_committed(self, name: str, after) -> None:
+        rec = self._pending_runs.pop(name, {"method": name})
+        self._snapshot_undo()
+        h, rel = self._save_state(after)
+        self._log("result", method=name, status="done", params=rec.get("params", {}),
+                  options=rec.get("options", {}), input_hash=rec.get("input_hash", ""),
+                  result_hash=h, result_file=rel,
+                  seconds=round(self.window.runner.last_duration, 3))
+
+    def _snapshot_undo(self) -> None:
+        st = self.window.undo_stack
+        self._undo_index = st.index()
+        self._undo_cmds = [(st.command(i), st.command(i).text()) for i in range(st.count())]
+
+    def _on_undo_index(self, index: int) -> None:
+        import shiboken6
+
+        st = self.window.undo_stack
+        old, cmds = self._undo_index, self._undo_cmds
+        now = [st.command(i) for i in range(st.count())]
+        doc = self.window.document.state
+        h = _state_hash(doc) if doc is not None else ""
+        if index < old:
+            for i in range(old - 1, index - 1, -1):
+                self._log("undo", text=cmds[i][1] if i < len(cmds) else "", result_hash=h)
+        elif index > old:
+            for i in range(old, index):
+                redo = (i < len(cmds) and shiboken6.isValid(cmds[i][0])
+                        and cmds[i][0] is now[i])
+                if redo:
+                    self._log("redo", text=cmds[i][1], result_hash=h)
+                elif not now[i].text().startswith(tuple(self.window.panels)):
+                    # runs are logged as run/result; every other undoable change is an edit
+                    self._log("edit", text=now[i].text(), after_hash=h)
+        self._snapshot_undo()
+
+    def _poll_camera(self) -> None:
+        if self.log.task is None:
+            return
+        pose = getattr(self.window.viewport, "camera_pose", None)
+        cam = pose() if callable(pose) else None
+        if cam is None:
+            return
+        if cam != self._camera:
+            self._camera = cam
+            self._camera_moving = True
+        elif self._camera_moving:  # it stopped moving: one event per camera move
+            self._camera_moving = False
+            self._log("camera", **cam)
+
+
+# ------------------------------------------------------------------------------ entry point
+def start_study(window, protocol_path, *, log_dir=None, participant: str | None = None,
+                condition: str | None = None, ask=None) -> StudySession | None:
+    """Open a protocol and start (or resume) a session in ``window``.
+
+    Without ``participant`` / ``condition`` the start dialog asks (``ask(dialog) -> bool`` runs
+    it; default: ``dialog.exec()``). Returns None when the experimenter cancels.
+    """
+    from .protocol import load_protocol
+
+    protocol = load_protocol(protocol_path)
+    log_dir = Path(log_dir) if log_dir else Path(protocol_path).resolve().parent / "logs"
+    if participant is None or condition is None:
+        dlg = StartDialog(protocol, log_dir, window)
+        if participant:
+            dlg.code.setText(participant)
+        if condition:
+            dlg.condition.setCurrentText(condition)
+        ok = ask(dlg) if ask is not None else dlg.exec() == QDialog.DialogCode.Accepted
+        if not ok:
+            return None
+        participant, condition = dlg.code.text().strip(), dlg.condition.currentText()
+    if condition not in protocol.conditions:
+        raise StudyError(f"The study has no condition '{condition}' (conditions: "
+                         f"{', '.join(protocol.conditions)}).")
+    path = log_path_for(log_dir, protocol.study, participant)
+    resumed = None
+    if path.exists():
+        log, resumed = SessionLog.resume(path)
+        if resumed.header.get("protocol_sha256") != protocol.sha256:
+            log.write("note", message="the protocol file changed since this session started")
+    else:
+        from app import __version__ as version
+
+        log = SessionLog.create(path, study=protocol.study, protocol_path=protocol.path,
+                                protocol_sha256=protocol.sha256, participant=participant,
+                                condition=condition, task_order=protocol.task_order(participant),
+                                app_version=version)
+    session = StudySession(window, protocol, log, resumed=resumed)
+    window.study_session = session
+    session.start()
+    return session
