@@ -135,9 +135,14 @@ class QuestionnaireDialog(QDialog):
         scroll.setWidgetResizable(True)
         scroll.setWidget(body)
         outer.addWidget(scroll, 1)
+        foot = QHBoxLayout()
+        self.progress = QLabel("")
+        self.progress.setStyleSheet("color: #555;")
+        foot.addWidget(self.progress, 1)
         self.buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Ok)
         self.buttons.accepted.connect(self.accept)
-        outer.addWidget(self.buttons)
+        foot.addWidget(self.buttons)
+        outer.addLayout(foot)
         self.resize(640, 520)
         self._update()
 
@@ -155,7 +160,10 @@ class QuestionnaireDialog(QDialog):
         return out
 
     def _update(self) -> None:
-        done = all(g.checkedId() > 0 for g in self.groups.values())
+        n = sum(g.checkedId() > 0 for g in self.groups.values())
+        done = n == len(self.groups)
+        self.progress.setText("" if done else
+                              f"{n} of {len(self.groups)} answered: answer each scale to go on.")
         self.buttons.button(QDialogButtonBox.StandardButton.Ok).setEnabled(done)
 
 
@@ -397,6 +405,10 @@ class StudySession(QObject):
             for name, w in form.editors.items():
                 w.setEnabled(name not in self._locked.get(title, {}))
             self._reapply_locks(title)
+        usable = [p for t, p in self.window.panels.items()
+                  if (setup.panels is None or t in setup.panels) and t not in setup.locked_panels]
+        if usable and setup.panels is not None:
+            usable[0].raise_()  # the panel the task is about comes forward
 
     def _reapply_locks(self, title: str) -> None:
         values = self._locked.get(title)
