@@ -67,7 +67,7 @@ from .camera import Camera
 from .render import Rendering, normal_vjp, render
 
 __all__ = ["SH_DEGREE", "n_coefficients", "sh_index", "clamped_cosine_coefficients",
-           "convolution_weights", "sh_basis", "sh_basis_gradient", "sh_basis_polar",
+           "convolution_weights", "sh_basis", "sh_basis_gradient", "sh_basis_vjp", "sh_basis_polar",
            "sh_basis_gradient_polar", "ENVIRONMENTS", "ENVIRONMENT_SOURCE", "environment",
            "SHShading", "SHGradients", "sh_render", "sh_image_vjp", "face_albedo",
            "read_mesh_colors"]
@@ -169,40 +169,56 @@ def _xy_powers(x, y, degree):
     return C, S
 
 
+def _parts(normals, degree, with_gradient: bool):
+    """The factors of ``Y_j = P_j(z) XY_j(x, y)`` (and of their partial derivatives)."""
+    d = _check_degree(degree)
+    N = _unit_normals(normals)
+    Pz, dPz, order, is_sin = _tables(d)
+    x, y, z = N[:, 0], N[:, 1], N[:, 2]
+    k = len(N)
+    Z = np.empty((k, d + 1))
+    Z[:, 0] = 1.0
+    for p in range(1, d + 1):
+        Z[:, p] = Z[:, p - 1] * z
+    C, S = _xy_powers(x, y, d)
+    CS = np.concatenate([C, S], axis=1)
+    idx = order + (d + 1) * is_sin
+    P = Z @ Pz
+    XY = CS[:, idx]
+    if not with_gradient:
+        return N, P, XY
+    mm = order.astype(np.float64)
+    Cm1 = np.zeros_like(C)
+    Sm1 = np.zeros_like(S)
+    Cm1[:, 1:], Sm1[:, 1:] = C[:, :-1], S[:, :-1]
+    # d/dx (x+iy)^m = m (x+iy)^(m-1); d/dy = i m (x+iy)^(m-1)
+    dXYdx = mm * np.concatenate([Cm1, Sm1], axis=1)[:, idx]
+    dXYdy = mm * np.concatenate([-Sm1, Cm1], axis=1)[:, idx]
+    return N, P, XY, Z @ dPz, dXYdx, dXYdy
+
+
 def sh_basis(normals, degree: int = SH_DEGREE) -> np.ndarray:
     """Real SH ``Y_l^m`` (Eq. 3.16-3.17) of the directions ``normals (k, 3)`` (normalized here):
     ``(k, (degree+1)^2)``."""
-    d = _check_degree(degree)
-    N = _unit_normals(normals)
-    Pz, _, order, is_sin = _tables(d)
-    x, y, z = N[:, 0], N[:, 1], N[:, 2]
-    Z = np.vander(z, d + 1, increasing=True)          # (k, d+1) powers of z
-    C, S = _xy_powers(x, y, d)
-    XY = np.where(is_sin, S[:, order], C[:, order])
-    return (Z @ Pz) * XY
+    _, P, XY = _parts(normals, degree, False)
+    return P * XY
 
 
 def sh_basis_gradient(normals, degree: int = SH_DEGREE) -> np.ndarray:
     """``dY_j/dn`` (k, (degree+1)^2, 3) at unit normals: the gradient of ``Y_j(n/|n|)``, i.e.
     tangent to the sphere (what Eq. 3.37-3.40 compute, without their pole singularity)."""
-    d = _check_degree(degree)
-    N = _unit_normals(normals)
-    Pz, dPz, order, is_sin = _tables(d)
-    x, y, z = N[:, 0], N[:, 1], N[:, 2]
-    Z = np.vander(z, d + 1, increasing=True)
-    C, S = _xy_powers(x, y, d)
-    Cm1 = np.concatenate([np.zeros((len(x), 1)), C[:, :-1]], axis=1)   # C_{m-1}, 0 for m = 0
-    Sm1 = np.concatenate([np.zeros((len(x), 1)), S[:, :-1]], axis=1)
-    mm = order.astype(np.float64)
-    XY = np.where(is_sin, S[:, order], C[:, order])
-    # d/dx (x+iy)^m = m (x+iy)^(m-1); d/dy = i m (x+iy)^(m-1)
-    dXYdx = mm * np.where(is_sin, Sm1[:, order], Cm1[:, order])
-    dXYdy = mm * np.where(is_sin, Cm1[:, order], -Sm1[:, order])
-    P = Z @ Pz
-    dP = Z @ dPz
+    N, P, XY, dP, dXYdx, dXYdy = _parts(normals, degree, True)
     g = np.stack([P * dXYdx, P * dXYdy, dP * XY], axis=-1)           # (k, nc, 3)
     radial = np.einsum("kjd,kd->kj", g, N)
     return g - radial[..., None] * N[:, None, :]
+
+
+def sh_basis_vjp(normals, weights, degree: int = SH_DEGREE) -> np.ndarray:
+    """``sum_j weights_kj dY_j/dn (n_k)`` (k, 3) without forming the (k, nc, 3) gradient."""
+    N, P, XY, dP, dXYdx, dXYdy = _parts(normals, degree, True)
+    wP = weights * P
+    g = np.stack([(wP * dXYdx).sum(1), (wP * dXYdy).sum(1), (weights * dP * XY).sum(1)], axis=1)
+    return g - np.einsum("kd,kd->k", g, N)[:, None] * N
 
 
 def _assoc_legendre(l: int, m: int, x):
@@ -376,8 +392,7 @@ class SHShading:
             grad_albedo = g * self.irradiance(normals)                  # Eq. 3.29
             g = g * albedo
         w = g @ self.weighted.T                                           # (k, nc)
-        dY = sh_basis_gradient(normals, self.degree)                      # (k, nc, 3)
-        return np.einsum("kj,kjd->kd", w, dY), grad_albedo               # Eq. 3.36
+        return sh_basis_vjp(normals, w, self.degree), grad_albedo        # Eq. 3.36
 
     def lighting_vjp(self, normals, grad_colors, albedo=None) -> np.ndarray:
         """``dE/dU (n_coefficients, C)`` from per-face colour gradients (Eq. 3.28)."""

@@ -1,0 +1,155 @@
+"""Simple coloured models of common ImageNet objects, made procedurally: test subjects an
+ImageNet classifier recognizes untextured (issue 13: the shared scan meshes -- bunny, armadillo,
+koala, ... -- are mostly not recognized from 30-degree views; see benchmarks/adversarial.py).
+
+Each function returns ``(V (n, 3), F (m, 3), albedo (m, 3))``, +y up, and the ImageNet class
+name it is meant to be (:data:`SUBJECTS`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["revolve", "orange", "coffee_mug", "wine_bottle", "tennis_ball", "basketball",
+           "flowerpot", "lemon", "SUBJECTS", "subject"]
+
+
+def revolve(r, y, segments: int = 64):
+    """Surface of revolution of the profile ``(r_i, y_i)`` (bottom to top) around +y, closed by a
+    cap where ``r`` does not end at 0. Returns V, F and the profile band index of each face."""
+    r = np.asarray(r, float)
+    y = np.asarray(y, float)
+    t = np.arange(segments) * 2 * np.pi / segments
+    rings = [np.stack([ri * np.cos(t), np.full(segments, yi), -ri * np.sin(t)], 1)
+             for ri, yi in zip(r, y)]
+    V = np.concatenate(rings)
+    F, band = [], []
+    for i in range(len(r) - 1):
+        a, b = i * segments, (i + 1) * segments
+        for j in range(segments):
+            k = (j + 1) % segments
+            F += [[a + j, a + k, b + k], [a + j, b + k, b + j]]
+            band += [i, i]
+    V = list(V)
+    for end, ring in ((0, 0), (len(r) - 1, len(r) - 1)):
+        c = len(V)
+        V.append([0.0, y[end], 0.0])
+        o = ring * segments
+        for j in range(segments):
+            k = (j + 1) % segments
+            F.append([c, o + k, o + j] if end == 0 else [c, o + j, o + k])
+            band.append(ring - (end != 0))
+    return np.asarray(V), np.asarray(F, dtype=np.int64), np.asarray(band)
+
+
+def _sphere(n_lat=48, segments=64, bump=0.0, seed=0):
+    th = np.linspace(0, np.pi, n_lat + 1)[1:-1]
+    V, F, band = revolve(np.sin(th), -np.cos(th), segments)
+    if bump:
+        rng = np.random.default_rng(seed)
+        V = V * (1 + bump * rng.standard_normal((len(V), 1)))
+    return V, F, band
+
+
+def orange():
+    """An orange: a slightly flattened, dimpled sphere, orange with a green-brown stem spot."""
+    V, F, band = _sphere(bump=0.006)
+    V[:, 1] *= 0.93
+    A = np.tile([1.0, 0.48, 0.05], (len(F), 1))
+    top = V[F].mean(1)[:, 1] > 0.9
+    A[top] = [0.35, 0.35, 0.1]
+    return V, F, A
+
+
+def tennis_ball():
+    """A tennis ball: a yellow-green sphere with a white seam band."""
+    V, F, _ = _sphere()
+    C = V[F].mean(1)
+    seam = np.abs(C[:, 2] - 0.6 * np.sin(2 * np.arctan2(C[:, 1], C[:, 0])) * np.hypot(
+        C[:, 0], C[:, 1])) < 0.06
+    A = np.tile([0.8, 0.95, 0.2], (len(F), 1))
+    A[seam] = [0.95, 0.95, 0.95]
+    return V, F, A
+
+
+def coffee_mug():
+    """A coffee mug: a white cylinder with an inner wall, a dark coffee surface and a handle."""
+    r = [0.0, 0.5, 0.52, 0.52, 0.46, 0.46, 0.0]
+    y = [0.0, 0.0, 0.03, 1.2, 1.2, 1.05, 1.05]
+    V, F, band = revolve(r, y, 64)
+    A = np.tile([0.93, 0.93, 0.9], (len(F), 1))
+    A[band == len(r) - 2] = [0.25, 0.12, 0.05]       # coffee
+    # handle: half a torus on the +x side
+    R, rr, nu, nv = 0.3, 0.07, 24, 12
+    u = np.linspace(-np.pi / 2, np.pi / 2, nu)
+    v = np.arange(nv) * 2 * np.pi / nv
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    H = np.stack([0.5 + (R + rr * np.cos(vv)) * np.cos(uu) - 0.05,
+                  0.6 + (R + rr * np.cos(vv)) * np.sin(uu), rr * np.sin(vv)], -1).reshape(-1, 3)
+    FH = []
+    for i in range(nu - 1):
+        for j in range(nv):
+            a, b, c, d = i * nv + j, i * nv + (j + 1) % nv, (i + 1) * nv + (j + 1) % nv, \
+                (i + 1) * nv + j
+            FH += [[a, b, c], [a, c, d]]
+    FH = np.asarray(FH) + len(V)
+    V = np.concatenate([V, H])
+    F = np.concatenate([F, FH])
+    A = np.concatenate([A, np.tile([0.93, 0.93, 0.9], (len(FH), 1))])
+    return V, F, A
+
+
+def wine_bottle():
+    """A wine bottle: dark green glass with a cream label and a dark red capsule."""
+    r = [0.0, 0.37, 0.38, 0.38, 0.36, 0.25, 0.13, 0.12, 0.13, 0.13, 0.0]
+    y = [0.0, 0.0, 0.03, 1.6, 1.75, 1.95, 2.2, 2.6, 2.62, 2.85, 2.85]
+    V, F, band = revolve(r, y, 64)
+    A = np.tile([0.08, 0.25, 0.1], (len(F), 1))
+    Cy = V[F].mean(1)[:, 1]
+    A[(Cy > 0.5) & (Cy < 1.2)] = [0.9, 0.85, 0.7]
+    A[Cy > 2.45] = [0.45, 0.05, 0.08]
+    return V, F, A
+
+
+def basketball():
+    """A basketball: an orange-brown sphere with dark seam lines."""
+    V, F, _ = _sphere()
+    C = V[F].mean(1)
+    seam = (np.abs(C[:, 0]) < 0.04) | (np.abs(C[:, 1]) < 0.04) | \
+        (np.abs(np.hypot(C[:, 0] - 0.9, C[:, 1]) - 0.75) < 0.04) | \
+        (np.abs(np.hypot(C[:, 0] + 0.9, C[:, 1]) - 0.75) < 0.04)
+    A = np.tile([0.85, 0.35, 0.08], (len(F), 1))
+    A[seam] = [0.08, 0.05, 0.04]
+    return V, F, A
+
+
+def flowerpot():
+    """A flowerpot: a terracotta truncated cone with a rim, dark soil on top."""
+    r = [0.0, 0.38, 0.4, 0.56, 0.56, 0.6, 0.6, 0.54, 0.54, 0.0]
+    y = [0.0, 0.0, 0.02, 0.85, 0.9, 0.92, 1.1, 1.1, 1.0, 1.0]
+    V, F, band = revolve(r, y, 64)
+    A = np.tile([0.72, 0.33, 0.18], (len(F), 1))
+    A[band == len(r) - 2] = [0.2, 0.13, 0.08]
+    return V, F, A
+
+
+def lemon():
+    """A lemon: a yellow ellipsoid with pointed ends."""
+    V, F, _ = _sphere(bump=0.004, seed=1)
+    yy = V[:, 1].copy()
+    V[:, 1] = 1.35 * yy + 0.25 * yy ** 9
+    A = np.tile([0.98, 0.85, 0.12], (len(F), 1))
+    return V, F, A
+
+
+#: ImageNet class name -> model, for the models EfficientNet-lite0 recognizes top-1 from 30-degree
+#: views under Grace Cathedral lighting (16 azimuths: coffee mug 16, bucket 16, orange 10, wine
+#: bottle 8). The flower pot is seen as a bucket (0.9), so it stands for "bucket". The tennis
+#: ball (3/16), basketball (3/16) and lemon (0/16: "golf ball") were not recognized enough.
+SUBJECTS = {"coffee mug": coffee_mug, "bucket": flowerpot, "orange": orange,
+            "wine bottle": wine_bottle}
+
+
+def subject(name: str):
+    """``(V, F, albedo)`` of the model of the ImageNet class ``name`` (a key of SUBJECTS)."""
+    return SUBJECTS[name]()
