@@ -110,6 +110,19 @@ def test_session_locks_logs_asks_and_replays(window, dialogs, qtbot, tmp_path):
                                                        ("cube-it", "skipped")]
     assert rows[0]["runs"] == "1" and rows[0]["undo"] == "1" and rows[0]["redo"] == "1"
     assert rows[0]["q_ease"] == "4"
+    # the CLI: a crash cut the last line off -> a warning, and the intact part still replays
+    with open(log_path, "a") as f:
+        f.write('{"t_wall": 1, "t_mono": 99.0, "task": "cube-it", "act')
+    from app import cli
+
+    out = tmp_path / "summary.csv"
+    assert cli.main(["study", "summary", str(log_path), "-o", str(out)]) == 0
+    assert len(list(csv.DictReader(io.StringIO(out.read_text())))) == 2
+    assert cli.main(["study", "replay", str(log_path), "--json",
+                     "-o", str(tmp_path / "replayed")]) == 0
+    rep = replay(log_path)
+    assert rep.counts == {"match": 1} and "cut off" in rep.warnings[0]
+    assert len(list((tmp_path / "replayed").glob("*.obj"))) == 1
 
 
 def test_time_limit_ends_the_task(window, dialogs, qtbot, tmp_path):
