@@ -1,0 +1,16 @@
+"""Paparazzi (thesis ch. 2): image filters applied to shapes through the one differentiable
+renderer (:mod:`algorithms.render`). See :mod:`.optimize` for the loop and its choices,
+:mod:`.filters` for the filter registry, :mod:`.offset` for the camera cage."""
+
+from .filters import (FilterContext, FilterSpec, ImageReadError, NoParams, filter_names,
+                      get_filter, read_image, register_filter, unregister_filter)
+from .measures import bending_energy, palette_fraction, planar_area_fraction
+from .offset import OffsetSurface, offset_surface, sample_camera
+from .optimize import (FilterFailed, Paparazzi, PaparazziParams, PaparazziStep,
+                       count_self_intersections, paparazzi, paparazzi_iter)
+
+__all__ = ["FilterContext", "FilterSpec", "ImageReadError", "NoParams", "filter_names",
+           "get_filter", "read_image", "register_filter", "unregister_filter", "bending_energy",
+           "palette_fraction", "planar_area_fraction", "OffsetSurface", "offset_surface",
+           "sample_camera", "FilterFailed", "Paparazzi", "PaparazziParams", "PaparazziStep",
+           "count_self_intersections", "paparazzi", "paparazzi_iter"]

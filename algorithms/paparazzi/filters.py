@@ -1,0 +1,428 @@
+"""Image filters for Paparazzi and their registry (thesis 2.3.1, 2.3.3, 2.6.1, 2.7.1).
+
+A filter is one Python function plus a frozen ``Params`` dataclass (fields made with
+:func:`algorithms.params.param`, so the CLI and the GUI build their flags and forms from it):
+
+* kind ``"energy"`` (Alg. at thesis 204-220): ``fn(image, params, ctx) -> (E, dE/dR)``;
+* kind ``"iterative"`` (thesis 235-248): ``fn(image, params, ctx) -> f(R)``; the optimizer uses
+  ``dE/dR := -(f(R) - R)``, i.e. it moves the shape so that its image becomes ``f(R)``.
+
+``image`` is the ``(H, W, C)`` rendering; ``ctx`` (:class:`FilterContext`) carries the camera, the
+foreground mask, the filter's prepared state (``prepare(params, ctx_info)``, run once: a loaded
+image, a target mesh) and a ``render_other(V, F)`` helper. Register your own::
+
+    from dataclasses import dataclass
+    from algorithms.params import param
+    from algorithms.paparazzi import register_filter
+
+    @dataclass(frozen=True)
+    class Posterize:
+        levels: int = param(4, label="Levels", minimum=2, maximum=64, tooltip="Colour levels.")
+
+    @register_filter("posterize", kind="iterative", params=Posterize)
+    def posterize(image, params, ctx):
+        return np.round(image * (params.levels - 1)) / (params.levels - 1)
+
+A filter that raises stops the run with its message (the optimizer wraps it in a
+:class:`~algorithms.errors.Stylize3DError` naming the filter).
+
+Built-in filters and their defaults (DESIGN.md §5, the authors' settings)
+-------------------------------------------------------------------------
+* ``guided`` -- fast guided filter (He and Sun 2015), self-guided with the colour image as guide
+  (3x3 covariance per window), radius 15, epsilon 1e-8, subsampling 4, at 128 px. (The thesis's
+  Fig. 2.15 quotes r = 4, eps = 0.02; both are settable.)
+* ``quantize`` -- each pixel's normal (rendered in the *world* frame, thesis 447-449) replaced by
+  the nearest of the 20 icosahedron face normals.
+* ``slic`` -- SLIC superpixels (scikit-image; 100 segments, compactness 10) on the foreground,
+  each superpixel painted with its mean colour; view width 0.3 (the authors' window).
+* ``l0`` -- L0 gradient smoothing (Xu et al. 2011; lambda 0.01, kappa 2, beta_max 1e5, periodic
+  boundary as in their MATLAB code) at 256 px; written here.
+* ``target-image`` -- energy 1/2 |R - I|^2 to an image, single fixed front view.
+* ``target-mesh`` -- energy 1/2 |R(V) - R(T)|^2 to the rendering of another mesh from the same
+  camera (detail transfer, Fig. 2.12-2.13), summed over the pixels where *both* renderings see a
+  face: with flat shading and fixed visibility nothing can move a silhouette, so pixels that only
+  one of them covers would only pull normals towards the background colour. The target is placed
+  with the *input's* normalization, so meshes that are aligned stay aligned.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from ..errors import ParameterError, Stylize3DError
+from ..params import param
+from ..render import Camera, LambertianShading, Shading
+
+__all__ = ["FilterSpec", "FilterContext", "register_filter", "unregister_filter", "get_filter",
+           "filter_names", "read_image", "ImageReadError", "icosahedron_face_normals",
+           "guided_filter", "l0_smooth", "front_camera", "NoParams"]
+
+
+class ImageReadError(Stylize3DError):
+    """An image file could not be used."""
+
+    exit_code = 2
+
+
+@dataclass(frozen=True)
+class NoParams:
+    """A filter without parameters."""
+
+
+@dataclass
+class FilterContext:
+    """What a filter may look at besides the image."""
+
+    camera: Camera
+    mask: np.ndarray
+    state: Any = None
+    render_other: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    rng: np.random.Generator | None = None
+    other_mask: np.ndarray | None = None   # foreground of the last render_other() image
+
+
+@dataclass(frozen=True)
+class FilterSpec:
+    """A registered filter.
+
+    ``resolution`` / ``width`` / ``sigma`` are the filter's preferred render resolution, view width
+    and camera offset (used when the run's parameter is left at 0 = "the filter's default");
+    ``single_view`` fixes the camera to :func:`front_camera`; ``shading(params)`` builds the
+    shading (default: R, G, B lights along the camera axes); ``prepare(params, info)`` builds the
+    state once (``info``: dict with ``normalize`` (a function mapping world points into the
+    optimizer's frame), ``resolution``).
+    """
+
+    name: str
+    kind: str
+    function: Callable
+    params: type = NoParams
+    prepare: Callable | None = None
+    shading: Callable[[Any], Shading] | None = None
+    resolution: int = 128
+    width: float = 0.5
+    sigma: float = 0.1
+    single_view: bool | Callable[[Any], bool] = False
+    description: str = ""
+
+    def make_shading(self, params) -> Shading:
+        return self.shading(params) if self.shading is not None else LambertianShading()
+
+    def is_single_view(self, params) -> bool:
+        sv = self.single_view
+        return bool(sv(params) if callable(sv) else sv)
+
+
+_REGISTRY: dict[str, FilterSpec] = {}
+
+
+def register_filter(name: str, *, kind: str, params: type = NoParams, **options):
+    """Decorator registering ``fn`` as filter ``name`` (see the module docstring); options are
+    the other :class:`FilterSpec` fields. Re-registering a name replaces it."""
+    if kind not in ("energy", "iterative"):
+        raise ParameterError(f"A filter's kind must be 'energy' or 'iterative' (got {kind!r}).")
+    if not dataclasses.is_dataclass(params):
+        raise ParameterError(f"Filter {name!r}: params must be a dataclass.")
+
+    def deco(fn):
+        _REGISTRY[name] = FilterSpec(name=name, kind=kind, function=fn, params=params, **options)
+        return fn
+
+    return deco
+
+
+def unregister_filter(name: str) -> None:
+    _REGISTRY.pop(name, None)
+
+
+def filter_names() -> list[str]:
+    return list(_REGISTRY)
+
+
+def get_filter(name: str) -> FilterSpec:
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise ParameterError(f"There is no image filter called {name!r}; choose one of "
+                             f"{', '.join(_REGISTRY)}.") from None
+
+
+def front_camera(resolution: int, shading_width: float = 2.4) -> Camera:
+    """The fixed single view: orthographic, from +z looking at the origin, the whole [-1, 1]^3."""
+    return Camera((0.0, 0.0, 3.0), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0), width=shading_width,
+                  resolution=resolution)
+
+
+# ----------------------------------------------------------------------------- images
+def read_image(path: str, resolution: int | None = None, channels: int = 3) -> np.ndarray:
+    """Read an image as ``(H, W, channels)`` float64 in [0, 1]; grey images are repeated to
+    colour, colour ones averaged to grey when ``channels == 1``, alpha is dropped. A square image
+    of another size is resized to ``resolution``; a non-square one is refused."""
+    from pathlib import Path
+
+    p = Path(str(path))
+    if not str(path):
+        raise ImageReadError("No image was given; choose an image file (PNG or JPEG).")
+    if not p.exists():
+        raise ImageReadError(f"The image {path} does not exist.")
+    if p.is_dir():
+        raise ImageReadError(f"{path} is a folder, not an image file.")
+    try:
+        from PIL import Image
+
+        with Image.open(p) as im:
+            im.load()
+            arr = np.asarray(im.convert("RGBA" if im.mode in ("RGBA", "LA", "P") else
+                                        ("L" if im.mode in ("L", "I", "I;16", "F", "1") else "RGB")))
+    except Exception as e:  # noqa: BLE001 - any decoder failure is the same plain message
+        raise ImageReadError(f"The image {path} cannot be read ({type(e).__name__}); "
+                             "use a PNG or JPEG file.") from None
+    img = arr.astype(np.float64)
+    img /= 255.0 if arr.dtype == np.uint8 else max(1.0, float(img.max()))
+    if img.ndim == 2:
+        img = img[..., None]
+    if img.shape[2] in (2, 4):
+        img = img[..., :-1]
+    if img.shape[0] != img.shape[1]:
+        raise ImageReadError(f"The image {path} is {img.shape[1]} x {img.shape[0]} pixels; "
+                             "Paparazzi renders square images, so crop it to a square first.")
+    if channels == 3 and img.shape[2] == 1:
+        img = np.repeat(img, 3, axis=2)
+    elif channels == 1 and img.shape[2] == 3:
+        img = img.mean(axis=2, keepdims=True)
+    if resolution is not None and img.shape[0] != resolution:
+        from skimage.transform import resize
+
+        img = resize(img, (resolution, resolution, img.shape[2]), order=1, anti_aliasing=True)
+    return np.ascontiguousarray(img)
+
+
+# ----------------------------------------------------------------------------- guided filter
+def _box(x: np.ndarray, r: int) -> np.ndarray:
+    """Mean over the (2r+1)^2 window clipped to the image (He et al.'s boxfilter / N)."""
+    def sums(a, axis):
+        c = np.cumsum(a, axis=axis)
+        n = a.shape[axis]
+        idx_hi = np.minimum(np.arange(n) + r, n - 1)
+        idx_lo = np.arange(n) - r - 1
+        hi = np.take(c, idx_hi, axis=axis)
+        lo = np.take(c, np.maximum(idx_lo, 0), axis=axis)
+        shape = [1] * a.ndim
+        shape[axis] = n
+        lo = lo * (idx_lo >= 0).reshape(shape)
+        return hi - lo
+    s = sums(sums(x, 0), 1)
+    ones = np.ones(x.shape[:2] + (1,) * (x.ndim - 2))
+    N = sums(sums(ones, 0), 1)
+    return s / N
+
+
+def _upsample(a: np.ndarray, n: int, axis: int) -> np.ndarray:
+    """Bilinear (pixel-centre aligned, edge-clamped) resampling of ``a`` to ``n`` along ``axis``."""
+    m = a.shape[axis]
+    x = np.clip((np.arange(n) + 0.5) * (m / n) - 0.5, 0.0, m - 1.0)
+    i0 = np.minimum(np.floor(x).astype(np.int64), m - 1)
+    i1 = np.minimum(i0 + 1, m - 1)
+    shape = [1] * a.ndim
+    shape[axis] = n
+    w = (x - i0).reshape(shape)
+    return np.take(a, i0, axis=axis) * (1.0 - w) + np.take(a, i1, axis=axis) * w
+
+
+def guided_filter(I: np.ndarray, p: np.ndarray, radius: int, eps: float, subsample: int = 1
+                  ) -> np.ndarray:
+    """Fast guided filter (He and Sun 2015) of ``p (H, W, C)`` with colour guide ``I (H, W, 3)``:
+    the coefficients are computed on images subsampled by ``subsample`` with radius
+    ``radius / subsample`` and bilinearly upsampled. ``subsample=1`` is He et al. 2010."""
+    H, W = I.shape[:2]
+    s = max(1, int(subsample))
+    Is = I[::s, ::s] if s > 1 else I
+    ps = p[::s, ::s] if s > 1 else p
+    r = max(1, int(round(radius / s)))
+    mI = _box(Is, r)                                     # (h, w, 3)
+    mp = _box(ps, r)                                     # (h, w, C)
+    corr_Ip = _box(Is[..., :, None] * ps[..., None, :], r)   # (h, w, 3, C)
+    cov_Ip = corr_Ip - mI[..., :, None] * mp[..., None, :]
+    corr_II = _box(Is[..., :, None] * Is[..., None, :], r)   # (h, w, 3, 3)
+    Sigma = corr_II - mI[..., :, None] * mI[..., None, :] + eps * np.eye(I.shape[2])
+    a = np.linalg.solve(Sigma, cov_Ip)                  # (h, w, 3, C)
+    b = mp - np.einsum("hwk,hwkc->hwc", mI, a)
+    ma = _box(a.reshape(a.shape[0], a.shape[1], -1), r).reshape(a.shape)
+    mb = _box(b, r)
+    if s > 1:
+        ma = _upsample(_upsample(ma, H, 0), W, 1)
+        mb = _upsample(_upsample(mb, H, 0), W, 1)
+    return np.einsum("hwk,hwkc->hwc", I, ma) + mb
+
+
+@dataclass(frozen=True)
+class GuidedParams:
+    radius: int = param(15, label="Radius", minimum=1, maximum=64, step=1,
+                        tooltip="Window radius of the guided filter in pixels (at 128 px). "
+                                "Larger smooths bigger features away.")
+    epsilon: float = param(1e-8, label="Epsilon", minimum=0.0, maximum=1.0, log_scale=True,
+                           decimals=10, tooltip="Edge-preservation threshold: larger values smooth "
+                                                "across weaker edges.")
+    subsample: int = param(4, label="Subsampling", minimum=1, maximum=16, step=1,
+                           tooltip="Fast guided filter speed-up: coefficients are computed on an "
+                                   "image this many times smaller.")
+
+
+@register_filter("guided", kind="iterative", params=GuidedParams, resolution=128,
+                 description="Fast guided filter: edge-preserving smoothing")
+def _guided(image, params: GuidedParams, ctx: FilterContext):
+    return guided_filter(image, image, params.radius, params.epsilon, params.subsample)
+
+
+# ----------------------------------------------------------------------------- quantization
+def icosahedron_face_normals() -> np.ndarray:
+    """(20, 3) unit outward normals of the faces of a regular icosahedron."""
+    from ..mesh.primitives import icosahedron
+
+    V, F = icosahedron()
+    c = V[F].mean(1)
+    return c / np.linalg.norm(c, axis=1, keepdims=True)
+
+
+def _world_shading(params) -> Shading:
+    return LambertianShading(frame="world")
+
+
+@register_filter("quantize", kind="iterative", resolution=256, shading=_world_shading,
+                 description="Quantize normals (world frame) to the 20 icosahedron face normals")
+def _quantize(image, params, ctx: FilterContext):
+    palette = icosahedron_face_normals()
+    n = image.reshape(-1, 3) * 2.0 - 1.0                 # colour -> normal (authors' mapping)
+    k = np.argmax(n @ palette.T, axis=1)
+    out = ((palette[k] + 1.0) / 2.0).reshape(image.shape)
+    return np.where(ctx.mask[..., None], out, image)
+
+
+# ----------------------------------------------------------------------------- SLIC
+@dataclass(frozen=True)
+class SlicParams:
+    segments: int = param(100, label="Segments", minimum=2, maximum=5000, step=10,
+                          tooltip="About how many superpixels each view is cut into.")
+    compactness: float = param(10.0, label="Compactness", minimum=0.01, maximum=1000.0,
+                               log_scale=True, tooltip="Higher values make squarer superpixels; "
+                                                       "lower ones follow colour more.")
+
+
+@register_filter("slic", kind="iterative", params=SlicParams, resolution=256, width=0.3,
+                 description="SLIC superpixels: each superpixel takes its mean colour")
+def _slic(image, params: SlicParams, ctx: FilterContext):
+    from skimage.segmentation import slic
+
+    if ctx.mask.sum() < 4:
+        return image
+    img = np.clip(image, 0.0, 1.0)
+    lab = slic(img, n_segments=params.segments, compactness=params.compactness,
+               mask=ctx.mask, start_label=1, channel_axis=-1)
+    out = image.copy()
+    m = lab > 0
+    L = lab[m]
+    cnt = np.bincount(L)
+    for c in range(image.shape[2]):
+        mean = np.bincount(L, weights=image[..., c][m]) / np.maximum(cnt, 1)
+        out[..., c][m] = mean[L]
+    return out
+
+
+# ----------------------------------------------------------------------------- L0 smoothing
+def l0_smooth(image: np.ndarray, lam: float = 0.01, kappa: float = 2.0,
+              beta_max: float = 1e5) -> np.ndarray:
+    """Image smoothing via L0 gradient minimization (Xu, Lu, Xu, Jia 2011), the half-quadratic
+    splitting of their paper with periodic boundaries (FFT), as in the authors' MATLAB code."""
+    from scipy import fft
+
+    img = np.asarray(image, dtype=np.float64)
+    S = np.ascontiguousarray(np.moveaxis(img, -1, 0))      # (C, H, W): contiguous FFT planes
+    H, W = S.shape[1:]
+    fx = np.zeros((H, W)); fx[0, 0], fx[0, -1] = -1.0, 1.0
+    fy = np.zeros((H, W)); fy[0, 0], fy[-1, 0] = -1.0, 1.0
+    denorm2 = np.abs(fft.rfft2(fx)) ** 2 + np.abs(fft.rfft2(fy)) ** 2
+    normin1 = fft.rfft2(S)
+    beta = 2.0 * lam
+    while beta < beta_max:
+        h = np.roll(S, -1, axis=2) - S
+        v = np.roll(S, -1, axis=1) - S
+        t = (h * h + v * v).sum(axis=0) < lam / beta
+        h[:, t] = 0.0
+        v[:, t] = 0.0
+        normin2 = (np.roll(h, 1, axis=2) - h) + (np.roll(v, 1, axis=1) - v)
+        FS = (normin1 + beta * fft.rfft2(normin2)) / (1.0 + beta * denorm2)
+        S = fft.irfft2(FS, s=(H, W))
+        beta *= kappa
+    return np.moveaxis(S, 0, -1)
+
+
+@dataclass(frozen=True)
+class L0Params:
+    l0_lambda: float = param(0.01, label="λ (L0)", minimum=1e-5, maximum=1.0, log_scale=True,
+                             decimals=5, tooltip="Weight of the L0 gradient penalty: larger "
+                                                 "values give fewer, larger flat regions.")
+    kappa: float = param(2.0, label="κ", minimum=1.05, maximum=10.0, advanced=True,
+                         tooltip="Growth factor of the splitting weight per inner iteration.")
+
+
+@register_filter("l0", kind="iterative", params=L0Params, resolution=256,
+                 description="L0 gradient smoothing: piecewise-constant images, planar shapes")
+def _l0(image, params: L0Params, ctx: FilterContext):
+    return l0_smooth(image, params.l0_lambda, params.kappa)
+
+
+# ----------------------------------------------------------------------------- L2 targets
+@dataclass(frozen=True)
+class TargetImageParams:
+    image: str = param("", label="Target image",
+                       tooltip="A square PNG/JPEG seen from the front camera (it is resized to "
+                               "the render resolution).")
+
+
+def _prepare_target_image(params: TargetImageParams, info: dict):
+    return read_image(params.image, info["resolution"], 3)
+
+
+@register_filter("target-image", kind="energy", params=TargetImageParams,
+                 prepare=_prepare_target_image, single_view=True, resolution=128,
+                 description="L2 distance to a target image from one fixed view")
+def _target_image(image, params, ctx: FilterContext):
+    d = image - ctx.state
+    return 0.5 * float((d * d).sum()), d
+
+
+@dataclass(frozen=True)
+class TargetMeshParams:
+    target: str = param("", label="Target mesh",
+                        tooltip="A mesh whose look is transferred (rendered from the same "
+                                "cameras). It is placed like the input.")
+    single_view: bool = param(False, label="Single view",
+                              tooltip="Only the fixed front view instead of cameras all around.")
+
+
+def _prepare_target_mesh(params: TargetMeshParams, info: dict):
+    from ..mesh import read_mesh
+
+    if not params.target:
+        raise ParameterError("No target mesh was given; choose a mesh file to transfer.")
+    data = read_mesh(params.target)
+    if not np.isfinite(data.V).all() or data.F.min() < 0 or data.F.max() >= len(data.V):
+        raise ParameterError(f"The target mesh {params.target} has invalid coordinates or faces; "
+                             "clean it first (stylize3d clean).")
+    return info["normalize"](data.V), data.F
+
+
+@register_filter("target-mesh", kind="energy", params=TargetMeshParams,
+                 prepare=_prepare_target_mesh, single_view=lambda p: p.single_view,
+                 resolution=128,
+                 description="L2 distance to renderings of another mesh (detail transfer)")
+def _target_mesh(image, params, ctx: FilterContext):
+    VT, FT = ctx.state
+    other = ctx.render_other(VT, FT)
+    both = ctx.mask & ctx.other_mask if ctx.other_mask is not None else ctx.mask
+    d = (image - other) * both[..., None]
+    return 0.5 * float((d * d).sum()), d

@@ -1,0 +1,49 @@
+"""Shape measures that say whether a filter did what it should (issue 12's acceptance).
+
+* :func:`palette_fraction` -- area fraction of faces whose normal is within ``degrees`` of one of
+  the 20 icosahedron face normals (quantization).
+* :func:`planar_area_fraction` -- area fraction of faces whose dihedral angles with all their
+  edge neighbours are below ``degrees`` (L0, SLIC: piecewise-planar shapes).
+* :func:`bending_energy` -- ``sum_i |(L V)_i|^2 / M_ii`` (squared mean-curvature normal, cotangent
+  Laplacian and barycentric mass of :mod:`algorithms.mesh.operators`; a discrete Willmore energy,
+  invariant to scale; guided-filter smoothing lowers it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..mesh.operators import cotangent_laplacian_psd, face_areas, face_normals, mass_matrix
+from ..mesh.topology import edge_flaps
+from .filters import icosahedron_face_normals
+
+__all__ = ["palette_fraction", "planar_area_fraction", "bending_energy"]
+
+
+def palette_fraction(V, F, degrees: float = 15.0, palette=None) -> float:
+    P = icosahedron_face_normals() if palette is None else np.asarray(palette, float)
+    N = face_normals(V, F)
+    A = face_areas(V, F)
+    close = (N @ P.T).max(axis=1) >= np.cos(np.radians(degrees))
+    return float(A[close].sum() / A.sum())
+
+
+def planar_area_fraction(V, F, degrees: float = 3.0) -> float:
+    N = face_normals(V, F)
+    A = face_areas(V, F)
+    E, EMAP, EF, EI = edge_flaps(F)
+    inner = (EF >= 0).all(axis=1)
+    f0, f1 = EF[inner, 0], EF[inner, 1]
+    ang = np.degrees(np.arccos(np.clip((N[f0] * N[f1]).sum(1), -1, 1)))
+    worst = np.zeros(len(F))
+    np.maximum.at(worst, f0, ang)
+    np.maximum.at(worst, f1, ang)
+    return float(A[worst < degrees].sum() / A.sum())
+
+
+def bending_energy(V, F) -> float:
+    V = np.asarray(V, float)
+    L = cotangent_laplacian_psd(V, F)
+    M = mass_matrix(V, F).diagonal()
+    LV = L @ V
+    return float(((LV ** 2).sum(1) / np.maximum(M, 1e-300)).sum())

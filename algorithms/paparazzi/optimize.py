@@ -1,0 +1,376 @@
+"""Paparazzi: stochastic multi-view optimization of a mesh through image filters (thesis ch. 2).
+
+Per iteration (thesis Alg. at 204-220 for energy filters, 235-248 for iterative filters):
+sample a camera on the offset surface (or use the fixed front view for single-view filters),
+render ``R`` (flat shading, :mod:`algorithms.render`), get ``dE/dR`` from the filter (energy
+filters) or ``-(f(R) - R)`` (iterative filters), pull it back to the vertices with the analytic
+vector-Jacobian product and take a NAdam step.
+
+Choices (written down here, tested in tests/algorithms/paparazzi/)
+------------------------------------------------------------------
+* Frame: the mesh is moved into ``[-1, 1]^3`` (longest side 2; the thesis's "unit-radius cube",
+  OpenGL canonical units) while optimizing and moved back at the end, so σ = 0.1 and the 0.5-wide
+  orthographic view mean what they mean in the thesis. ``sigma`` is in those units; the bounding
+  box diagonal of a normalized shape is at most 3.46, so the thesis's 5 %-25 % of the diagonal is
+  about 0.1-0.85.
+* NAdam (Dozat 2016, the form without momentum schedule): ``m, v`` with β1 = 0.9, β2 = 0.999,
+  ε = 1e-8, step ``lr (β1 m̂ + (1-β1) g / (1-β1^t)) / (sqrt(v̂) + ε)``; the learning rate is
+  divided by 5 at 90 % of the iterations (the authors' schedule).
+* Mesh quality without El Topo: every ``remesh_every`` iterations (default 30) the mesh is first
+  checked for self-intersections (``igl.predicates.find_self_intersections``, exact predicates);
+  if the steps since the last check created any, the mesh is rolled back to the last checked
+  state and the learning rate is halved (step shrinking). Otherwise it is remeshed isotropically
+  (``gpytoolbox.remesh_botsch``, target edge length = the input's mean edge length, boundary
+  vertices kept fixed as features, reprojection on) and the remeshed mesh is accepted only if it is
+  still a 2-manifold with the input's Euler characteristic and boundary-loop count and no new
+  self-intersections (else the un-remeshed mesh is kept). Remeshing resets the optimizer moments
+  (the authors' practice). The output is checked the same way; if the last steps created
+  intersections, the last checked state is returned. "No self-intersections" means no more
+  intersecting face pairs than the input had (0 for a clean input).
+* Boundary vertices do not move (their gradient is zeroed), so a boundary loop stays where it is.
+* Monitor energy (thesis 353-356): a fixed camera (the first offset sample of a separate seeded
+  stream, or the fixed view) is rendered every ``monitor_every`` iterations; its energy is ``E``
+  for energy filters and ``1/2 |f(R) - R|^2`` for iterative ones.
+* Same seed, same result: all randomness comes from ``numpy.random.default_rng(seed)``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Iterator
+
+import numpy as np
+
+from ..errors import InvalidMeshError, ParameterError, Stylize3DError
+from ..params import param, validate_params
+from ..render import image_vjp, render
+from ..steps import Step
+from .filters import FilterContext, FilterSpec, front_camera, get_filter
+from .offset import OffsetSurface, offset_surface, sample_camera
+
+__all__ = ["PaparazziParams", "PaparazziStep", "Paparazzi", "paparazzi_iter", "paparazzi",
+           "FilterFailed", "count_self_intersections", "nadam_step"]
+
+
+class FilterFailed(Stylize3DError):
+    """The image filter raised; the run stops with its message."""
+
+    exit_code = 6
+
+
+@dataclass(frozen=True)
+class PaparazziParams:
+    iterations: int = param(1000, label="Iterations", minimum=1, maximum=100000, step=100,
+                            tooltip="How many views to render and filter. The thesis uses "
+                                    "1000-3000; more gives a stronger effect.")
+    learning_rate: float = param(2e-4, label="Learning rate", minimum=1e-7, maximum=0.1,
+                                 log_scale=True, decimals=7,
+                                 tooltip="NAdam step size (in units of the shape normalized to "
+                                         "a cube of side 2). Larger moves faster but may need "
+                                         "more self-intersection rollbacks.")
+    sigma: float = param(0.0, label="Camera offset σ", minimum=0.0, maximum=1.0, decimals=3,
+                         tooltip="Distance of the camera cage from the shape (shape in a cube of "
+                                 "side 2). 0 = the filter's default (0.1).")
+    resolution: int = param(0, label="Resolution", minimum=0, maximum=1024, step=32,
+                            tooltip="Rendered image size in pixels. 0 = the filter's default "
+                                    "(128 or 256).")
+    view_width: float = param(0.0, label="View width", minimum=0.0, maximum=4.0, decimals=3,
+                              tooltip="Width of the orthographic view. 0 = the filter's default "
+                                      "(0.5; SLIC 0.3).")
+    remesh_every: int = param(30, label="Remesh every", minimum=0, maximum=10000, step=10,
+                              tooltip="Remesh and check for self-intersections every this many "
+                                      "iterations (0 = only check at the end).")
+    remesh_iterations: int = param(1, label="Remesh passes", minimum=1, maximum=20, advanced=True,
+                                   tooltip="Split/collapse/flip/relax passes per remeshing.")
+    monitor_every: int = param(10, label="Monitor every", minimum=0, maximum=10000,
+                               advanced=True, tooltip="Evaluate the fixed monitor view every "
+                                                      "this many iterations (0 = only at the end).")
+    upsample_vertices: int = param(0, label="Upsample to", minimum=0, maximum=2_000_000,
+                                   step=10000, advanced=True,
+                                   tooltip="Loop-subdivide the input until it has at least this "
+                                           "many vertices (0 = no upsampling; the thesis uses "
+                                           "10^5-10^6).")
+    seed: int = param(0, label="Seed", minimum=0, maximum=2**31 - 1,
+                      tooltip="Random seed of the camera sampling: the same seed gives the "
+                              "same result.")
+
+
+@dataclass
+class PaparazziStep(Step):
+    """A :class:`Step` that also carries the (possibly remeshed) faces and the last view."""
+
+    F: np.ndarray | None = None
+    image: np.ndarray | None = None
+    filtered: np.ndarray | None = None
+    seconds: dict = field(default_factory=dict)
+
+
+def nadam_step(g, m, v, t: int, lr: float, b1: float = 0.9, b2: float = 0.999,
+               eps: float = 1e-8) -> np.ndarray:
+    """One NAdam step (Dozat 2016, no momentum schedule): updates the moments ``m``, ``v`` in
+    place and returns the displacement to subtract. ``t`` is the 1-based step count."""
+    m *= b1
+    m += (1 - b1) * g
+    v *= b2
+    v += (1 - b2) * g * g
+    mhat = m / (1 - b1 ** t)
+    vhat = v / (1 - b2 ** t)
+    return lr * (b1 * mhat + (1 - b1) * g / (1 - b1 ** t)) / (np.sqrt(vhat) + eps)
+
+
+def count_self_intersections(V, F) -> int:
+    """Number of intersecting face pairs (libigl, exact predicates)."""
+    import igl.predicates
+
+    found, IF, _ = igl.predicates.find_self_intersections(
+        np.ascontiguousarray(V, dtype=np.float64), np.ascontiguousarray(F, dtype=np.int64), False)
+    return int(len(IF)) if found else 0
+
+
+def _topology(F) -> tuple[int, int, bool]:
+    from ..mesh.topology import boundary_loops, euler_characteristic, is_manifold
+
+    return euler_characteristic(F), len(boundary_loops(F)), is_manifold(F)
+
+
+class Paparazzi:
+    """One Paparazzi run: precomputes the normalization, offset surface and filter state.
+
+    Parameters
+    ----------
+    V, F : the input mesh (a 2-manifold; boundaries allowed).
+    filter : a registered filter name or :class:`FilterSpec`.
+    filter_params : that filter's Params (default: its defaults).
+    params : :class:`PaparazziParams`.
+    """
+
+    def __init__(self, V, F, filter: str | FilterSpec = "guided", filter_params: Any = None,
+                 params: PaparazziParams | None = None):
+        self.params = validate_params(params or PaparazziParams())
+        self.spec = get_filter(filter) if isinstance(filter, str) else filter
+        self.filter_params = validate_params(filter_params if filter_params is not None
+                                             else self.spec.params())
+        if not isinstance(self.filter_params, self.spec.params):
+            raise ParameterError(f"The {self.spec.name} filter expects {self.spec.params.__name__} "
+                                 f"parameters.")
+        V = np.asarray(V, dtype=np.float64)
+        F = np.asarray(F, dtype=np.int64)
+        self._check_input(V, F)
+        from ..mesh.operators import normalize_unit_box
+
+        Vu, self.center, scale = normalize_unit_box(V)
+        self.scale = scale / 2.0            # world = V_opt * self.scale + center
+        V0 = Vu * 2.0
+        F0 = F.copy()
+        p = self.params
+        if p.upsample_vertices and len(V0) < p.upsample_vertices:
+            from ..mesh.subdivision import loop_subdivide
+
+            while len(V0) < p.upsample_vertices:
+                V0, F0 = loop_subdivide(V0, F0, 1)
+        self.V0, self.F0 = V0, F0
+        self.topology = _topology(F0)
+        import igl
+
+        self.edge_length = float(igl.edge_lengths(V0, F0).mean())
+        self.input_intersections = count_self_intersections(V0, F0)
+        self.resolution = p.resolution or self.spec.resolution
+        self.width = p.view_width or self.spec.width
+        self.sigma = p.sigma or self.spec.sigma
+        self.single_view = self.spec.is_single_view(self.filter_params)
+        self.shading = self.spec.make_shading(self.filter_params)
+        info = {"normalize": lambda X: (np.asarray(X, float) - self.center) / self.scale,
+                "resolution": self.resolution}
+        self.state = (self.spec.prepare(self.filter_params, info)
+                      if self.spec.prepare is not None else None)
+        self.offset: OffsetSurface | None = None
+        if not self.single_view:
+            self.offset = offset_surface(V0, F0, self.sigma)
+
+    @staticmethod
+    def _check_input(V, F) -> None:
+        from ..mesh.topology import is_manifold
+
+        if V.ndim != 2 or V.shape[1] != 3 or len(V) < 4 or F.ndim != 2 or F.shape[1] != 3 \
+                or len(F) < 4:
+            raise InvalidMeshError("Paparazzi needs a triangle mesh with at least 4 triangles.")
+        if not np.isfinite(V).all() or F.min() < 0 or F.max() >= len(V):
+            raise InvalidMeshError("The mesh has invalid coordinates or face indices; clean it "
+                                   "first (stylize3d clean, or Clean in the app).")
+        if not is_manifold(F):
+            raise InvalidMeshError(
+                "Paparazzi needs a 2-manifold mesh (every edge shared by at most two triangles, "
+                "every vertex with a single fan of triangles), because it remeshes the surface "
+                "as it goes. This mesh is not; run Clean (stylize3d clean) first.")
+
+    # -------------------------------------------------------------------- pieces
+    def to_world(self, X) -> np.ndarray:
+        return np.asarray(X) * self.scale + self.center
+
+    def camera(self, rng: np.random.Generator):
+        if self.single_view:
+            return front_camera(self.resolution)
+        return sample_camera(self.offset, rng, width=self.width, resolution=self.resolution)
+
+    def _context(self, r, camera):
+        ctx = FilterContext(camera=camera, mask=r.mask, state=self.state)
+
+        def render_other(VT, FT):
+            o = render(VT, FT, camera, self.shading)
+            ctx.other_mask = o.mask
+            return o.image
+        ctx.render_other = render_other
+        return ctx
+
+    def evaluate(self, V, F, camera):
+        """(energy, dE/dR, rendering, filtered image or None) for one view."""
+        r = render(V, F, camera, self.shading)
+        return self._filter(r, self._context(r, camera))
+
+    def _remesh(self, V, F):
+        import gpytoolbox
+
+        from ..mesh.topology import boundary_edges
+
+        b = np.unique(boundary_edges(F).ravel()) if self.topology[1] else np.array([], np.int64)
+        U, G = gpytoolbox.remesh_botsch(np.ascontiguousarray(V), np.ascontiguousarray(F, np.int32),
+                                        i=self.params.remesh_iterations, h=self.edge_length,
+                                        project=True, feature=b.astype(np.int64))
+        return np.ascontiguousarray(U, np.float64), np.ascontiguousarray(G, np.int64)
+
+    def _acceptable(self, V, F) -> bool:
+        if _topology(F) != self.topology:
+            return False
+        return count_self_intersections(V, F) <= self.input_intersections
+
+    # -------------------------------------------------------------------- the loop
+    def steps(self) -> Iterator[PaparazziStep]:
+        p = self.params
+        rng = np.random.default_rng(p.seed)
+        mon_rng = np.random.default_rng([p.seed, 1])
+        monitor_cam = self.camera(mon_rng)
+        V, F = self.V0.copy(), self.F0.copy()
+        good = (V.copy(), F.copy())
+        m = np.zeros_like(V)
+        v = np.zeros_like(V)
+        t_adam = 0
+        lr_scale = 1.0
+        secs = {"render": 0.0, "filter": 0.0, "derivative": 0.0, "remesh": 0.0, "monitor": 0.0}
+        counts = {"remeshes": 0, "rollbacks": 0, "remesh_rejected": 0}
+        tm = time.perf_counter()
+        monitor0 = monitor = self.evaluate(V, F, monitor_cam)[0]
+        secs["monitor"] += time.perf_counter() - tm
+        free = self._free_mask(F)
+        N = p.iterations
+        for it in range(1, N + 1):
+            cam = self.camera(rng)
+            t0 = time.perf_counter()
+            r = render(V, F, cam, self.shading)
+            t1 = time.perf_counter()
+            ctx = self._context(r, cam)
+            E, G, _, filtered = self._filter(r, ctx)
+            t2 = time.perf_counter()
+            g = image_vjp(V, F, r, G)
+            g[~free] = 0.0
+            t3 = time.perf_counter()
+            secs["render"] += t1 - t0
+            secs["filter"] += t2 - t1
+            secs["derivative"] += t3 - t2
+            t_adam += 1
+            lr = p.learning_rate * lr_scale * (0.2 if it > 0.9 * N else 1.0)
+            V = V - nadam_step(g, m, v, t_adam, lr)
+            t4 = time.perf_counter()
+            secs["derivative"] += t4 - t3
+            message = ""
+            if (p.remesh_every and it % p.remesh_every == 0) or it == N:
+                tr = time.perf_counter()
+                if count_self_intersections(V, F) > self.input_intersections:
+                    V, F = good[0].copy(), good[1].copy()
+                    lr_scale *= 0.5
+                    counts["rollbacks"] += 1
+                    message = "self-intersection: rolled back and halved the step"
+                    if lr_scale < 1.0 / 1024:
+                        raise Stylize3DError(
+                            "Paparazzi could not keep the mesh free of self-intersections even "
+                            "with a 1000 times smaller step; try a smaller learning rate or a "
+                            "larger remeshing frequency.")
+                elif p.remesh_every and it < N:
+                    U, Gf = self._remesh(V, F)
+                    counts["remeshes"] += 1
+                    if self._acceptable(U, Gf):
+                        V, F = U, Gf
+                    else:
+                        counts["remesh_rejected"] += 1
+                good = (V.copy(), F.copy())
+                m = np.zeros_like(V)
+                v = np.zeros_like(V)
+                t_adam = 0
+                free = self._free_mask(F)
+                secs["remesh"] += time.perf_counter() - tr
+            if (p.monitor_every and it % p.monitor_every == 0) or it == N:
+                tm = time.perf_counter()
+                monitor = self.evaluate(V, F, monitor_cam)[0]
+                secs["monitor"] += time.perf_counter() - tm
+            metrics = {"energy": float(E), "monitor_energy": monitor,
+                       "initial_monitor_energy": monitor0, "learning_rate": lr,
+                       "vertices": float(len(V)), **{k: float(c) for k, c in counts.items()}}
+            yield PaparazziStep(it, N, self.to_world(V), metrics, message, F=F.copy(),
+                                image=r.image, filtered=filtered if filtered is not None
+                                else r.image - G, seconds=dict(secs))
+
+    def _filter(self, r, ctx):
+        try:
+            out = self.spec.function(r.image, self.filter_params, ctx)
+        except Stylize3DError:
+            raise
+        except Exception as e:  # noqa: BLE001
+            raise FilterFailed(f"The image filter '{self.spec.name}' failed: "
+                               f"{type(e).__name__}: {e}") from e
+        if self.spec.kind == "energy":
+            try:
+                E, G = out
+                E = float(E)
+                G = np.asarray(G, dtype=np.float64).reshape(r.image.shape)
+            except Exception as e:  # noqa: BLE001
+                raise FilterFailed(f"The energy filter '{self.spec.name}' must return (energy, "
+                                   f"gradient image of shape {r.image.shape}).") from e
+            filtered = None
+        else:
+            try:
+                filtered = np.asarray(out, dtype=np.float64).reshape(r.image.shape)
+            except Exception as e:  # noqa: BLE001
+                raise FilterFailed(f"The image filter '{self.spec.name}' must return an image "
+                                   f"of shape {r.image.shape}.") from e
+            D = filtered - r.image
+            D[~r.mask] = 0.0
+            E = 0.5 * float((D * D).sum())
+            G = -D
+        if not (np.isfinite(E) and np.isfinite(G).all()):
+            raise FilterFailed(f"The image filter '{self.spec.name}' returned NaN or infinite "
+                               "values.")
+        return E, G, r, filtered
+
+    def _free_mask(self, F) -> np.ndarray:
+        from ..mesh.topology import boundary_edges
+
+        n = int(F.max()) + 1
+        free = np.ones(n, dtype=bool)
+        if self.topology[1]:
+            free[np.unique(boundary_edges(F).ravel())] = False
+        return free
+
+
+def paparazzi_iter(V, F, filter: str | FilterSpec = "guided", filter_params: Any = None,
+                   params: PaparazziParams | None = None) -> Iterator[PaparazziStep]:
+    """The house generator form: ``Paparazzi(...).steps()``."""
+    return Paparazzi(V, F, filter, filter_params, params).steps()
+
+
+def paparazzi(V, F, filter: str | FilterSpec = "guided", filter_params: Any = None,
+              params: PaparazziParams | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Run to the end; returns the output ``(V, F)`` in the input's coordinates."""
+    last = None
+    for last in paparazzi_iter(V, F, filter, filter_params, params):
+        pass
+    return last.V, last.F
