@@ -10,15 +10,19 @@ from PySide6.QtWidgets import QApplication
 from app.main_window import APP_NAME, MainWindow
 
 
-def run_app(mesh: str | None = None, screenshot: str | None = None) -> int:
+def run_app(mesh: str | None = None, screenshot: str | None = None,
+            study: dict | None = None) -> int:
     app = QApplication.instance() or QApplication(sys.argv[:1])
     app.setApplicationName(APP_NAME)
     app.setOrganizationName(APP_NAME)
     win = MainWindow()
+    sys.excepthook = make_excepthook(win)
     win.show()
     status = {"code": 0}
     if mesh:
         QTimer.singleShot(0, lambda: win.open_path(mesh))
+    if study:
+        QTimer.singleShot(0, lambda: _start_study(win, study, status))
     if screenshot:
         def shoot():
             if mesh and win.document.is_empty:
@@ -33,3 +37,53 @@ def run_app(mesh: str | None = None, screenshot: str | None = None) -> int:
         QTimer.singleShot(1500, shoot)
     rc = app.exec()
     return status["code"] or rc
+
+
+def _start_study(win, study: dict, status: dict) -> None:
+    """User-study mode (app/study/session.py); a protocol that cannot be run says why and quits."""
+    from algorithms.errors import Stylize3DError
+    from app import dialogs
+    from app.study.session import start_study
+
+    try:
+        session = start_study(win, study["protocol"], log_dir=study.get("log_dir"),
+                              participant=study.get("participant"),
+                              condition=study.get("condition"))
+    except Stylize3DError as e:
+        dialogs.error(win, "Cannot start the study session", str(e))
+        status["code"] = e.exit_code
+        win.close()
+        return
+    if session is None:  # the experimenter cancelled the start dialog
+        win.close()
+
+
+def make_excepthook(win):
+    """An exception that escapes a slot (a defect of ours) becomes a plain dialog with the
+    traceback under "Show Details", instead of text on a terminal the user never sees; the app
+    keeps running and the document is as the last finished command left it."""
+    import traceback
+
+    from algorithms.errors import Stylize3DError
+    from app import dialogs
+
+    def hook(etype, value, tb):
+        if issubclass(etype, KeyboardInterrupt):
+            sys.__excepthook__(etype, value, tb)
+            return
+        details = "".join(traceback.format_exception(etype, value, tb))
+        print(details, file=sys.stderr)
+        if isinstance(value, Stylize3DError):
+            dialogs.error(win, "Stylize3D", str(value))
+            return
+        what = ("The computer ran out of memory" if issubclass(etype, MemoryError)
+                else f"An unexpected error stopped the action ({etype.__name__}: {value})")
+        try:
+            dialogs.error(win, "Something went wrong",
+                          f"{what}. Your mesh is as the last finished step left it; Undo "
+                          "(Ctrl+Z) works as before. Please report this with the details below.",
+                          details)
+        except Exception:  # never raise from the hook itself
+            pass
+
+    return hook

@@ -42,3 +42,21 @@ def test_status_bar_sends_to_clean_when_clean_can_fix(window, dialogs, tmp_path)
     dialogs.answers.append("Open as it is")
     assert window.open_path(path)
     assert "Edit > Clean Mesh" in window.stats_label.text()
+
+
+def test_unexpected_error_in_a_slot_is_a_plain_dialog(window, dialogs):
+    from app.gui import make_excepthook
+
+    hook = make_excepthook(window)
+    try:
+        raise RuntimeError("Factor is exactly singular")
+    except RuntimeError as e:
+        hook(type(e), e, e.__traceback__)
+    title, text = dialogs.errors[-1]
+    assert title == "Something went wrong" and "Factor is exactly singular" in text
+    assert "Traceback" not in text and "Undo" in text
+    try:
+        raise MemoryError()
+    except MemoryError as e:
+        hook(type(e), e, e.__traceback__)
+    assert "ran out of memory" in dialogs.errors[-1][1]
