@@ -221,7 +221,9 @@ def cost_image_gradients(classifier, images: np.ndarray, decrease: Sequence[int 
 
     Returns ``(cost, dC/dI (B, S, S, 3), probabilities (B, K))``."""
     torch = _torch()
-    x = torch.from_numpy(np.ascontiguousarray(images.transpose(0, 3, 1, 2), dtype=np.float32))
+    dtype = getattr(classifier, "dtype", torch.float32)
+    x = torch.from_numpy(np.ascontiguousarray(images.transpose(0, 3, 1, 2),
+                                              dtype=np.float64)).to(dtype)
     x.requires_grad_(True)
     logits = classifier.logits(x)
     logp = torch.log_softmax(logits, dim=1)

@@ -81,13 +81,15 @@ class TorchClassifier:
         self.class_names = tuple(class_names)
         self.input_size = int(input_size)
         self.name = name
-        self._mean = torch.tensor(mean, dtype=torch.float32).view(1, 3, 1, 1)
-        self._std = torch.tensor(std, dtype=torch.float32).view(1, 3, 1, 1)
+        first = next(iter(self.model.parameters()), None)
+        self.dtype = first.dtype if first is not None else torch.float32
+        self._mean = torch.tensor(mean, dtype=self.dtype).view(1, 3, 1, 1)
+        self._std = torch.tensor(std, dtype=self.dtype).view(1, 3, 1, 1)
 
     def logits(self, images):
         import torch
 
-        x = images.to(torch.float32)
+        x = images.to(self.dtype)
         if x.ndim == 3:
             x = x[None]
         if x.shape[-1] != self.input_size or x.shape[-2] != self.input_size:

@@ -1,0 +1,178 @@
+"""Parametric adversaries: labels, classifier files, the cost's image gradient, the chain rule
+through the SH renderer against finite differences, and small attacks on a recognized model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+torch.set_num_threads(1)
+
+from algorithms.adversarial import (AdversaryParams, ClassifierLoadError,  # noqa: E402
+                                    TorchClassifier, attack, attack_iter, cost_image_gradients,
+                                    default_classifier, evaluate, load_classifier,
+                                    orbit_cameras, prepare_scene, random_perturbation,
+                                    render_views, resolve_label)
+from algorithms.adversarial.attack import _parameter_gradient  # noqa: E402
+from algorithms.adversarial.shapes import SUBJECTS  # noqa: E402
+from algorithms.errors import ParameterError  # noqa: E402
+from algorithms.render import look_at  # noqa: E402
+
+NAMES = ["tench, Tinca tinca", "coffee mug", "teapot", "cup"]
+
+
+def test_labels_names_synonyms_numbers_and_suggestions():
+    assert resolve_label("Coffee Mug", NAMES) == 1
+    assert resolve_label("Tinca tinca", NAMES) == 0
+    assert resolve_label("2", NAMES) == 2
+    with pytest.raises(ParameterError, match="Did you mean: 'coffee mug'"):
+        resolve_label("cofee mug", NAMES)
+    with pytest.raises(ParameterError, match="classes 0 to 3"):
+        resolve_label("7", NAMES)
+
+
+class _Toy(torch.nn.Module):
+    """A small smooth classifier: average-pooled colours -> 4 logits."""
+
+    def __init__(self):
+        super().__init__()
+        g = torch.Generator().manual_seed(0)
+        self.w = torch.nn.Parameter(torch.randn(4, 3 * 16, generator=g))
+
+    def forward(self, x):
+        p = torch.nn.functional.adaptive_avg_pool2d(x, 4).flatten(1)
+        return p @ self.w.T
+
+
+def _toy(dtype=torch.float32):
+    return TorchClassifier(_Toy().to(dtype), NAMES, input_size=32)
+
+
+def test_classifier_files_are_loaded_safely_with_plain_errors(tmp_path):
+    text = tmp_path / "notes.pt"
+    text.write_text("hello, I am not a model")
+    with pytest.raises(ClassifierLoadError, match="not a model file"):
+        load_classifier(text)
+    # a pickle that would run code when unpickled: refused, and the code never runs
+    marker = tmp_path / "ran.txt"
+
+    class Evil:
+        def __reduce__(self):
+            return (open, (str(marker), "w"))
+
+    evil = tmp_path / "evil.pt"
+    torch.save({"x": Evil()}, evil)
+    with pytest.raises(ClassifierLoadError, match="refused for safety"):
+        load_classifier(evil)
+    assert not marker.exists()
+    weights = tmp_path / "weights.pt"
+    torch.save({"conv.weight": torch.zeros(2, 2)}, weights)
+    with pytest.raises(ClassifierLoadError, match="torch.jit.save"):
+        load_classifier(weights)
+    data = tmp_path / "data.pt"
+    torch.save([1, 2, 3], data)
+    with pytest.raises(ClassifierLoadError, match="holds data"):
+        load_classifier(data)
+    # a TorchScript model loads, and its classes are named when it is not ImageNet's
+    ts = tmp_path / "toy.pt"
+    torch.jit.script(_Toy()).save(str(ts))
+    clf = load_classifier(ts, input_size=32)
+    assert clf.class_names == ("class 0", "class 1", "class 2", "class 3")
+    assert tuple(clf.logits(torch.zeros(2, 3, 32, 32)).shape) == (2, 4)
+
+
+def test_cost_gradient_is_eq_3_1_and_matches_finite_differences():
+    clf = _toy()
+    rng = np.random.default_rng(0)
+    images = rng.random((2, 32, 32, 3))
+    cost, g, p = cost_image_gradients(clf, images, [1, 2], [None, 3])
+    x = torch.tensor(images.transpose(0, 3, 1, 2), dtype=torch.float32)
+    logp = torch.log_softmax(clf.logits(x), 1).detach().double().numpy()
+    assert cost == pytest.approx(logp[0, 1] + logp[1, 2] - logp[1, 3], rel=1e-5)
+    D = rng.standard_normal(images.shape)
+    eps = 1e-2
+    fd = (cost_image_gradients(clf, images + eps * D, [1, 2], [None, 3])[0]
+          - cost_image_gradients(clf, images - eps * D, [1, 2], [None, 3])[0]) / (2 * eps)
+    assert fd == pytest.approx(float((g * D).sum()), rel=1e-2)
+
+
+@pytest.mark.parametrize("mode", ["lighting", "geometry"])
+def test_chain_rule_through_renderer_and_classifier_matches_finite_differences(mode):
+    V, F, A = SUBJECTS["orange"]()
+    scene = prepare_scene(V, F, albedo=A)
+    cams = orbit_cameras([20.0, 200.0], resolution=64)
+    clf = _toy(torch.float64)
+
+    def cost_at(x):
+        kw = {"lighting": x} if mode == "lighting" else {"V": x}
+        images, renders, raw = render_views(scene, cams, supersample=2, **kw)
+        c, gI, _ = cost_image_gradients(clf, images, [1, 1], [2, None])
+        return c, gI, renders, raw
+
+    x0 = scene.lighting if mode == "lighting" else scene.V
+    c, gI, renders, raw = cost_at(x0)
+    g = _parameter_gradient(scene, renders, scene.V, raw, gI, mode, 2)
+    assert g.shape == x0.shape
+    rng = np.random.default_rng(1)
+    D = rng.standard_normal(x0.shape)
+    # float64 classifier; displacements of 1e-8 (1e-6 pixel) leave visibility fixed
+    eps = 1e-8 if mode == "geometry" else 1e-5
+    fd = (cost_at(x0 + eps * D)[0] - cost_at(x0 - eps * D)[0]) / (2 * eps)
+    assert fd == pytest.approx(float((g * D).sum()), rel=1e-4)
+
+
+@pytest.fixture(scope="module")
+def mug():
+    V, F, A = SUBJECTS["coffee mug"]()
+    return prepare_scene(V, F, albedo=A)
+
+
+@pytest.fixture(scope="module")
+def clf():
+    return default_classifier()
+
+
+def test_lighting_attack_streams_steps_and_stays_in_the_ball(mug, clf):
+    cams = orbit_cameras([0.0, 180.0])
+    params = AdversaryParams(mode="lighting", iterations=2)
+    steps = list(attack_iter(mug, clf, cams, params, decrease="coffee mug"))
+    assert [s.iteration for s in steps] == [0, 1, 2]
+    assert steps[0].images.shape == (2, 224, 224, 3)
+    assert steps[0].top5[0][0][0] == "coffee mug"          # recognized before the attack
+    assert np.abs(steps[-1].lighting - mug.lighting).max() <= 0.1 + 1e-12
+    assert np.abs(steps[-1].lighting - mug.lighting).max() > 0
+    # the cost goes down (confidence in the true class decreases)
+    assert steps[-1].metrics["confidence_decreased"] < steps[0].metrics["confidence_decreased"]
+    np.testing.assert_allclose(steps[-1].V, mug.to_original(mug.V))   # geometry untouched
+
+
+def test_geometry_attack_and_random_baseline_keep_the_norm(mug, clf):
+    cams = orbit_cameras([0.0])
+    res = attack(mug, clf, cams, AdversaryParams(mode="geometry", iterations=1))
+    assert res.V.shape == (len(mug.V), 3)
+    assert 0 < res.norm <= 0.002 + 1e-12
+    assert np.abs((res.V - mug.to_original(mug.V)) / mug.scale).max() <= 0.002 + 1e-12
+    assert res.views[0].label_before == "coffee mug"
+    x = random_perturbation(mug, "geometry", 0.002, seed=3)
+    np.testing.assert_allclose(np.abs(x - mug.V), 0.002)
+    top, p = evaluate(mug, clf, orbit_cameras([90.0]), V=x)      # an unseen view
+    assert p.shape == (1, 1000) and top.shape == (1,)
+
+
+def test_optical_illusion_takes_one_target_per_view(mug, clf):
+    cams = orbit_cameras([0.0, 90.0])
+    steps = list(attack_iter(mug, clf, cams, AdversaryParams(iterations=1),
+                             increase=["cup", "bucket"]))
+    assert steps[0].metrics["confidence_increased"] < steps[-1].metrics["confidence_increased"]
+    with pytest.raises(ParameterError, match="one per view"):
+        next(attack_iter(mug, clf, cams, AdversaryParams(iterations=1),
+                         increase=["cup", "bucket", "pail"]))
+    with pytest.raises(ParameterError, match="Did you mean"):
+        next(attack_iter(mug, clf, cams, AdversaryParams(iterations=1), increase="coffe mug"))
+
+
+def test_a_view_that_does_not_see_the_shape_is_refused(mug, clf):
+    away = look_at((0, 0, 3), (0, 0, 6), width=1.5, resolution=448)
+    with pytest.raises(ParameterError, match="not visible from view 1"):
+        next(attack_iter(mug, clf, [away]))
