@@ -13,7 +13,7 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   orthographic view mean what they mean in the thesis. ``sigma`` is in those units; the bounding
   box diagonal of a normalized shape is at most 3.46, so the thesis's 5 %-25 % of the diagonal is
   about 0.1-0.85.
-* NAdam (Dozat 2016, the form without momentum schedule): ``m, v`` with β1 = 0.9, β2 = 0.999,
+* NAdam (Dozat 2016) in the form of Ruder's overview (thesis cites Ruder 2016; no momentum schedule): ``m, v`` with β1 = 0.9, β2 = 0.999,
   ε = 1e-8, step ``lr (β1 m̂ + (1-β1) g / (1-β1^t)) / (sqrt(v̂) + ε)``; the learning rate is
   divided by 5 at 90 % of the iterations (the authors' schedule).
 * Mesh quality without El Topo: every ``remesh_every`` iterations (default 30) the mesh is first

@@ -1,0 +1,147 @@
+"""Image filters of Paparazzi and their registry."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from algorithms.errors import ParameterError
+from algorithms.paparazzi import (FilterContext, ImageReadError, filter_names, get_filter,
+                                  read_image, register_filter, unregister_filter)
+from algorithms.paparazzi.filters import guided_filter, icosahedron_face_normals, l0_smooth
+from algorithms.params import param
+from algorithms.render import look_at
+
+
+def _reference_guided(I, p, r, eps):
+    """He et al. 2010 colour guided filter with SciPy box means (independent implementation)."""
+    from scipy.ndimage import uniform_filter
+
+    box = lambda x: uniform_filter(x, size=(2 * r + 1, 2 * r + 1), mode="constant")  # noqa: E731
+    out = np.empty_like(p)
+    mI = np.stack([box(I[..., k]) for k in range(3)], -1)
+    S = np.empty(I.shape[:2] + (3, 3))
+    for a in range(3):
+        for b in range(3):
+            S[..., a, b] = box(I[..., a] * I[..., b]) - mI[..., a] * mI[..., b]
+    S += eps * np.eye(3)
+    for c in range(p.shape[2]):
+        mp = box(p[..., c])
+        cov = np.stack([box(I[..., k] * p[..., c]) - mI[..., k] * mp for k in range(3)], -1)
+        a = np.linalg.solve(S, cov[..., None])[..., 0]
+        b = mp - (a * mI).sum(-1)
+        ma = np.stack([box(a[..., k]) for k in range(3)], -1)
+        out[..., c] = (ma * I).sum(-1) + box(b)
+    return out
+
+
+def test_guided_filter_matches_an_independent_implementation_away_from_the_border():
+    rng = np.random.default_rng(0)
+    I = rng.random((40, 40, 3))
+    p = rng.random((40, 40, 2))
+    r = 3
+    ours = guided_filter(I, p, r, 0.05, subsample=1)
+    ref = _reference_guided(I, p, r, 0.05)
+    inner = slice(2 * r + 1, -2 * r - 1)
+    np.testing.assert_allclose(ours[inner, inner], ref[inner, inner], atol=1e-10)
+    # constant images are fixed points; a noisy image gets smoother
+    C = np.full((32, 32, 3), 0.3)
+    np.testing.assert_allclose(guided_filter(C, C, 15, 1e-8, 4), C, atol=1e-9)
+    q = guided_filter(I, I, 4, 0.05, subsample=2)
+    assert np.abs(np.diff(q, axis=0)).mean() < 0.7 * np.abs(np.diff(I, axis=0)).mean()
+
+
+def test_l0_smoothing_flattens_noise_and_keeps_a_step_edge():
+    rng = np.random.default_rng(1)
+    clean = np.zeros((64, 64, 3))
+    clean[:, 32:] = 0.8
+    noisy = clean + 0.03 * rng.standard_normal(clean.shape)
+    S = l0_smooth(noisy, 0.01)
+    nonzero = lambda X: int((np.abs(np.diff(X, axis=1)).sum(-1) > 1e-3).sum())  # noqa: E731
+    assert nonzero(S) < 0.1 * nonzero(noisy)
+    assert np.abs(S - clean).mean() < 0.02          # the step is still there, noise gone
+    assert S[:, 40:].mean() - S[:, :24].mean() == pytest.approx(0.8, abs=0.03)
+    const = np.full((16, 16, 3), 0.4)
+    np.testing.assert_allclose(l0_smooth(const), const, atol=1e-12)
+
+
+def _ctx(mask):
+    return FilterContext(camera=look_at((0, 0, 3), (0, 0, 0)), mask=mask)
+
+
+def test_quantize_maps_every_foreground_normal_to_the_nearest_palette_normal():
+    P = icosahedron_face_normals()
+    assert P.shape == (20, 3)
+    np.testing.assert_allclose(np.linalg.norm(P, axis=1), 1.0)
+    rng = np.random.default_rng(2)
+    n = rng.standard_normal((8, 8, 3))
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    img = (n + 1) / 2
+    mask = np.ones((8, 8), bool)
+    mask[0] = False
+    out = get_filter("quantize").function(img, None, _ctx(mask))
+    q = out[mask].reshape(-1, 3) * 2 - 1
+    best = P[np.argmax(n[mask].reshape(-1, 3) @ P.T, axis=1)]
+    np.testing.assert_allclose(q, best, atol=1e-12)
+    np.testing.assert_array_equal(out[0], img[0])          # background untouched
+
+
+def test_slic_paints_superpixels_with_their_mean_colour():
+    spec = get_filter("slic")
+    y, x = np.mgrid[0:64, 0:64] / 63.0
+    img = np.stack([x, y, 0.5 * (x + y)], -1)
+    mask = np.zeros((64, 64), bool)
+    mask[8:56, 8:56] = True
+    out = spec.function(img, spec.params(segments=20), _ctx(mask))
+    colours = np.unique(out[mask].round(12), axis=0)
+    assert 2 <= len(colours) <= 40
+    np.testing.assert_array_equal(out[~mask], img[~mask])
+    assert out[mask].mean(0) == pytest.approx(img[mask].mean(0), abs=1e-9)  # means preserved
+
+
+def test_read_image_plain_errors_grey_to_colour_and_resizing(tmp_path):
+    from PIL import Image
+
+    with pytest.raises(ImageReadError, match="does not exist"):
+        read_image(str(tmp_path / "missing.png"))
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"this is not a PNG")
+    with pytest.raises(ImageReadError, match="cannot be read"):
+        read_image(str(bad))
+    Image.fromarray(np.zeros((10, 20), np.uint8)).save(tmp_path / "wide.png")
+    with pytest.raises(ImageReadError, match="square"):
+        read_image(str(tmp_path / "wide.png"))
+    g = (np.arange(16 * 16).reshape(16, 16) % 256).astype(np.uint8)
+    Image.fromarray(g).save(tmp_path / "grey.png")
+    img = read_image(str(tmp_path / "grey.png"))
+    assert img.shape == (16, 16, 3) and np.allclose(img[..., 0], g / 255.0)
+    assert read_image(str(tmp_path / "grey.png"), resolution=8).shape == (8, 8, 3)
+    Image.fromarray(np.zeros((8, 8, 4), np.uint8)).save(tmp_path / "rgba.png")
+    assert read_image(str(tmp_path / "rgba.png"), channels=1).shape == (8, 8, 1)
+
+
+def test_registry_builtins_one_function_extension_and_unknown_names():
+    for name in ("guided", "quantize", "slic", "l0", "target-image", "target-mesh"):
+        assert name in filter_names()
+
+    @dataclass(frozen=True)
+    class Gain:
+        gain: float = param(0.5, label="Gain", minimum=0.0, maximum=1.0, tooltip="How much.")
+
+    @register_filter("test-darken", kind="iterative", params=Gain)
+    def darken(image, params, ctx):
+        return image * params.gain
+
+    try:
+        spec = get_filter("test-darken")
+        assert spec.kind == "iterative" and spec.params is Gain
+        out = spec.function(np.ones((2, 2, 3)), Gain(), _ctx(np.ones((2, 2), bool)))
+        assert np.allclose(out, 0.5)
+    finally:
+        unregister_filter("test-darken")
+    with pytest.raises(ParameterError, match="no image filter called 'test-darken'"):
+        get_filter("test-darken")
+    with pytest.raises(ParameterError, match="kind"):
+        register_filter("x", kind="magic")

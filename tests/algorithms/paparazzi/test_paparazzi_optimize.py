@@ -1,0 +1,164 @@
+"""The Paparazzi loop: offset cameras, NAdam, single-view L2, remeshing guarantees, boundaries,
+bad input, reproducibility and each filter's own effect (short runs; long ones in
+benchmarks/paparazzi.py)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from algorithms.errors import InvalidMeshError
+from algorithms.mesh import icosphere, read_mesh, write_mesh
+from algorithms.mesh.topology import boundary_loops, euler_characteristic, is_manifold
+from algorithms.paparazzi import (FilterFailed, Paparazzi, PaparazziParams,
+                                  count_self_intersections, get_filter, offset_surface,
+                                  palette_fraction, paparazzi_iter, register_filter,
+                                  sample_camera, unregister_filter)
+from algorithms.paparazzi.optimize import nadam_step
+from algorithms.steps import run_to_end
+from tests.conftest import shared_mesh
+
+
+def test_offset_surface_is_at_distance_sigma_and_cameras_look_inwards():
+    import igl
+
+    V, F = icosphere(3)
+    off = offset_surface(V, F, 0.2)
+    d = igl.signed_distance(off.V, V, F)[0]
+    np.testing.assert_allclose(d, 0.2, atol=0.02)
+    rng = np.random.default_rng(0)
+    cams = [sample_camera(off, rng, resolution=8) for _ in range(400)]
+    P = np.array([c.position for c in cams])
+    D = np.array([c.direction for c in cams])
+    np.testing.assert_allclose(np.linalg.norm(P, axis=1), 1.2, atol=0.03)
+    assert (np.einsum("ij,ij->i", D, -P / np.linalg.norm(P, axis=1)[:, None]) > 0.99).all()
+    # area-uniform on a sphere: each octant gets about 1/8 of the cameras
+    octant = (P > 0) @ [1, 2, 4]
+    assert np.bincount(octant, minlength=8).min() > 25
+    ups = np.array([c.up for c in cams])
+    assert np.abs(ups.mean(0)).max() < 0.15            # random roll: no preferred up
+
+
+def test_nadam_first_step_is_1_9_learning_rates_times_the_sign():
+    # Ruder's form: lr (b1 m_hat + (1 - b1) g / (1 - b1^t)) / sqrt(v_hat); at t = 1, m_hat = g,
+    # sqrt(v_hat) = |g|, so the step is lr (0.9 + 1) sign(g).
+    g = np.array([[3.0, -0.5, 1e-3]])
+    m, v = np.zeros_like(g), np.zeros_like(g)
+    np.testing.assert_allclose(nadam_step(g, m, v, 1, 0.01), 0.019 * np.sign(g), rtol=1e-5)
+    np.testing.assert_allclose(m, 0.1 * g)
+    np.testing.assert_allclose(v, 0.001 * g * g)
+
+
+def _bumpy_target(tmp_path):
+    V, F = icosphere(3)
+    T = V.copy()
+    z = T[:, 2] > 0.3
+    T[z, 2] += 0.15 * np.sin(6 * T[z, 0]) * np.cos(5 * T[z, 1]) * (T[z, 2] - 0.3)
+    path = tmp_path / "target.obj"
+    write_mesh(path, T, F)
+    return V, F, str(path)
+
+
+def test_single_view_l2_to_another_shape_reproduces_it_in_that_view(tmp_path):
+    V, F, target = _bumpy_target(tmp_path)
+    fp = get_filter("target-mesh").params(target=target, single_view=True)
+    last = run_to_end(paparazzi_iter(V, F, "target-mesh", fp, PaparazziParams(
+        iterations=300, learning_rate=1e-3, resolution=64, monitor_every=0)))
+    e0, e1 = last.metrics["initial_monitor_energy"], last.metrics["monitor_energy"]
+    assert e1 < 0.2 * e0, (e0, e1)
+
+
+@pytest.mark.parametrize("name", ["spot_lowres.obj"])
+def test_remeshing_keeps_a_manifold_with_the_input_topology_and_no_self_intersections(name):
+    d = read_mesh(shared_mesh(name))
+    before = palette_fraction(d.V, d.F)
+    steps = list(paparazzi_iter(d.V, d.F, "quantize", None, PaparazziParams(
+        iterations=90, learning_rate=5e-4, resolution=64, monitor_every=0, remesh_every=30)))
+    last = steps[-1]
+    assert last.metrics["remeshes"] == 2
+    assert len(last.V) != len(d.V)                            # it was remeshed
+    assert is_manifold(last.F)
+    assert euler_characteristic(last.F) == euler_characteristic(d.F)
+    assert count_self_intersections(last.V, last.F) == 0
+    assert palette_fraction(last.V, last.F) > before + 0.05   # quantization's own effect
+
+
+def test_same_seed_same_result_other_seed_other_result():
+    V, F = icosphere(2)
+    V = V * (1 + 0.05 * np.random.default_rng(0).random((len(V), 1)))
+    run = lambda seed: run_to_end(paparazzi_iter(V, F, "quantize", None, PaparazziParams(  # noqa: E731
+        iterations=12, resolution=32, remesh_every=6, monitor_every=0, seed=seed))).V
+    a, b, c = run(3), run(3), run(4)
+    np.testing.assert_array_equal(a, b)
+    assert a.shape != c.shape or not np.array_equal(a, c)
+
+
+def test_mesh_with_boundary_works_and_its_boundary_stays():
+    d = read_mesh(shared_mesh("hand_lowres.obj"))
+    loops = boundary_loops(d.F)
+    assert len(loops) == 1
+    P = Paparazzi(d.V, d.F, "guided", None, PaparazziParams(
+        iterations=30, resolution=64, learning_rate=5e-4, remesh_every=15, monitor_every=0))
+    last = run_to_end(P.steps())
+    out_loops = boundary_loops(last.F)
+    assert len(out_loops) == 1 and is_manifold(last.F)
+    ring_in = np.sort(d.V[loops[0]], axis=0)
+    ring_out = np.sort(last.V[out_loops[0]], axis=0)
+    np.testing.assert_allclose(ring_out, ring_in, atol=1e-9)      # the same boundary vertices
+    assert not np.allclose(last.V[len(out_loops[0]):].mean(0), 0)  # and the shape was processed
+
+
+def test_non_manifold_mesh_is_refused_plainly():
+    V, F = icosphere(1)
+    F2 = np.vstack([F, [[F[0, 0], F[0, 1], len(V)]]])
+    V2 = np.vstack([V, [[2.0, 2.0, 2.0]]])
+    with pytest.raises(InvalidMeshError, match="2-manifold.*Clean"):
+        Paparazzi(V2, F2, "guided")
+
+
+def test_a_filter_that_raises_stops_the_run_with_its_message():
+    @register_filter("test-broken", kind="iterative")
+    def broken(image, params, ctx):
+        raise ValueError("my filter is broken")
+
+    try:
+        V, F = icosphere(2)
+        with pytest.raises(FilterFailed, match="test-broken.*my filter is broken"):
+            run_to_end(paparazzi_iter(V, F, "test-broken", None,
+                                      PaparazziParams(iterations=3, resolution=16)))
+    finally:
+        unregister_filter("test-broken")
+
+
+def test_an_unreadable_target_image_is_refused_before_running(tmp_path):
+    from algorithms.paparazzi import ImageReadError
+
+    bad = tmp_path / "target.png"
+    bad.write_text("no image here")
+    V, F = icosphere(2)
+    with pytest.raises(ImageReadError, match="cannot be read"):
+        Paparazzi(V, F, "target-image", get_filter("target-image").params(image=str(bad)))
+
+
+def test_self_intersections_are_rolled_back_and_the_step_shrinks():
+    # an energy that pushes two close sheets of a thin shape into each other
+    V, F = icosphere(2)
+    V = V * [1.0, 1.0, 0.04]
+
+    @register_filter("test-crush", kind="energy")
+    def crush(image, params, ctx):
+        G = np.zeros_like(image)
+        G[..., 2] = ctx.mask * -50.0       # wants every face to turn towards the camera's back
+        return float(image[..., 2].sum()), G
+
+    try:
+        last = run_to_end(paparazzi_iter(V, F, "test-crush", None, PaparazziParams(
+            iterations=40, learning_rate=0.02, resolution=32, remesh_every=5, sigma=0.1,
+            monitor_every=0)))
+    finally:
+        unregister_filter("test-crush")
+    assert last.metrics["rollbacks"] >= 1
+    assert count_self_intersections(last.V, last.F) == 0
+    assert is_manifold(last.F)
