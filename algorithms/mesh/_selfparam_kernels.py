@@ -813,6 +813,41 @@ def replay(K, bptr, bface, bloc, aptr, aface, aloc, uptr, uv, m, pf, pb, backwar
     return worst
 
 
+# ------------------------------------------------------------------------------ semi-random
+RANDOM_MAX_FAILS = 2000  # failed semi-random attempts in a row before giving up
+
+
+@njit(cache=True)
+def seed_random(seed):
+    """Seed the generator the semi-random collapses draw from (Numba's own, or NumPy's)."""
+    np.random.seed(seed)
+
+
+@njit(cache=True)
+def _random_edge(F, falive, alist, nlist, P, Q, bnd, protect, strategy, pos, qs, k):
+    """The cheapest of ``k`` random edges of live faces (-1, -1 when none has a finite cost)."""
+    best = np.inf
+    bu = -1
+    bv = -1
+    drawn = 0
+    tries = 0
+    while drawn < k and tries < 50 * k:
+        tries += 1
+        f = alist[np.random.randint(0, nlist)]
+        if not falive[f]:
+            continue
+        drawn += 1
+        c = np.random.randint(0, 3)
+        u = F[f, c]
+        v = F[f, (c + 1) % 3]
+        cost, _k = edge_cost(u, v, P, Q, bnd, protect, strategy, pos, qs)
+        if cost < best:
+            best = cost
+            bu = u
+            bv = v
+    return bu, bv
+
+
 # ------------------------------------------------------------------------------ main loop
 @njit(cache=True)
 def _push_vertex_edges(w, skip, P, Q, F, FF, vf, bnd, protect, stamp, strategy,
@@ -860,11 +895,16 @@ def rebuild_heap(P, Q, F, FF, falive, valive, bnd, protect, stamp, strategy, hk)
 def collapse_loop(P, Q, F, FF, FFi, vf, falive, valive, bnd, protect, stamp, rej, loc, mark,
                   hk, st, counts,
                   bptr, bface, bloc, aptr, aface, aloc, uptr, uv,
-                  strategy, target, min_q, min_dot, max_attempts, flattening, arap_iters):
+                  strategy, target, min_q, min_dot, max_attempts, flattening, arap_iters,
+                  random_candidates=0):
     """Collapse edges (cheapest first) with joint flattening until ``st[S_NF] <= target``.
 
     Returns 0 target reached, 1 attempt budget used (call again), 2 no valid collapse left,
     3 the log arrays need to grow (call again after growing them).
+
+    ``random_candidates > 0`` (semi-random collapses, thesis App. 4.8.5): instead of the heap,
+    each attempt draws that many random edges (a random live face and corner, with replacement)
+    and tries the cheapest; after ``RANDOM_MAX_FAILS`` failed attempts in a row it returns 2.
     """
     ringA_f = np.empty(CAP, dtype=np.int64)
     ringA_c = np.empty(CAP, dtype=np.int64)
@@ -910,6 +950,9 @@ def collapse_loop(P, Q, F, FF, FFi, vf, falive, valive, bnd, protect, stamp, rej
 
     attempts = 0
     size = st[S_HEAP]
+    fails = 0
+    alist = np.empty(F.shape[0] if random_candidates > 0 else 1, dtype=np.int64)
+    nlist = -1  # the live-face list is built on the first semi-random attempt
     while st[S_NF] > target:
         if attempts >= max_attempts:
             st[S_HEAP] = size
@@ -918,27 +961,44 @@ def collapse_loop(P, Q, F, FF, FFi, vf, falive, valive, bnd, protect, stamp, rej
                 or st[S_NU] + LMAX > uv.shape[0] or st[S_K] + 2 > bptr.shape[0]):
             st[S_HEAP] = size
             return 3
-        if size == 0:
-            if st[S_REBUILT] == 1 and st[S_SINCE] == 0:
-                st[S_HEAP] = 0
+        if random_candidates > 0:
+            if fails >= RANDOM_MAX_FAILS:
+                st[S_HEAP] = size
                 return 2
-            rej[:] = False
-            size = rebuild_heap(P, Q, F, FF, falive, valive, bnd, protect, stamp, strategy, hk)
-            st[S_REBUILT] = 1
-            st[S_SINCE] = 0
+            fails += 1
+            if nlist < 0 or nlist > 2 * st[S_NF] + 16:
+                nlist = 0
+                for f in range(F.shape[0]):
+                    if falive[f]:
+                        alist[nlist] = f
+                        nlist += 1
+            u, v = _random_edge(F, falive, alist, nlist, P, Q, bnd, protect, strategy, pos, qs,
+                                random_candidates)
+            st[S_POPS] += 1
+            if u < 0:
+                continue
+        else:
             if size == 0:
-                st[S_HEAP] = 0
-                return 2
-            continue
-        if size >= hk.shape[0] - 4 * CAP:
-            size = _hcompact(hk, size, valive, stamp)
+                if st[S_REBUILT] == 1 and st[S_SINCE] == 0:
+                    st[S_HEAP] = 0
+                    return 2
+                rej[:] = False
+                size = rebuild_heap(P, Q, F, FF, falive, valive, bnd, protect, stamp, strategy, hk)
+                st[S_REBUILT] = 1
+                st[S_SINCE] = 0
+                if size == 0:
+                    st[S_HEAP] = 0
+                    return 2
+                continue
             if size >= hk.shape[0] - 4 * CAP:
-                size = rebuild_heap(P, Q, F, FF, falive, valive, bnd, protect, stamp, strategy,
-                                    hk)
-        cost, u, v, su, sv, size = _hpop(hk, size)
-        st[S_POPS] += 1
-        if not _hcurrent(u, v, su, sv, valive, stamp):
-            continue
+                size = _hcompact(hk, size, valive, stamp)
+                if size >= hk.shape[0] - 4 * CAP:
+                    size = rebuild_heap(P, Q, F, FF, falive, valive, bnd, protect, stamp, strategy,
+                                        hk)
+            cost, u, v, su, sv, size = _hpop(hk, size)
+            st[S_POPS] += 1
+            if not _hcurrent(u, v, su, sv, valive, stamp):
+                continue
         attempts += 1
         cost, keep_u = edge_cost(u, v, P, Q, bnd, protect, strategy, pos, qs)
         if keep_u:
@@ -1373,9 +1433,10 @@ def collapse_loop(P, Q, F, FF, FFi, vf, falive, valive, bnd, protect, stamp, rej
         rej[j] = False
         st[S_NF] -= ns
         st[S_SINCE] += 1
+        fails = 0
         # ---- new candidate edges
         nfk, nvk, _b = _ring(i, F, FF, vf, ringA_f, ringA_c, ringA_v, CAP)
-        if nfk >= 0:
+        if nfk >= 0 and random_candidates == 0:
             for t in range(nvk):
                 w = ringA_v[t]
                 if rej[w]:

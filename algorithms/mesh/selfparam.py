@@ -377,7 +377,9 @@ def _check_arrays(V, F, target_faces) -> tuple[np.ndarray, np.ndarray, int]:
 
 def self_parameterize(V, F, target_faces, *, strategy: str = "midpoint", flattening: str = "lscm",
                       keep=None, min_quality: float = 0.2, flip_delta: float = 0.2,
-                      progress: Callable[[float], None] | None = None) -> SelfParameterization:
+                      progress: Callable[[float], None] | None = None,
+                      random_candidates: int = 0, seed: int | None = None
+                      ) -> SelfParameterization:
     """Decimate to ``target_faces`` triangles while maintaining a bijective map fine -> coarse.
 
     Parameters
@@ -393,6 +395,13 @@ def self_parameterize(V, F, target_faces, *, strategy: str = "midpoint", flatten
     flip_delta : a collapse is refused if a changed triangle's unit normal n' has
         ``n . n' <= flip_delta`` (0.2).
     progress : optional ``callable(fraction)`` called now and then.
+    random_candidates : int, 0 (default) collapses cheapest first (a priority queue); k > 0
+        makes the collapses semi-random (thesis App. 4.8.5, neural subdivision's training data):
+        each collapse tries the cheapest of k random edges (the thesis uses 100), where an edge
+        is drawn as a random corner of a random live triangle (so a boundary edge is drawn half
+        as often as an interior one). Stops (``reached_target`` False) after 2000 failed
+        attempts in a row.
+    seed : int, optional, seeds the semi-random draws (reproducible data).
 
     Returns
     -------
@@ -423,6 +432,14 @@ def self_parameterize(V, F, target_faces, *, strategy: str = "midpoint", flatten
                              f"uses 0.2.")
     if progress is not None and not callable(progress):
         raise ParameterError("progress must be a callable taking a fraction in [0, 1].")
+    if isinstance(random_candidates, bool) or int(random_candidates) != random_candidates \
+            or random_candidates < 0:
+        raise ParameterError(f"random_candidates must be a whole number >= 0 (got "
+                             f"{random_candidates!r}); the thesis draws 100 edges per collapse.")
+    random_candidates = int(random_candidates)
+    if random_candidates:
+        _k.seed_random(int(seed) % (2**31 - 1) if seed is not None
+                       else int(np.random.SeedSequence().entropy % (2**31 - 1)))
     t0 = time.perf_counter()
     V, F, target_faces = _check_arrays(V, F, target_faces)
     n, m = len(V), len(F)
@@ -487,7 +504,8 @@ def self_parameterize(V, F, target_faces, *, strategy: str = "midpoint", flatten
                                 loc, mark, hk, st, counts,
                                 bptr, bface, bloc, aptr, aface, aloc, uptr, uv,
                                 sid, target_faces, min_quality, flip_delta, chunk,
-                                FLATTENINGS.index(flattening), ARAP_ITERATIONS)
+                                FLATTENINGS.index(flattening), ARAP_ITERATIONS,
+                                random_candidates)
         if code == 3:
             K = int(st[_k.S_K])
             frac = max((m - st[_k.S_NF]) / todo, 0.05)
@@ -552,6 +570,7 @@ def self_parameterize(V, F, target_faces, *, strategy: str = "midpoint", flatten
         "seconds": t2 - t0, "seconds_collapse": t1 - t0, "seconds_map": t2 - t1,
         "compiled": bool(_k.COMPILED),
         "max_clamped": float(-stage.worst), "heap_pops": int(st[_k.S_POPS]),
+        "random_candidates": random_candidates,
     }
     return SelfParameterization(V_fine=V, F_fine=F, V_coarse=Vc, F_coarse=Fc,
                                 coarse_to_fine=coarse_to_fine, face=face, bary=bary,
