@@ -491,6 +491,8 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
                                params=params, methods=tuple(dict.fromkeys(methods)),
                                alpha=alpha, callback=progress)
     out = {"n": cmp_.n, "m": cmp_.m, "k": cmp_.k, "methods": {}}
+    if cmp_.notes:
+        out["notes"] = list(cmp_.notes)
     for name, r in cmp_.methods.items():
         d = {"c_diag_score": r.metrics["c_diag_score"],
              "eig_rel_err_mean": r.metrics["eig_rel_error_mean"],
@@ -506,6 +508,8 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
         _print_json(out)
     else:
         print(cmp_.table())
+        for note in cmp_.notes:
+            print(f"Note: {note}")
         if args.output:
             print(f"Wrote {args.output}.")
     return 0

@@ -8,12 +8,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import scipy.sparse as sp
 
+from ..errors import ParameterError, Stylize3DError
 from .baselines import amg_baseline, qslim_baseline
 from .coarsen import CoarsenParams, coarsen, generalized_eigs
 from .metrics import spectral_metrics
 from .operators import build_operator
 
 __all__ = ["MethodResult", "Comparison", "compare_coarsenings", "compare_coarsenings_iter"]
+
+_TITLES = {"qslim": "QSlim (simplify and rediscretize)", "amg": "AMG (smoothed aggregation)"}
 
 
 @dataclass
@@ -40,6 +43,7 @@ class Comparison:
     methods: dict[str, MethodResult]
     timings: dict[str, float]
     fine_eigs: tuple | None = None  # (eigenvalues (k',), eigenvectors (n, k')) of the fine operator
+    notes: list[str] = field(default_factory=list)  # plain-language remarks (skipped baselines)
 
     def table(self) -> str:
         lines = [f"{'method':8s} {'m':>6s} {'C diag':>8s} {'eig mean':>9s} {'eig max':>9s} {'s':>7s}"]
@@ -83,7 +87,14 @@ def compare_coarsenings_iter(V, F, operator: str = "cotangent", m: int = 500,
     n = L.shape[0]
     t = time.perf_counter()
     nnull = sp.csgraph.connected_components(L, directed=False)[0]
-    eigs = generalized_eigs(L, M, k + nnull)
+    if nnull > m:   # checked before the (then large) eigendecomposition
+        raise ParameterError(f"the mesh has {nnull} separate parts but only m = {m} coarse "
+                             "nodes were asked for; ask for at least one per part, or remove "
+                             "small loose parts first.")
+    if not 1 <= k < m < n:
+        raise ParameterError(f"need 1 <= k < m < n (here n = {n}, m = {m}, k = {k}); the "
+                             "thesis recommends m > 2k.")
+    eigs = generalized_eigs(L, M, min(k + nnull, n - 1))
     timings["eigendecomposition"] = time.perf_counter() - t
     out: dict[str, MethodResult] = {}
     if "ours" in methods:
@@ -96,18 +107,32 @@ def compare_coarsenings_iter(V, F, operator: str = "cotangent", m: int = 500,
         met = spectral_metrics(L, M, last.L, last.M, last.P, k, fine_eigs=eigs)
         out["ours"] = MethodResult("ours", last.L, last.M, last.P, met.as_dict(), secs,
                                    {"G": last.G, "K": last.K, "energy": last.energy}, met)
-    if "qslim" in methods:
-        r = qslim_baseline(V, F, m, operator, **({"alpha": alpha} if operator == "anisotropic" else {}))
-        met = spectral_metrics(L, M, r.L, r.M, r.P, k, fine_eigs=eigs)
-        out["qslim"] = MethodResult("qslim", r.L, r.M, r.P, met.as_dict(), r.seconds,
-                                    {"V": r.V, "F": r.F}, met)
-    if "amg" in methods:
-        r = amg_baseline(L, M, m, seed=params.seed)
-        met = spectral_metrics(L, M, r.L, r.M, r.P, k, fine_eigs=eigs)
-        out["amg"] = MethodResult("amg", r.L, r.M, r.P, met.as_dict(), r.seconds, {}, met)
+    notes: list[str] = []
+    for name in ("qslim", "amg"):
+        if name not in methods:
+            continue
+        try:
+            if name == "qslim":
+                r = qslim_baseline(V, F, m, operator,
+                                   **({"alpha": alpha} if operator == "anisotropic" else {}))
+                extra = {"V": r.V, "F": r.F}
+            else:
+                r = amg_baseline(L, M, m, seed=params.seed)
+                extra = {}
+            met = spectral_metrics(L, M, r.L, r.M, r.P, k, fine_eigs=eigs)
+        except Stylize3DError as exc:
+            # a baseline that cannot handle this input (QSlim needs a manifold, consistently
+            # oriented mesh) is left out and the user is told why; ours is still reported
+            notes.append(f"{_TITLES[name]} was left out of the comparison: {exc}")
+            continue
+        except MemoryError:
+            notes.append(f"{_TITLES[name]} was left out of the comparison: it ran out of "
+                         "memory on this mesh.")
+            continue
+        out[name] = MethodResult(name, r.L, r.M, r.P, met.as_dict(), r.seconds, extra, met)
     for name, r in out.items():
         timings[name] = r.seconds
-    return Comparison(n, m, k, operator, out, timings, fine_eigs=eigs)
+    return Comparison(n, m, k, operator, out, timings, fine_eigs=eigs, notes=notes)
 
 
 def _iter(L, M, m, k, params, eigs):

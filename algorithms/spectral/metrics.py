@@ -32,12 +32,30 @@ def functional_map(phi_coarse, M_coarse, P, phi_fine) -> np.ndarray:
     return phi_coarse.T @ (M_coarse @ (P @ phi_fine))
 
 
-def c_diag_score(C: np.ndarray) -> float:
-    """Sign-invariant diagonality: mean over rows i of |C_ii| / ||C_i,:||_2."""
+def c_diag_score(C: np.ndarray, lam=None, rtol: float = 1e-6) -> float:
+    """Sign-invariant diagonality: mean over rows i of |C_ii| / ||C_i,:||_2.
+
+    With the fine eigenvalues ``lam`` (first k), rows of a repeated eigenvalue are scored as a
+    block (thesis Fig. 7.10: with multiplicity C should be *block* diagonal; any rotation of the
+    eigenvectors of one eigenvalue is as good as another): row i scores
+    ||C_i,J|| / ||C_i,:|| with J the eigenvalues equal to lam_i within ``rtol`` (relative to
+    the largest), and all the zero eigenvalues of an operator with several connected parts form
+    one block. Without ``lam``, or with distinct eigenvalues, this is the plain diagonal score.
+    """
     k = min(C.shape)
+    C = np.asarray(C)
     rn = np.linalg.norm(C[:k], axis=1)
     rn[rn == 0] = 1.0
-    return float(np.mean(np.abs(np.diag(C[:k, :k])) / rn))
+    if lam is None:
+        return float(np.mean(np.abs(np.diag(C[:k, :k])) / rn))
+    lam = np.asarray(lam, float)[:k]
+    tol = rtol * max(np.abs(lam).max(), 1e-300)
+    # group sorted eigenvalues whose neighbours differ by at most tol
+    brk = np.r_[0, np.flatnonzero(np.diff(lam) > tol) + 1, len(lam)]
+    num = np.empty(k)
+    for a, b in zip(brk[:-1], brk[1:]):
+        num[a:b] = np.linalg.norm(C[a:b, a:b], axis=1)
+    return float(np.mean(num / rn))
 
 
 def eigenvalue_errors(lam_fine, lam_coarse, k: int, zero_tol: float = 1e-8):
@@ -69,4 +87,4 @@ def spectral_metrics(L, M, L_coarse, M_coarse, P, k: int, *, fine_eigs=None) -> 
     kk = min(k, phi_c.shape[1])
     C = functional_map(phi_c[:, :kk], Mc, P, phi_f[:, :kk])
     mean, mx = eigenvalue_errors(lam_f, lam_c, k)
-    return SpectralMetrics(c_diag_score(C), mean, mx, C, np.asarray(lam_f), np.asarray(lam_c))
+    return SpectralMetrics(c_diag_score(C, lam_f[:kk]), mean, mx, C, np.asarray(lam_f), np.asarray(lam_c))

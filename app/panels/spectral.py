@@ -12,7 +12,7 @@ from PySide6.QtGui import QColor, QImage, QPixmap
 from PySide6.QtWidgets import (QComboBox, QGridLayout, QGroupBox, QHBoxLayout, QLabel,
                                QSpinBox, QVBoxLayout, QWidget)
 
-from algorithms.spectral.coarsen import CoarsenParams, generalized_eigs
+from algorithms.spectral.coarsen import CoarsenParams, generalized_eigs, suggested_coarse_size
 from algorithms.spectral.compare import compare_coarsenings_iter
 from algorithms.steps import Step
 from app.panels.base import MethodPanel
@@ -99,6 +99,22 @@ class SpectralPanel(MethodPanel):
         lay.insertWidget(lay.indexOf(self.plot) + 1, res)
         self.show_combo.currentIndexChanged.connect(lambda _i: self.show_result())
         self.eig_index.valueChanged.connect(lambda _i: self.show_result())
+        window.mesh_shown.connect(self._fit_size_to_mesh)
+
+    def _fit_size_to_mesh(self) -> None:
+        """A newly opened mesh gets a coarse size that suits it: the thesis's 500, but at most
+        n / 8 (see suggested_coarse_size); the panel says so."""
+        doc = self.window_.document
+        if doc.is_empty:
+            return
+        n = len(doc.V)
+        m = suggested_coarse_size(n, CoarsenParams().m)
+        if self.form.editors["m"].value() != m:
+            self.form.set_value("m", m)
+            self.form.set_value("k", 0)
+            self.status_label.setText(
+                f"Coarse size set to m = {m} for this {n:,}-vertex mesh (spectral coarsening "
+                f"is made for strong reductions: at most n/8), k = {round(m / 3)} eigenvectors.")
 
     # -- the job ---------------------------------------------------------------------------------
     def run(self, live: bool = False) -> None:
@@ -145,6 +161,8 @@ class SpectralPanel(MethodPanel):
         for name in METHODS:
             mr = r.methods.get(name)
             if mr is None:
+                self.heatmaps[name].clear()
+                self.scores[name].setText("left out" if name != "ours" else "")
                 continue
             self.heatmaps[name].setPixmap(QPixmap.fromImage(heatmap_image(mr.spectral.C, 110)))
             self.scores[name].setText(f"C diag {mr.metrics['c_diag_score']:.3f}\n"
@@ -162,7 +180,8 @@ class SpectralPanel(MethodPanel):
         self.status_label.setText(
             f"n = {r.n} → m = {r.m}, k = {r.k}. Ours: C diag "
             f"{r.methods['ours'].metrics['c_diag_score']:.3f}, mean eigenvalue error "
-            f"{r.methods['ours'].metrics['eig_rel_error_mean']:.3f}.")
+            f"{r.methods['ours'].metrics['eig_rel_error_mean']:.3f}."
+            + "".join(f"\n{note}" for note in getattr(r, "notes", [])))
         if self.show_combo.currentIndex() == 0:
             self.show_combo.setCurrentIndex(1)
         else:
