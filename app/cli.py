@@ -20,7 +20,7 @@ from algorithms.errors import InvalidMeshError, MeshWriteError, ParameterError, 
 from algorithms.params import describe, params_from_dict, params_to_dict
 
 SUBCOMMANDS = ("info", "clean", "smooth", "multigrid-info", "cubic", "analogy", "coarsen",
-               "study")
+               "study", "adversary")
 
 
 # ----------------------------------------------------------------------------- Params -> flags
@@ -552,6 +552,99 @@ def cmd_study(args: argparse.Namespace) -> int:
     return 0 if not c.get("mismatch") and not c.get("failed") else 1
 
 
+def cmd_adversary(args: argparse.Namespace) -> int:
+    """Parametric adversary (thesis ch. 3): perturb the SH lighting or the vertices within an
+    L-infinity ball until an image classifier misclassifies the views; random baseline of the
+    same norm on the same views."""
+    import numpy as np
+
+    from algorithms.adversarial import (AdversaryParams, attack_iter, default_classifier,
+                                        evaluate, find_recognized_views, load_classifier,
+                                        orbit_cameras, prepare_scene, random_perturbation,
+                                        resolve_label, short_name)
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.io import atomic_write
+    from algorithms.render.sh import read_mesh_colors
+
+    t0 = time.perf_counter()
+    params = params_from_args(AdversaryParams, args)
+    if args.output:
+        ext = Path(args.output).suffix.lower()
+        if params.mode == "lighting" and ext != ".json":
+            raise ParameterError("A lighting attack writes the adversarial lighting as .json; "
+                                 f"name the output file *.json (got '{args.output}').")
+        if params.mode == "geometry" and ext == ".json":
+            raise ParameterError("A geometry attack writes the perturbed mesh; name the output "
+                                 "file .obj, .ply, .off or .stl.")
+        _check_output(args.output, args.overwrite, args.mesh)
+    data, _ = _read_valid(args.mesh, clean=args.clean, quiet=args.json)
+    colours = read_mesh_colors(args.mesh, len(data.V), len(data.F))
+    albedo = args.color if colours is None else colours[1]
+    scene = prepare_scene(data.V, data.F, albedo=albedo, lighting=args.lighting)
+    clf = load_classifier(args.classifier) if args.classifier else default_classifier()
+    say = (lambda text: None) if args.json or args.quiet else (
+        lambda text: print(text, file=sys.stderr, flush=True))
+    width, res, ss = params.view_width, params.resolution, params.supersample
+    if args.label:
+        k = resolve_label(args.label, clf.class_names)
+        found = find_recognized_views(scene, clf, k, candidates=24, elevation=params.elevation,
+                                      width=width, resolution=res, supersample=ss)
+        if not found:
+            raise ParameterError(
+                f"The classifier does not see '{short_name(clf.class_names[k])}' in any of 24 "
+                "views around the shape (30 degrees up), so there is nothing to attack. Try "
+                "another --label, or leave it out to attack whatever it sees.")
+        if len(found) < params.views:
+            say(f"only {len(found)} of 24 views are recognized; attacking those")
+        azimuths = [a for a, _ in found[:params.views]]
+        decrease = [k] * len(azimuths)
+    else:
+        azimuths = list(np.arange(params.views) * 360.0 / params.views)
+        decrease = None
+    cams = orbit_cameras(azimuths, elevation=params.elevation, width=width, resolution=res * ss)
+    out: dict = {}
+    for step in attack_iter(scene, clf, cams, params, decrease=decrease, increase=args.target,
+                            _out=out):
+        say(f"{step.message}; " + "; ".join(f"view {b + 1}: {t[0][0]} {100 * t[0][1]:.0f}%"
+                                            for b, t in enumerate(step.top5)))
+    result = out["result"]
+    # random baseline: same norm, same views
+    radius = params.ball()
+    x = random_perturbation(scene, params.mode, radius, seed=params.seed)
+    top, _ = evaluate(scene, clf, cams, supersample=ss, resolution=res,
+                      **({"lighting": x} if params.mode == "lighting" else {"V": x}))
+    targets = [None] * len(cams) if args.target is None else (
+        [resolve_label(args.target, clf.class_names)] * len(cams))
+    before = [resolve_label(v.label_before, clf.class_names) for v in result.views]
+    random_success = [bool(top[b] == targets[b]) if targets[b] is not None else
+                      bool(top[b] != (decrease[b] if decrease else before[b]))
+                      for b in range(len(cams))]
+    if args.output:
+        if params.mode == "geometry":
+            write_mesh(args.output, result.V, data.F)
+        else:
+            doc = {"format": "stylize3d spherical-harmonics lighting", "degree": 6,
+                   "order": "index l*l + l + m; columns R, G, B",
+                   "coefficients": result.lighting.tolist()}
+            atomic_write(args.output, lambda fh: fh.write(json.dumps(doc, indent=1).encode()))
+    report = {"views": [v.to_dict() for v in result.views],
+              "success_rate": result.success_rate,
+              "random_success_rate": float(np.mean(random_success)),
+              "norm": result.norm, "seconds": time.perf_counter() - t0}
+    if args.json:
+        _print_json(report)
+    else:
+        for b, v in enumerate(result.views):
+            print(f"view {b + 1} (azimuth {azimuths[b]:.0f}°): {v.label_before} "
+                  f"{100 * v.confidence_before:.0f}% -> {v.label_after} "
+                  f"{100 * v.confidence_after:.0f}% {'fooled' if v.success else 'not fooled'}")
+        print(f"success rate {100 * report['success_rate']:.0f}%, random perturbation of the "
+              f"same norm {100 * report['random_success_rate']:.0f}%; L-inf norm "
+              f"{result.norm:.4g} after {result.iterations} iterations, "
+              f"{report['seconds']:.1f} s")
+    return 0
+
+
 def _add_progressive_arguments(s: argparse.ArgumentParser) -> None:
     from algorithms.deform.progressive import AUTO_PROGRESSIVE_FACES
 
@@ -719,6 +812,37 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--clean", action="store_true", help="clean the mesh first")
     add_params_arguments(s, CoarsenParams)
     s.set_defaults(func=cmd_coarsen)
+
+    from algorithms.adversarial import AdversaryParams
+    from algorithms.render.sh import ENVIRONMENTS
+
+    s = sub.add_parser("adversary",
+                       help="adversarial lighting or geometry that fools an image classifier "
+                            "(thesis ch. 3)")
+    s.add_argument("mesh")
+    s.add_argument("--target", metavar="LABEL",
+                   help="make the classifier see this class (default: any wrong class)")
+    s.add_argument("--label", metavar="LABEL",
+                   help="the true class: views are chosen among those the classifier gets "
+                        "right (default: whatever it sees in evenly spaced views)")
+    s.add_argument("--classifier", metavar="FILE",
+                   help="a TorchScript model or EfficientNet-lite0 weights (default: the "
+                        "installed ImageNet EfficientNet-lite0)")
+    s.add_argument("--lighting", default="Grace Cathedral", choices=list(ENVIRONMENTS),
+                   help="the starting environment (Ramamoorthi & Hanrahan 2001)")
+    s.add_argument("--color", type=float, nargs=3, default=(0.7, 0.7, 0.7), metavar=("R", "G", "B"),
+                   help="surface colour when the mesh file has none. Default: 0.7 0.7 0.7.")
+    s.add_argument("-o", "--output",
+                   help="write the perturbed mesh (geometry) or the lighting (.json)")
+    s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
+    s.add_argument("--json", action="store_true",
+                   help='print {"views": [{"label_before", "confidence_before", "label_after", '
+                        '"confidence_after", "success"}], "success_rate", '
+                        '"random_success_rate", "norm", "seconds"}')
+    s.add_argument("--quiet", action="store_true", help="no per-iteration progress")
+    s.add_argument("--clean", action="store_true", help="clean the mesh first")
+    add_params_arguments(s, AdversaryParams)
+    s.set_defaults(func=cmd_adversary)
     return p
 
 

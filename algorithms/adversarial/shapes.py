@@ -19,6 +19,9 @@ def revolve(r, y, segments: int = 64):
     cap where ``r`` does not end at 0. Returns V, F and the profile band index of each face."""
     r = np.asarray(r, float)
     y = np.asarray(y, float)
+    y0, y1 = y[0], y[-1]
+    keep = r > 0                      # points on the axis become the caps' centres
+    r, y = r[keep], y[keep]
     t = np.arange(segments) * 2 * np.pi / segments
     rings = [np.stack([ri * np.cos(t), np.full(segments, yi), -ri * np.sin(t)], 1)
              for ri, yi in zip(r, y)]
@@ -33,7 +36,7 @@ def revolve(r, y, segments: int = 64):
     V = list(V)
     for end, ring in ((0, 0), (len(r) - 1, len(r) - 1)):
         c = len(V)
-        V.append([0.0, y[end], 0.0])
+        V.append([0.0, y0 if end == 0 else y1, 0.0])
         o = ring * segments
         for j in range(segments):
             k = (j + 1) % segments
@@ -78,7 +81,9 @@ def coffee_mug():
     y = [0.0, 0.0, 0.03, 1.2, 1.2, 1.05, 1.05]
     V, F, band = revolve(r, y, 64)
     A = np.tile([0.93, 0.93, 0.9], (len(F), 1))
-    A[band == len(r) - 2] = [0.25, 0.12, 0.05]       # coffee
+    C = V[F].mean(1)
+    A[(np.abs(C[:, 1] - 1.05) < 1e-9) & (np.hypot(C[:, 0], C[:, 2]) < 0.46)] = \
+        [0.25, 0.12, 0.05]                            # coffee
     # handle: half a torus on the +x side
     R, rr, nu, nv = 0.3, 0.07, 24, 12
     u = np.linspace(-np.pi / 2, np.pi / 2, nu)
@@ -129,7 +134,8 @@ def flowerpot():
     y = [0.0, 0.0, 0.02, 0.85, 0.9, 0.92, 1.1, 1.1, 1.0, 1.0]
     V, F, band = revolve(r, y, 64)
     A = np.tile([0.72, 0.33, 0.18], (len(F), 1))
-    A[band == len(r) - 2] = [0.2, 0.13, 0.08]
+    C = V[F].mean(1)
+    A[(np.abs(C[:, 1] - 1.0) < 1e-9) & (np.hypot(C[:, 0], C[:, 2]) < 0.54)] = [0.2, 0.13, 0.08]
     return V, F, A
 
 
