@@ -812,6 +812,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--clean", action="store_true", help="clean the mesh first")
     add_params_arguments(s, CoarsenParams)
     s.set_defaults(func=cmd_coarsen)
+    _add_paparazzi_parser(sub)
 
     from algorithms.adversarial import AdversaryParams
     from algorithms.render.sh import ENVIRONMENTS
@@ -845,6 +846,123 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_adversary)
     return p
 
+
+
+# ----------------------------------------------------------------------------- paparazzi
+SUBCOMMANDS = SUBCOMMANDS + ("paparazzi",)
+
+
+def _paparazzi_filter_flags() -> list[tuple[str, str, object]]:
+    """(filter name, flag, ParamSpec) for every registered filter's parameters; a field name
+    used by two filters (or by PaparazziParams) gets the filter's name as a prefix."""
+    from algorithms.paparazzi import filter_names, get_filter
+    from algorithms.paparazzi.optimize import PaparazziParams
+
+    taken = {spec.flag for spec in describe(PaparazziParams)}
+    counts: dict[str, int] = {}
+    for name in filter_names():
+        for spec in describe(get_filter(name).params):
+            counts[spec.flag] = counts.get(spec.flag, 0) + 1
+    out = []
+    for name in filter_names():
+        for spec in describe(get_filter(name).params):
+            flag = spec.flag
+            if flag in taken or counts[flag] > 1:
+                flag = f"--{name}-{spec.name.replace('_', '-')}"
+            out.append((name, flag, spec))
+    return out
+
+
+def _add_paparazzi_parser(sub) -> None:
+    from algorithms.paparazzi import filter_names, get_filter
+    from algorithms.paparazzi.optimize import PaparazziParams
+
+    s = sub.add_parser("paparazzi", help="Paparazzi: image filters applied to a shape through "
+                                         "many rendered views (thesis ch. 2)")
+    s.add_argument("mesh")
+    s.add_argument("-o", "--output", required=True, help="where to write the filtered mesh")
+    s.add_argument("--filter", required=True, choices=filter_names(),
+                   help="the image filter: " + "; ".join(
+                       f"{n}: {get_filter(n).description}" for n in filter_names()))
+    s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
+    s.add_argument("--json", action="store_true",
+                   help="print iterations, seconds (render / filter / derivative / remesh), the "
+                        "monitor-view energy before and after, and the manifold / "
+                        "self-intersection checks of the output, as JSON")
+    s.add_argument("--quiet", action="store_true", help="no progress")
+    s.add_argument("--clean", action="store_true",
+                   help="clean the mesh first when it has fixable problems (says what it fixed)")
+    add_params_arguments(s, PaparazziParams)
+    group = s.add_argument_group("filter parameters (only those of the chosen --filter are used)")
+    for name, flag, spec in _paparazzi_filter_flags():
+        help_text = f"[{name}] {spec.tooltip} Default: {spec.default}.".replace("%", "%%")
+        dest = f"pz_{name}_{spec.name}".replace("-", "_")
+        if spec.type is bool:
+            group.add_argument(flag, dest=dest, action=argparse.BooleanOptionalAction,
+                               default=spec.default, help=help_text)
+        else:
+            group.add_argument(flag, dest=dest, type=spec.type, default=spec.default,
+                               choices=spec.choices, metavar=spec.name.upper(), help=help_text)
+    s.set_defaults(func=cmd_paparazzi)
+
+
+def cmd_paparazzi(args: argparse.Namespace) -> int:
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.topology import euler_characteristic, is_manifold
+    from algorithms.paparazzi import Paparazzi, count_self_intersections, get_filter
+    from algorithms.paparazzi.optimize import PaparazziParams
+
+    params = params_from_args(PaparazziParams, args)
+    spec = get_filter(args.filter)
+    values = {ps.name: getattr(args, f"pz_{spec.name}_{ps.name}".replace("-", "_"))
+              for ps in describe(spec.params)}
+    fparams = params_from_dict(spec.params, values)
+    _check_output(args.output, args.overwrite, args.mesh)
+    quiet = args.json or args.quiet
+    data, _ = _read_valid(args.mesh, clean=args.clean, quiet=quiet)
+    t0 = time.perf_counter()
+    run = Paparazzi(data.V, data.F, spec, fparams, params)
+    setup = time.perf_counter() - t0
+    last = None
+    report_every = max(1, params.iterations // 10)
+    for last in run.steps():
+        if not quiet and (last.iteration % report_every == 0 or last.message):
+            print(f"  iteration {last.iteration}/{params.iterations}: monitor energy "
+                  f"{last.metrics['monitor_energy']:.6g} {last.message}", file=sys.stderr)
+    seconds = time.perf_counter() - t0
+    V, F = last.V, last.F
+    manifold = bool(is_manifold(F))
+    same_topology = euler_characteristic(F) == euler_characteristic(data.F)
+    crossings = count_self_intersections(V, F)
+    if not manifold or not same_topology or crossings > run.input_intersections:
+        raise Stylize3DError("Paparazzi failed: the result is not a clean 2-manifold with the "
+                             "input's topology; nothing was written. Try a smaller learning rate.")
+    write_mesh(args.output, V, F)
+    sec = last.seconds
+    it = last.iteration
+    if args.json:
+        _print_json({
+            "input": args.mesh, "output": args.output, "filter": spec.name,
+            "filter_params": params_to_dict(fparams), "params": params_to_dict(params),
+            "iterations": it, "seconds": seconds, "setup_seconds": setup,
+            "seconds_split": {k: sec.get(k, 0.0) for k in
+                              ("render", "filter", "derivative", "remesh", "monitor")},
+            "seconds_per_iteration": {k: sec.get(k, 0.0) / it for k in
+                                      ("render", "filter", "derivative", "remesh")},
+            "initial_monitor_energy": last.metrics["initial_monitor_energy"],
+            "final_monitor_energy": last.metrics["monitor_energy"],
+            "vertices": int(len(V)), "faces": int(len(F)),
+            "manifold": manifold, "same_topology": bool(same_topology),
+            "self_intersecting_pairs": crossings,
+            "input_self_intersecting_pairs": run.input_intersections,
+            "self_intersections": crossings > 0,
+            "remeshes": int(last.metrics["remeshes"]),
+            "rollbacks": int(last.metrics["rollbacks"])})
+    else:
+        print(f"Paparazzi '{spec.name}' on {args.mesh}: {it} iterations in {seconds:.1f} s; "
+              f"monitor energy {last.metrics['initial_monitor_energy']:.4g} -> "
+              f"{last.metrics['monitor_energy']:.4g}; {len(V)} vertices; wrote {args.output}.")
+    return 0
 
 
 def main(argv: list[str]) -> int:

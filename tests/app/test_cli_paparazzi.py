@@ -1,0 +1,80 @@
+"""`stylize3d paparazzi`: JSON interface, reproducibility, plain errors (nothing written)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from algorithms.mesh import icosphere, read_mesh, write_mesh
+from algorithms.mesh.topology import is_manifold
+from app.cli import main
+
+FAST = ["--iterations", "12", "--resolution", "32", "--remesh-every", "6", "--monitor-every", "0"]
+
+
+@pytest.fixture
+def sphere(tmp_path):
+    V, F = icosphere(2)
+    V = V * (1 + 0.05 * np.random.default_rng(0).random((len(V), 1)))
+    p = tmp_path / "in.obj"
+    write_mesh(p, V, F)
+    return p
+
+
+def test_json_output_and_same_seed_same_result(sphere, tmp_path, capsys):
+    out1, out2 = tmp_path / "a.obj", tmp_path / "b.obj"
+    rc = main(["paparazzi", str(sphere), "-o", str(out1), "--filter", "quantize", "--json",
+               "--seed", "5", *FAST])
+    assert rc == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["iterations"] == 12 and rep["filter"] == "quantize"
+    assert set(rep["seconds_split"]) == {"render", "filter", "derivative", "remesh", "monitor"}
+    assert rep["manifold"] is True and rep["self_intersections"] is False
+    assert rep["same_topology"] is True and rep["remeshes"] == 1
+    assert np.isfinite(rep["final_monitor_energy"]) and np.isfinite(rep["initial_monitor_energy"])
+    assert main(["paparazzi", str(sphere), "-o", str(out2), "--filter", "quantize", "--quiet",
+                 "--seed", "5", *FAST]) == 0
+    a, b = read_mesh(out1), read_mesh(out2)
+    np.testing.assert_array_equal(a.V, b.V)
+    np.testing.assert_array_equal(a.F, b.F)
+    assert is_manifold(a.F)
+
+
+def test_filter_flags_reach_the_filter(sphere, tmp_path, capsys):
+    out = tmp_path / "s.obj"
+    assert main(["paparazzi", str(sphere), "-o", str(out), "--filter", "slic", "--segments",
+                 "30", "--compactness", "5", "--json", *FAST]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["filter_params"] == {"segments": 30, "compactness": 5.0}
+
+
+def test_unreadable_target_image_is_a_plain_error_and_nothing_is_written(sphere, tmp_path, capsys):
+    bad = tmp_path / "t.png"
+    bad.write_text("not an image")
+    out = tmp_path / "o.obj"
+    rc = main(["paparazzi", str(sphere), "-o", str(out), "--filter", "target-image", "--image",
+               str(bad), *FAST])
+    err = capsys.readouterr().err
+    assert rc != 0 and "cannot be read" in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_non_manifold_mesh_is_refused_plainly(tmp_path, capsys):
+    V, F = icosphere(1)
+    F2 = np.vstack([F, [[F[0, 0], F[0, 1], len(V)]]])
+    V2 = np.vstack([V, [[2.0, 2.0, 2.0]]])
+    p = tmp_path / "nm.obj"
+    write_mesh(p, V2, F2)
+    out = tmp_path / "o.obj"
+    rc = main(["paparazzi", str(p), "-o", str(out), "--filter", "guided", *FAST])
+    err = capsys.readouterr().err
+    assert rc != 0 and "Traceback" not in err and "clean" in err.lower()
+    assert not out.exists()
+
+
+def test_out_of_range_parameters_are_refused(sphere, tmp_path, capsys):
+    rc = main(["paparazzi", str(sphere), "-o", str(tmp_path / "o.obj"), "--filter", "guided",
+               "--radius", "0"])
+    assert rc != 0 and "Radius must be at least 1" in capsys.readouterr().err
