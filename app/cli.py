@@ -20,7 +20,8 @@ from algorithms.errors import InvalidMeshError, MeshWriteError, ParameterError, 
 from algorithms.params import describe, params_from_dict, params_to_dict
 
 SUBCOMMANDS = ("info", "clean", "smooth", "multigrid-info", "cubic", "analogy", "coarsen",
-               "study", "adversary")
+               "study", "subdivide",
+               "subdivide-train", "subdivide-eval", "adversary")
 
 
 # ----------------------------------------------------------------------------- Params -> flags
@@ -515,6 +516,164 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- subdivision (ch. 4)
+def _neural_or_baseline(method: str, weights: str | None):
+    """``fn(V, F, levels) -> (V, F)`` for a subdivision method name."""
+    from algorithms.subdivision.baselines import subdivide_baseline
+
+    if method == "neural":
+        from algorithms.subdivision.model import load_weights, neural_subdivide
+
+        net, _ = load_weights(None if weights in (None, "shipped") else weights)
+        return lambda V, F, levels: neural_subdivide(V, F, levels, net)
+    return lambda V, F, levels: subdivide_baseline(V, F, levels, method)
+
+
+def cmd_subdivide(args: argparse.Namespace) -> int:
+    from algorithms.mesh import write_mesh
+
+    if not 1 <= args.levels <= 3:
+        raise ParameterError(f"--levels must be 1, 2 or 3 (got {args.levels}).")
+    _check_output(args.output, args.overwrite, args.mesh)
+    data, _ = _read_valid(args.mesh, clean=args.clean, quiet=args.json)
+    fn = _neural_or_baseline(args.method, args.weights)
+    t0 = time.perf_counter()
+    V, F = fn(data.V, data.F, args.levels)
+    dt = time.perf_counter() - t0
+    write_mesh(args.output, V, F)
+    out = {"input": args.mesh, "output": args.output, "method": args.method,
+           "levels": args.levels, "vertices_in": int(len(data.V)), "faces_in": int(len(data.F)),
+           "vertices": int(len(V)), "faces": int(len(F)), "seconds": dt}
+    if args.json:
+        _print_json(out)
+    else:
+        print(f"Wrote {args.output}: {args.method} subdivision, {args.levels} level(s), "
+              f"{len(data.F):,} -> {len(F):,} triangles in {dt:.2f} s.")
+    return 0
+
+
+def cmd_subdivide_train(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from algorithms.subdivision.data import DataParams, generate_dataset
+    from algorithms.subdivision.model import save_weights
+    from algorithms.subdivision.train import Trainer, TrainParams
+
+    dparams = params_from_args(DataParams, args)
+    tparams = params_from_args(TrainParams, args)
+    _check_output(args.output, args.overwrite)
+    shapes = [_read_valid(p, clean=args.clean, quiet=args.json)[0] for p in args.meshes]
+    quiet = args.json or args.quiet
+    t0 = time.perf_counter()
+    last = {"pct": -1}
+
+    def progress(frac, msg):
+        pct = int(frac * 100)
+        if not quiet and pct >= last["pct"] + 10:
+            last["pct"] = pct
+            print(f"  data: {msg}", file=sys.stderr)
+
+    samples = generate_dataset([(d.V, d.F) for d in shapes], dparams, workers=args.workers,
+                               scheduler=args.scheduler, cache_dir=args.cache_dir,
+                               use_cache=not args.no_cache, progress=progress)
+    t_data = time.perf_counter() - t0
+    trainer = Trainer(samples, tparams)
+    t1 = time.perf_counter()
+    try:
+        for step in trainer.steps():
+            if not quiet and (step.iteration % 10 == 0 or step.iteration == 1):
+                print(f"  {step.message}", file=sys.stderr)
+    except KeyboardInterrupt:
+        _say("stylize3d subdivide-train: interrupted; saving the best weights so far.")
+    t_train = time.perf_counter() - t1
+    info = {"trained_on": ", ".join(Path(p).name for p in args.meshes),
+            "coarse_meshes": dparams.coarse_meshes, "levels": dparams.levels,
+            "epochs_run": len(trainer.history), "best_epoch": trainer.best_epoch,
+            "best_validation_loss": float(trainer.best_loss), "targets": dparams.targets}
+    save_weights(args.output, trainer.net, info)
+    spe = trainer.seconds_per_epoch
+    out = {"weights": args.output, "meshes": list(args.meshes),
+           "coarse_meshes": len(samples), "epochs": len(trainer.history),
+           "best_epoch": trainer.best_epoch, "best_validation_loss": float(trainer.best_loss),
+           "final_loss": trainer.history[-1]["loss"] if trainer.history else None,
+           "seconds_data": t_data, "seconds_training": t_train,
+           "seconds_per_epoch": float(np.median(spe)) if spe else None}
+    if args.json:
+        _print_json(out)
+    else:
+        print(f"Wrote {args.output}: {len(samples)} coarse meshes ({t_data:.0f} s), "
+              f"{len(trainer.history)} epochs ({t_train:.0f} s); best validation loss "
+              f"{trainer.best_loss:.4g} at epoch {trainer.best_epoch}.")
+    return 0
+
+
+def _parse_range(text: str) -> tuple[int, int]:
+    try:
+        parts = [int(p) for p in str(text).split("-")]
+        lo, hi = (parts[0], parts[0]) if len(parts) == 1 else (parts[0], parts[1])
+        if len(parts) > 2 or lo < 4 or hi < lo:
+            raise ValueError
+    except ValueError:
+        raise ParameterError(f"--target-vertices takes a range like 350-450 (got {text!r}).") \
+            from None
+    return lo, hi
+
+
+def cmd_subdivide_eval(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from algorithms.subdivision.metrics import evaluate_protocol
+
+    lo, hi = _parse_range(args.target_vertices)
+    methods = [m for m in args.methods.split(",") if m]
+    bad = [m for m in methods if m not in ("neural", "loop", "butterfly", "midpoint")]
+    if bad or not methods:
+        raise ParameterError(f"--methods takes neural, loop, butterfly, midpoint (got "
+                             f"{args.methods!r}).")
+    fns = {m: _neural_or_baseline(m, args.weights) for m in methods}
+    meshes = []
+    for p in args.meshes:
+        d, _ = _read_valid(p, clean=args.clean, quiet=args.json)
+        meshes.append((Path(p).name, d.V, d.F))
+
+    def progress(frac, msg):
+        if not args.json and not args.quiet:
+            print(f"  {msg}", file=sys.stderr)
+
+    rows = evaluate_protocol(meshes, fns, target_vertices=(lo, hi), levels=args.levels,
+                             samples=args.samples, seed=args.seed, progress=progress)
+    keys = ("hausdorff", "mean_distance")
+    summary = {m: {k: float(np.mean([r["methods"][m][k] for r in rows])) for k in keys}
+               for m in methods}
+    out = {"units": "% of the bounding-box diagonal of each original mesh",
+           "weights": args.weights, "levels": args.levels, "target_vertices": [lo, hi],
+           "methods": summary,
+           "meshes": [{"mesh": r["mesh"], "vertices": r["vertices"],
+                       "coarse_vertices": r["coarse_vertices"],
+                       "methods": {m: {k: r["methods"][m][k] for k in keys} for m in methods}}
+                      for r in rows]}
+    if "neural" in methods:
+        others = [m for m in methods if m in ("loop", "butterfly")]
+        out["neural_best_on_both"] = sum(
+            all(r["methods"]["neural"][k] < r["methods"][o][k] for k in keys for o in others)
+            for r in rows)
+    if args.json:
+        _print_json(out)
+    else:
+        head = "mesh".ljust(22) + "".join(f"H_{m}".rjust(12) for m in methods) + \
+            "".join(f"M_{m}".rjust(12) for m in methods)
+        print(f"Table 4.2 protocol: QSlim to {lo}-{hi} vertices, {args.levels} levels; "
+              f"H = Hausdorff, M = mean surface distance, in % of the bounding-box diagonal.")
+        print(head)
+        for r in rows:
+            print(r["mesh"][:21].ljust(22)
+                  + "".join(f"{r['methods'][m]['hausdorff']:12.3f}" for m in methods)
+                  + "".join(f"{r['methods'][m]['mean_distance']:12.3f}" for m in methods))
+        print("mean".ljust(22) + "".join(f"{summary[m]['hausdorff']:12.3f}" for m in methods)
+              + "".join(f"{summary[m]['mean_distance']:12.3f}" for m in methods))
+    return 0
+
+
 # ----------------------------------------------------------------------------- parser
 def cmd_study(args: argparse.Namespace) -> int:
     """``stylize3d study replay|summary``: user-study logs, headless (no Qt)."""
@@ -844,6 +1003,65 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--clean", action="store_true", help="clean the mesh first")
     add_params_arguments(s, AdversaryParams)
     s.set_defaults(func=cmd_adversary)
+
+    from algorithms.subdivision.data import DataParams
+    from algorithms.subdivision.train import TrainParams
+
+    s = sub.add_parser("subdivide", help="subdivide a mesh: neural (thesis ch. 4), Loop, "
+                                         "modified butterfly or mid-point")
+    s.add_argument("mesh")
+    s.add_argument("-o", "--output", required=True, help="where to write the subdivided mesh")
+    s.add_argument("--levels", type=int, default=2, help="1 to 3 levels. Default: 2.")
+    s.add_argument("--method", choices=("neural", "loop", "butterfly", "midpoint"),
+                   default="neural", help="Default: neural (with the shipped weights).")
+    s.add_argument("--weights", help="a weights file from subdivide-train (default: shipped)")
+    s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
+    s.add_argument("--json", action="store_true",
+                   help='print {"method", "levels", "vertices", "faces", "seconds", ...}')
+    s.add_argument("--clean", action="store_true", help="clean the mesh first")
+    s.set_defaults(func=cmd_subdivide)
+
+    s = sub.add_parser("subdivide-train", help="train neural subdivision on one or more meshes "
+                                               "(thesis §4.4, App. 4.8.5-4.8.6)")
+    s.add_argument("meshes", nargs="+", metavar="MESH")
+    s.add_argument("-o", "--output", required=True, help="where to write the weights (.pt)")
+    s.add_argument("--scheduler", metavar="ADDRESS",
+                   help="a Dask distributed scheduler (tcp://host:8786) to generate the data on "
+                        "(its workers need Stylize3D installed); default: local processes")
+    s.add_argument("--workers", type=int, default=2,
+                   help="local processes for data generation (1: in this process). Default: 2.")
+    s.add_argument("--cache-dir", help="where generated data is cached (default: "
+                                       "$STYLIZE3D_CACHE/subdivision or ~/.cache/stylize3d)")
+    s.add_argument("--no-cache", action="store_true", help="neither read nor write the cache")
+    s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
+    s.add_argument("--json", action="store_true",
+                   help='print {"weights", "coarse_meshes", "epochs", "best_epoch", '
+                        '"best_validation_loss", "seconds_data", "seconds_training", ...}')
+    s.add_argument("--quiet", action="store_true", help="no progress")
+    s.add_argument("--clean", action="store_true", help="clean the meshes first")
+    add_params_arguments(s, DataParams)
+    add_params_arguments(s, TrainParams)
+    s.set_defaults(func=cmd_subdivide_train)
+
+    s = sub.add_parser("subdivide-eval", help="the Table 4.2 protocol: QSlim each mesh to "
+                                              "350-450 vertices, subdivide, measure H and M")
+    s.add_argument("weights", help="a weights file ('shipped' for the shipped weights)")
+    s.add_argument("meshes", nargs="+", metavar="MESH")
+    s.add_argument("--target-vertices", default="350-450",
+                   help="coarse vertex range. Default: 350-450.")
+    s.add_argument("--levels", type=int, default=2, help="Default: 2.")
+    s.add_argument("--methods", default="neural,loop,butterfly",
+                   help="comma-separated: neural, loop, butterfly, midpoint. "
+                        "Default: neural,loop,butterfly.")
+    s.add_argument("--samples", type=int, default=200_000,
+                   help="area-uniform samples per surface (plus the vertices). Default: 200000.")
+    s.add_argument("--seed", type=int, default=0, help="seed of the targets and samples")
+    s.add_argument("--json", action="store_true",
+                   help='print {"methods": {name: {"hausdorff", "mean_distance"}}, "meshes": '
+                        '[...]} (%% of the bounding-box diagonal)')
+    s.add_argument("--quiet", action="store_true", help="no progress")
+    s.add_argument("--clean", action="store_true", help="clean the meshes first")
+    s.set_defaults(func=cmd_subdivide_eval)
     return p
 
 
