@@ -214,9 +214,11 @@ class MainWindow(QMainWindow):
         from app.panels.multigrid import MultigridPanel
         from app.panels.smooth import SmoothPanel
         from app.panels.spectral import SpectralPanel
+        from app.panels.subdivision import SubdivisionPanel
 
         self.panels = {}
-        for cls in (CubicPanel, AnalogiesPanel, SmoothPanel, MultigridPanel, SpectralPanel):
+        for cls in (CubicPanel, AnalogiesPanel, SmoothPanel, MultigridPanel, SpectralPanel,
+                    SubdivisionPanel):
             panel = cls(self)
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, panel)
             self.panels[cls.title] = panel

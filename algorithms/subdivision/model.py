@@ -33,15 +33,17 @@ Weights files: ``torch.save`` of a dict of plain tensors, numbers and strings, r
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InvalidMeshError, ParameterError, Stylize3DError
+from ..params import param
 from .data import check_manifold, normalization
 from .topology import half_flaps, refine
 
-__all__ = ["SubdivisionNet", "MeshLevels", "neural_subdivide", "save_weights", "load_weights",
+__all__ = ["SubdivideParams", "SubdivisionNet", "MeshLevels", "neural_subdivide", "save_weights", "load_weights",
            "shipped_weights_path", "WeightsError", "FORMAT", "FEATURES"]
 
 FORMAT = "stylize3d-neural-subdivision"
@@ -50,6 +52,24 @@ FEATURES = 32  # 3 + 29
 DTYPE_NAME = "float32"  # network and inference precision (float64 is ~2x slower)
 HIDDEN = 32
 MAX_LEVELS = 3
+
+
+@dataclass(frozen=True)
+class SubdivideParams:
+    """Subdividing a mesh (the Subdivision panel's form)."""
+
+    method: str = param("neural", label="Method", choices=("neural", "loop", "butterfly",
+                                                            "midpoint"),
+                        tooltip="neural: the learned subdivision (thesis ch. 4); loop: smooth, "
+                                "shrinks; butterfly: interpolating; midpoint: splits only.")
+    levels: int = param(2, label="Levels", minimum=1, maximum=MAX_LEVELS, step=1,
+                        tooltip="Each level splits every triangle into four (the network was "
+                                "trained for 2).")
+    coarsen_first: int = param(0, label="Coarsen first to (vertices)", minimum=0,
+                               maximum=1_000_000, step=50,
+                               tooltip="0: off. Otherwise QSlim the mesh to about this many "
+                                       "vertices first (e.g. 400), so you can watch the method "
+                                       "rebuild the detail.")
 
 
 class WeightsError(Stylize3DError):
