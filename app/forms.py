@@ -2,7 +2,9 @@
 
 Numbers get a spin box plus a slider (logarithmic where the field says so) for immediate feedback;
 booleans a check box; strings with choices a drop-down. Fields marked ``advanced`` go into a
-collapsed "Advanced" group. ``changed`` fires on every edit with the new Params instance;
+folded "Advanced" section (one line of text while folded), panels may fold other rarely used
+fields into sections of their own (``groups``) and grey out fields that need a switch
+(``enable_when``). ``changed`` fires on every edit with the new Params instance;
 ``params()`` returns the current one; ``set_params`` loads one.
 """
 
@@ -15,10 +17,11 @@ from typing import Any
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtGui import QValidator
 from PySide6.QtWidgets import (QAbstractSpinBox, QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout,
-                               QGroupBox, QHBoxLayout, QLabel, QSlider, QSpinBox, QVBoxLayout,
+                               QHBoxLayout, QLabel, QSlider, QSpinBox, QVBoxLayout,
                                QWidget)
 
 from algorithms.params import ParamSpec, describe
+from app.widgets import CollapsibleSection
 
 SLIDER_STEPS = 1000
 
@@ -172,33 +175,44 @@ class ParamsForm(QWidget):
     changed = Signal(object)
 
     def __init__(self, params_cls: type, parent: QWidget | None = None, values: Any = None,
-                 exclude: tuple[str, ...] = ()):
+                 exclude: tuple[str, ...] = (),
+                 groups: dict[str, tuple[str, ...]] | None = None,
+                 enable_when: dict[str, str] | None = None,
+                 auto_text: dict[str, Any] | None = None):
+        """``groups``: title -> field names shown in a folded section of their own (rarely used
+        fields); fields marked ``advanced`` fold into "Advanced". ``enable_when``: field ->
+        the bool field that must be on for it to be editable (e.g. x/y/z factors need
+        "Per-axis λ"). ``auto_text``: field -> ``f(params) -> str``, what the field's minimum
+        means, shown instead of the number (e.g. "auto (167)" for "0 = round(m/3)")."""
         super().__init__(parent)
         self.params_cls = params_cls
         self.specs = [s for s in describe(params_cls) if s.name not in exclude]
         self._excluded = {s.name: s.default for s in describe(params_cls) if s.name in exclude}
         self.editors: dict[str, QWidget] = {}
+        self.labels: dict[str, QLabel] = {}
         outer = QVBoxLayout(self)
         outer.setContentsMargins(0, 0, 0, 0)
         main = QFormLayout()
         outer.addLayout(main)
-        self.advanced_box = QGroupBox("Advanced")
-        self.advanced_box.setCheckable(True)
-        self.advanced_box.setChecked(False)
+        in_group = {n: title for title, names in (groups or {}).items() for n in names}
+        self.sections: dict[str, CollapsibleSection] = {}
+        forms: dict[str, QFormLayout] = {}
+        for title in list(groups or {}) + ["Advanced"]:
+            names = [sp.name for sp in self.specs
+                     if (in_group.get(sp.name) == title if title != "Advanced"
+                         else sp.advanced and sp.name not in in_group)]
+            if not names:
+                continue
+            sec = CollapsibleSection(f"{title} ({len(names)})")
+            forms[title] = QFormLayout(sec.body)
+            forms[title].setContentsMargins(12, 0, 0, 0)
+            outer.addWidget(sec)
+            self.sections[title] = sec
+        self.advanced_box = self.sections.get("Advanced") or CollapsibleSection("Advanced")
         self.advanced_box.setToolTip("Settings most users never need to change.")
-        adv_body = QWidget()
-        adv = QFormLayout(adv_body)
-        adv.setContentsMargins(0, 0, 0, 0)
-        box_lay = QVBoxLayout(self.advanced_box)
-        box_lay.addWidget(adv_body)
-        adv_body.setVisible(False)
-        self.advanced_box.toggled.connect(adv_body.setVisible)
-        if any(s.advanced for s in self.specs):
-            outer.addWidget(self.advanced_box)
-        else:
-            self.advanced_box.setVisible(False)
         for spec in self.specs:
-            form = adv if spec.advanced else main
+            title = in_group.get(spec.name) or ("Advanced" if spec.advanced else None)
+            form = forms.get(title, main)
             if spec.type is bool:
                 w = QCheckBox()
                 w.toggled.connect(self._emit)
@@ -217,10 +231,33 @@ class ParamsForm(QWidget):
             label.setToolTip(tip)
             form.addRow(label, w)
             self.editors[spec.name] = w
+            self.labels[spec.name] = label
+        self._enable_when = {k: v for k, v in (enable_when or {}).items() if k in self.editors}
+        for controller in set(self._enable_when.values()):
+            self.editors[controller].toggled.connect(lambda _on: self._update_enabled())
+        self._auto_text = {k: f for k, f in (auto_text or {}).items() if k in self.editors}
         self._loading = False
         self.set_params(values if values is not None else params_cls())
+        self._update_enabled()
+        self._update_auto_text()
+
+    def _update_auto_text(self) -> None:
+        if not self._auto_text:
+            return
+        p = self.params()
+        for name, f in self._auto_text.items():
+            spin = self.editors[name].spin
+            spin.setSpecialValueText(str(f(p)))
+            spin.update()
+
+    def _update_enabled(self) -> None:
+        for name, controller in self._enable_when.items():
+            on = self.editors[controller].isChecked()
+            self.editors[name].setEnabled(on)
+            self.labels[name].setEnabled(on)
 
     def _emit(self, *_):
+        self._update_auto_text()
         if not self._loading:
             self.changed.emit(self.params())
 

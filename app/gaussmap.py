@@ -70,6 +70,7 @@ class GaussMapPainter(QWidget):
         hint.setWordWrap(True)
         lay.addWidget(hint)
         self.view = Viewport(self)
+        self.view.show_legend = False  # a small view: its colours are the panel's λ
         self.view.setMinimumSize(200, 200)
         lay.addWidget(self.view, 1)
         Vs, Fs = icosphere(4)
@@ -83,7 +84,26 @@ class GaussMapPainter(QWidget):
         self.refresh()
 
     def _on_doc(self, what: str) -> None:
-        if what in ("mesh", "topology", "fields", "positions"):
+        if what not in ("mesh", "topology", "fields", "positions"):
+            return
+        st = self.window_.document.state
+        key = None if st is None else (id(st.V), id(st.F), id(st.fields.get(self.brush.field)))
+        if key == getattr(self, "_drawn_key", 0):
+            return  # another panel's field changed: the sphere shows the same
+        self._drawn_key = key
+        if self._panel_shown():
+            self.refresh()
+        else:  # drawn when its panel comes to the front (refresh_if_stale)
+            self._stale = True
+
+    def _panel_shown(self) -> bool:
+        w = self.parentWidget()
+        while w is not None and not hasattr(w, "is_shown"):
+            w = w.parentWidget()
+        return self.isVisible() if w is None else w.is_shown()
+
+    def refresh_if_stale(self) -> None:
+        if getattr(self, "_stale", False):
             self.refresh()
 
     def sphere_values(self, values: np.ndarray | None = None) -> np.ndarray:
@@ -110,5 +130,6 @@ class GaussMapPainter(QWidget):
         return out
 
     def refresh(self, values: np.ndarray | None = None) -> None:
+        self._stale = False
         b = self.brush
         self.view.show_field(b.field, self.sphere_values(values), b.cmap, (b.low, b.high))

@@ -19,6 +19,9 @@ def run_app(mesh: str | None = None, screenshot: str | None = None,
     sys.excepthook = make_excepthook(win)
     win.show()
     status = {"code": 0}
+    said: list[tuple[str, str]] = []
+    if screenshot:  # nobody is there to answer: questions are declined, messages kept
+        _unattended_dialogs(said)
     if mesh:
         QTimer.singleShot(0, lambda: win.open_path(mesh))
     if study:
@@ -26,7 +29,12 @@ def run_app(mesh: str | None = None, screenshot: str | None = None,
     if screenshot:
         def shoot():
             if mesh and win.document.is_empty:
-                print(f"stylize3d: could not open {mesh}", file=sys.stderr)
+                why = "".join(f"\n{text}" for _title, text in said[-1:])
+                if said and said[-1][0] == "Mesh problems":
+                    why += (f"\n\nRun `stylize3d clean {mesh} -o CLEANED.obj` first, or open it "
+                            "in the app and choose 'Clean and open'.")
+                print(f"stylize3d: could not open {mesh}{':' if why else ''}{why}",
+                      file=sys.stderr)
                 status["code"] = 2
             elif not win.save_window_image(screenshot):
                 status["code"] = 3
@@ -37,6 +45,25 @@ def run_app(mesh: str | None = None, screenshot: str | None = None,
         QTimer.singleShot(1500, shoot)
     rc = app.exec()
     return status["code"] or rc
+
+
+def _unattended_dialogs(said: list) -> None:
+    """For `--screenshot` runs: every dialog becomes a recorded message; questions are answered
+    with their last choice (Cancel), so a mesh that needs cleaning is not opened silently."""
+    from app import dialogs
+
+    def error(parent, title, text, details=None):
+        said.append((title, text))
+
+    def choose(parent, title, text, choices, default=None, details=None):
+        said.append((title, text))
+        return None
+
+    dialogs.error = error
+    dialogs.info = error
+    dialogs.choose = choose
+    dialogs.confirm = lambda parent, title, text, yes="Yes", no="Cancel": bool(
+        choose(parent, title, text, [yes, no]))
 
 
 def _start_study(win, study: dict, status: dict) -> None:

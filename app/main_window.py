@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 from PySide6.QtCore import QSettings, Qt, QTimer, Signal
 from PySide6.QtGui import QAction, QKeySequence, QShortcut, QUndoStack
-from PySide6.QtWidgets import (QLabel, QMainWindow, QProgressBar, QPushButton, QWidget)
+from PySide6.QtWidgets import (QDockWidget, QLabel, QMainWindow, QProgressBar, QPushButton,
+                               QWidget)
 
 from algorithms.errors import Stylize3DError
 from algorithms.mesh import (SUPPORTED_READ, SUPPORTED_WRITE, clean_mesh, file_filter, read_mesh,
@@ -24,6 +25,7 @@ from app.commands import StateCommand
 from app.document import Document
 from app.jobs import JobRunner
 from app.viewport import Viewport
+from app.widgets import MessageLog, plural
 
 APP_NAME = "Stylize3D"
 MAX_RECENT = 8
@@ -45,6 +47,10 @@ SHORTCUTS: list[tuple[str, str, str | None]] = [
     ("W", "Show / hide edges", "wireframe"),
     ("F", "Flat / smooth shading", "flat"),
     ("G", "Show the original mesh as a ghost", "ghost"),
+    ("1", "Front view", "view_front"),
+    ("7", "Top view", "view_top"),
+    ("3", "Side view", "view_side"),
+    ("5", "Orthographic / perspective view", "orthographic"),
     ("F1", "This list of shortcuts", "shortcuts"),
     ("Ctrl+Q", "Quit", "quit"),
 ]
@@ -90,6 +96,7 @@ class MainWindow(QMainWindow):
         self._build_actions()
         self._build_menus()
         self._build_status_bar()
+        self._build_toolbar()
         self._build_panels()
 
         self.document.subscribe(self._on_document_changed)
@@ -154,6 +161,12 @@ class MainWindow(QMainWindow):
           checkable=True, tip="Shade each triangle with one colour (shows facets)")
         A("ghost", "Show &Original as Ghost", self._toggle_ghost,
           checkable=True, tip="Overlay the mesh as it was when opened, translucent")
+        for key, text in (("front", "&Front View"), ("top", "&Top View"),
+                          ("side", "&Side View")):
+            A(f"view_{key}", text, lambda _=False, key=key: self.viewport.standard_view(key),
+              tip=f"Look at the whole mesh from the {key}")
+        A("orthographic", "&Orthographic", self.viewport.set_orthographic, checkable=True,
+          tip="Parallel projection: no perspective, so sizes compare across the view")
         A("about", "&About Stylize3D", self.show_about)
         A("shortcuts", "&Keyboard Shortcuts", self.show_shortcuts)
 
@@ -176,16 +189,71 @@ class MainWindow(QMainWindow):
         m.addSeparator()
         m.addAction(a["clean"])
         m = mb.addMenu("&View")
-        for name in ("reset_camera", "wireframe", "flat", "ghost"):
+        for name in ("reset_camera", "view_front", "view_top", "view_side", "orthographic",
+                     "wireframe", "flat", "ghost"):
             m.addAction(a[name])
         self.panels_menu = m.addMenu("&Panels")
+        self.view_menu = m
         m = mb.addMenu("&Help")
         m.addAction(a["shortcuts"])
         m.addAction(a["about"])
         self._fill_recent_menu()
 
+    def _build_toolbar(self) -> None:
+        """The common actions as icons (the same actions as the menus)."""
+        from PySide6.QtWidgets import QStyle, QToolBar
+
+        tb = QToolBar("Toolbar", self)
+        tb.setObjectName("toolbar_main")
+        tb.setMovable(False)
+        tb.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextUnderIcon)
+        style = self.style()
+        icons = {"open": QStyle.StandardPixmap.SP_DialogOpenButton,
+                 "save": QStyle.StandardPixmap.SP_DialogSaveButton,
+                 "undo": QStyle.StandardPixmap.SP_ArrowBack,
+                 "redo": QStyle.StandardPixmap.SP_ArrowForward,
+                 "reset_camera": QStyle.StandardPixmap.SP_BrowserReload,
+                 "screenshot": QStyle.StandardPixmap.SP_DesktopIcon,
+                 "ghost": QStyle.StandardPixmap.SP_TitleBarShadeButton}
+        labels = {"reset_camera": "Reset view", "screenshot": "Screenshot", "ghost": "Ghost",
+                  "view_front": "Front", "view_top": "Top", "view_side": "Side",
+                  "orthographic": "Ortho"}
+        groups = (("open", "save"), ("undo", "redo"), ("reset_camera", "view_front", "view_top",
+                                                      "view_side", "orthographic", "ghost"),
+                  ("screenshot",))
+        self.toolbar_buttons = {}
+        for i, group in enumerate(groups):
+            if i:
+                tb.addSeparator()
+            for name in group:
+                a = self.actions_by_name[name]
+                if name in icons:
+                    a.setIcon(style.standardIcon(icons[name]))
+                if name in labels:
+                    a.setIconText(labels[name])
+                keys = a.shortcut().toString()
+                if keys and keys not in a.toolTip():
+                    a.setToolTip(f"{a.toolTip() or a.text().replace('&', '')} ({keys})")
+                tb.addAction(a)
+                self.toolbar_buttons[name] = tb.widgetForAction(a)
+        self.addToolBar(Qt.ToolBarArea.TopToolBarArea, tb)
+        self.toolbar = tb
+
     def _build_status_bar(self) -> None:
         sb = self.statusBar()
+        self.message_log = MessageLog()
+        self.messages_dock = QDockWidget("Messages", self)
+        self.messages_dock.setObjectName("dock_messages")
+        self.messages_dock.setWidget(self.message_log)
+        self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, self.messages_dock)
+        self.messages_dock.hide()
+        self.view_menu.addAction(self.messages_dock.toggleViewAction())
+        self.details_button = QPushButton("Details…")
+        self.details_button.setFlat(True)
+        self.details_button.setToolTip("Show every message of this session in full (the status "
+                                       "bar shows each one for a few seconds).")
+        self.details_button.clicked.connect(self.show_messages)
+        sb.addPermanentWidget(self.details_button)
         self.stats_label = QLabel()
         self.stats_label.setToolTip("Vertices, triangles, boundary loops and genus of the open mesh")
         sb.addPermanentWidget(self.stats_label)
@@ -202,6 +270,28 @@ class MainWindow(QMainWindow):
         self._esc = QShortcut(QKeySequence(Qt.Key.Key_Escape), self)
         self._esc.setContext(Qt.ShortcutContext.ApplicationShortcut)
         self._esc.activated.connect(self.cancel_job)
+
+    # ------------------------------------------------------------------------------ messages
+    def report(self, text: str, level: str = "info", timeout_ms: int = 8000) -> None:
+        """Tell the user something: the whole text goes to the message log (View > Messages,
+        "Details…"); its first line, shortened with "…" to the free width, to the status bar."""
+        self.message_log.add(text, level)
+        sb = self.statusBar()
+        used = sum(w.width() for w in (self.details_button, self.stats_label, self.progress_bar,
+                                       self.cancel_button) if w.isVisible())
+        free = max(sb.width() - used - 40, 120)
+        line = text.strip().splitlines()[0] if text.strip() else ""
+        shown = sb.fontMetrics().elidedText(line, Qt.TextElideMode.ElideRight, free)
+        sb.showMessage(shown, timeout_ms)
+
+    def _error(self, title: str, text: str, details: str | None = None) -> None:
+        """An error dialog whose text also stays in the message log."""
+        self.message_log.add(f"{title}: {text}", "error")
+        dialogs.error(self, title, text, details)
+
+    def show_messages(self) -> None:
+        self.messages_dock.show()
+        self.messages_dock.raise_()
 
     def _layout_version(self) -> int:
         import zlib
@@ -272,12 +362,12 @@ class MainWindow(QMainWindow):
         stays as it was. Returns True when the mesh was opened."""
         path = str(path)
         if self.runner.busy:
-            dialogs.error(self, "A job is running", "Stop the running job (Esc) before opening a file.")
+            self._error("A job is running", "Stop the running job (Esc) before opening a file.")
             return False
         try:
             data = read_mesh(path)
         except Stylize3DError as e:
-            dialogs.error(self, "Cannot open mesh", str(e))
+            self._error("Cannot open mesh", str(e))
             return False
         V, F, notes = data.V, data.F, list(data.notes)
         report = validate_mesh(V, F, notes=notes)
@@ -295,13 +385,13 @@ class MainWindow(QMainWindow):
                     notes += list(res.actions)
                     report = validate_mesh(V, F, notes=notes)
                     if report.errors:
-                        dialogs.error(self, "Cannot open mesh",
+                        self._error("Cannot open mesh",
                                       f"Cleaning could not fix everything:\n\n{report.summary()}")
                         return False
                 elif choice != "Open as it is":
                     return False
             else:
-                dialogs.error(self, "Cannot open mesh", text + "\n\nThese problems cannot be "
+                self._error("Cannot open mesh", text + "\n\nThese problems cannot be "
                               "fixed automatically; repair the file in a mesh editor.")
                 return False
         if not self._confirm_discard():
@@ -313,24 +403,24 @@ class MainWindow(QMainWindow):
         msg = f"Opened {Path(path).name}: {len(V):,} vertices, {len(F):,} triangles."
         if notes:
             msg += " " + " ".join(notes)
-        self.statusBar().showMessage(msg, 8000)
+        self.report(msg + (f"\n{report.summary()}" if report.warnings else ""))
         return True
 
     def _write(self, path: str) -> bool:
         try:
             write_mesh(path, self.document.V, self.document.F)
         except Stylize3DError as e:
-            dialogs.error(self, "Could not save", str(e))
+            self._error("Could not save", str(e))
             return False
         except OSError as e:  # pragma: no cover - write_mesh wraps these
-            dialogs.error(self, "Could not save", f"{path}: {e.strerror or e}")
+            self._error("Could not save", f"{path}: {e.strerror or e}")
             return False
         self._ever_saved_here.add(str(Path(path).resolve()))
         if Path(path).suffix.lower() in SUPPORTED_READ:
             self.document.mark_saved(path)
             self.undo_stack.setClean()
             self._add_recent(path)
-        self.statusBar().showMessage(f"Saved {path}", 5000)
+        self.report(f"Saved {path}", timeout_ms=5000)
         self._update_title()
         return True
 
@@ -382,10 +472,10 @@ class MainWindow(QMainWindow):
         except Exception as e:
             if os.path.exists(tmp):
                 os.remove(tmp)
-            dialogs.error(self, "Could not export screenshot", f"{path}: {e}")
+            self._error("Could not export screenshot", f"{path}: {e}")
             return False
         self._ever_saved_here.add(str(Path(path).resolve()))
-        self.statusBar().showMessage(f"Screenshot saved to {path}", 5000)
+        self.report(f"Screenshot saved to {path}", timeout_ms=5000)
         return True
 
     def save_window_image(self, path: str) -> bool:
@@ -418,7 +508,7 @@ class MainWindow(QMainWindow):
         try:
             res = clean_mesh(doc.V, doc.F)
         except Stylize3DError as e:
-            dialogs.error(self, "Cannot clean the mesh", str(e))
+            self._error("Cannot clean the mesh", str(e))
             return False
         changed = res.V.shape != doc.V.shape or res.F.shape != doc.F.shape or not (
             np.array_equal(res.F, doc.F) and np.array_equal(res.V, doc.V))
@@ -477,6 +567,7 @@ class MainWindow(QMainWindow):
             self.progress_bar.setFormat(f"{self.runner.name}: {it}")
 
     def _on_busy_changed(self, busy: bool) -> None:
+        self.viewport.set_streaming(busy)
         self.progress_bar.setVisible(busy)
         self.cancel_button.setVisible(busy)
         if busy:
@@ -494,8 +585,7 @@ class MainWindow(QMainWindow):
 
     def _on_job_finished(self, step: Step) -> None:
         if getattr(self, "_job_kind", "positions") == "analysis":
-            self.statusBar().showMessage(f"{self.last_job_name} finished in "
-                                         f"{self.runner.last_duration:.2f} s.", 8000)
+            self.report(f"{self.last_job_name} finished in {self.runner.last_duration:.2f} s.")
             return
         before = self._job_before
         if before is None or self.document.state is not before:
@@ -503,7 +593,7 @@ class MainWindow(QMainWindow):
             return
         if step.V.shape != before.V.shape or not np.isfinite(step.V).all():
             self._restore_view()
-            dialogs.error(self, f"{self.last_job_name} failed",
+            self._error(f"{self.last_job_name} failed",
                           "The method returned an invalid result; your mesh was not changed.")
             return
         commit = getattr(self, "_job_commit", None)
@@ -512,18 +602,17 @@ class MainWindow(QMainWindow):
                                           merge_id=getattr(self, "_job_merge_id", -1)))
         self._job_before = None
         self.job_committed.emit(self.last_job_name, after)
-        self.statusBar().showMessage(
-            f"{self.last_job_name} finished in {self.runner.last_duration:.2f} s "
-            f"({step.iteration} iterations). Undo with Ctrl+Z.", 8000)
+        self.report(f"{self.last_job_name} finished in {self.runner.last_duration:.2f} s "
+                    f"({plural(step.iteration, 'iteration')}). Undo with Ctrl+Z.")
 
     def _on_job_cancelled(self, message: str) -> None:
         if not self.runner.busy:  # a restarted (live) job keeps streaming instead
             self._restore_view()
-        self.statusBar().showMessage(message + " The mesh is as it was.", 5000)
+        self.report(message + " The mesh is as it was.", timeout_ms=5000)
 
     def _on_job_failed(self, message: str, details: str) -> None:
         self._restore_view()
-        dialogs.error(self, f"{self.last_job_name or 'Job'} failed",
+        self._error(f"{self.last_job_name or 'Job'} failed",
                       message + "\n\nYour mesh is as it was before the job.", details or None)
 
     # ------------------------------------------------------------------------------ document

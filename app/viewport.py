@@ -8,13 +8,14 @@ original mesh, edges (wireframe overlay), flat or smooth shading, a per-vertex s
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 import pyvista as pv
 from pyvistaqt import QtInteractor
-from PySide6.QtCore import QEvent, QObject, Qt, Signal
+from PySide6.QtCore import QEvent, QObject, Qt, QTimer, Signal
 from PySide6.QtWidgets import QVBoxLayout, QWidget
 from vtkmodules.vtkRenderingCore import vtkCellPicker
 
@@ -25,6 +26,25 @@ BACKGROUND_BOTTOM = "#7d8799"
 MESH_COLOR = "#e8d4b0"
 GHOST_COLOR = "#5b8bd9"
 HOME_VIEW_DIRECTION = (0.55, 0.35, 1.0)
+#: at most this share of the GUI thread's time goes to redrawing the 3D view (the rest answers
+#: the user): after a redraw that took t seconds the next one waits t · (1 − s) / s
+REDRAW_SHARE = 0.5
+#: what the colour legend says of each field the app shows (title with units); a field not
+#: listed is titled by its name. Categorical fields (region labels) get no bar.
+FIELD_TITLES = {
+    "lambda_scale": "λ scale (× the slider's λ)",
+    "fixed": "fixed region (1 = pinned)",
+    "plane": "plane region (1 = flattened)",
+    "frame_mask": "own cube frame (1 = painted)",
+    "angle_to_targets": "angle to target normals (°)",
+    "gaussian_curvature": "Gaussian curvature (1/length²)",
+    "signal": "signal value",
+    "eigenfunction": "eigenfunction value",
+}
+#: fields whose colours are not a scale (hues of directions): no bar
+NO_LEGEND = {"target_direction", "capture"}
+#: anti-aliasing samples when idle; none while a job streams (3× cheaper with software OpenGL)
+MULTI_SAMPLES = 4
 
 
 def _faces_vtk(F: np.ndarray) -> np.ndarray:
@@ -84,14 +104,45 @@ class _MouseFilter(QObject):
         return False
 
 
+class _TimedInteractor(QtInteractor):
+    """pyvistaqt's widget, its paints timed and prepared by the :class:`Viewport`."""
+
+    viewport: "Viewport | None" = None
+
+    def paintGL(self) -> None:  # noqa: N802 (Qt API)
+        vp = self.viewport
+        if vp is not None:
+            vp._before_paint()
+        t0 = time.perf_counter()
+        super().paintGL()
+        if vp is not None:
+            vp._after_paint(t0, time.perf_counter())
+
+
 class Viewport(QWidget):
-    """The central 3D view. ``rendered`` is emitted after every render of new geometry."""
+    """The central 3D view. ``rendered`` is emitted after every redraw.
+
+    Redraws are asked for with :meth:`render` and happen in the widget's next paint: several
+    changes before it are drawn once, and while redraws are expensive (software OpenGL, big
+    meshes) they are spaced so that at most :data:`REDRAW_SHARE` of the GUI thread's time goes
+    to them (``render_seconds`` is the measured cost of one). Streamed positions are stored at
+    once (``points`` is always current); their normals are computed just before the paint."""
 
     rendered = Signal()
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
-        self.plotter = QtInteractor(self, auto_update=False)
+        self.plotter = _TimedInteractor(self, auto_update=False, multi_samples=MULTI_SAMPLES)
+        self.plotter.viewport = self
+        self.render_seconds = 0.0       # measured cost of one redraw (moving average)
+        self.redraws = 0
+        self.redraw_seconds_total = 0.0
+        self._last_paint_end = 0.0
+        self._paint_asked = False
+        self._normals_dirty = False
+        self._paint_timer = QTimer(self)
+        self._paint_timer.setSingleShot(True)
+        self._paint_timer.timeout.connect(self._ask_paint)
         self.plotter.set_background(BACKGROUND_BOTTOM, top=BACKGROUND_TOP)
         self.plotter.add_axes(interactive=False, line_width=2, labels_off=False)
         layout = QVBoxLayout(self)
@@ -104,6 +155,10 @@ class Viewport(QWidget):
         self._flat = False
         self._edges = False
         self._field_name: str | None = None
+        self.show_legend = True   # small views (Gauss map, capture sphere) switch it off
+        self.legend = None        # the colour bar (vtkScalarBarActor) of the shown field
+        self.legend_title = ""
+        self.legend_range: tuple[float, float] | None = None
         self.handler: InteractionHandler | None = None
         self.last_mouse: tuple[float, float] = (0.0, 0.0)
         self.handles_actor = None
@@ -130,6 +185,8 @@ class Viewport(QWidget):
         of its nearest vertex."""
         if self.mesh_actor is None or self.poly is None:
             return None
+        if self._paint_timer.isActive() or self._paint_asked:
+            self.render_now()  # the depth buffer must show the current geometry
         w = self.plotter.interactor
         dpr = w.devicePixelRatioF()
         xd, yd = x * dpr, (w.height() - 1 - y) * dpr
@@ -248,6 +305,7 @@ class Viewport(QWidget):
             scalars=None, reset_camera=False)
         self._apply_shading()
         self._field_name = None
+        self._set_legend(None)
         if reset_camera:
             self._home_camera()
         self.render()
@@ -260,8 +318,7 @@ class Viewport(QWidget):
         if V.shape != (self.poly.n_points, 3):
             raise ValueError(f"expected {(self.poly.n_points, 3)} positions, got {V.shape}")
         self.poly.points = V
-        self.poly.point_data["Normals"] = vertex_normals(V, self._F)
-        self.poly.point_data.active_normals_name = "Normals"
+        self._normals_dirty = True  # computed once, just before the next redraw
         self.poly.Modified()
         self.render()
 
@@ -320,8 +377,14 @@ class Viewport(QWidget):
         if name is None or values is None:
             mapper.scalar_visibility = False
             self._field_name = None
+            self._set_legend(None)
         else:
             values = np.asarray(values, dtype=np.float64)
+            if categorical and len(values) == self.poly.n_points and self._F is not None \
+                    and len(self._F):
+                # region labels: each triangle takes its first corner's label, so regions are
+                # drawn in flat colours with sharp borders (no blended label colours)
+                values = values[self._F[:, 0]]
             if len(values) == self.poly.n_points:
                 self.poly.point_data[name] = values
                 self.poly.point_data.active_scalars_name = name
@@ -333,13 +396,60 @@ class Viewport(QWidget):
             else:
                 raise ValueError(f"a field needs {self.poly.n_points} vertex values or "
                                  f"{self.poly.n_cells} triangle values, got {len(values)}")
-            mapper.lookup_table = pv.LookupTable(cmap, nan_color="#9a9a9a")
-            lo, hi = clim if clim else (float(np.min(values)), float(np.max(values)))
-            mapper.scalar_range = (lo, hi if hi > lo else lo + 1.0)
+            lut = pv.LookupTable(cmap, nan_color="#9a9a9a")
+            if clim:
+                lo, hi = clim
+            else:
+                finite = values[np.isfinite(values)]
+                lo, hi = ((float(finite.min()), float(finite.max())) if finite.size
+                          else (0.0, 1.0))
+            hi = hi if hi > lo else lo + 1.0
+            lut.scalar_range = (lo, hi)
+            mapper.lookup_table = lut
+            mapper.scalar_range = (lo, hi)
             mapper.SetInterpolateScalarsBeforeMapping(not categorical)
             mapper.scalar_visibility = True
             self._field_name = name
+            self._set_legend(None if categorical or name in NO_LEGEND else lut,
+                             FIELD_TITLES.get(name, name.replace("_", " ")), (lo, hi))
         self.render()
+
+    def _set_legend(self, lut, title: str = "", rng: tuple[float, float] | None = None) -> None:
+        """The colour bar of the shown field: its title (with units) and its range; one bar,
+        made once, shown for every colour view of this viewport (None hides it)."""
+        if lut is None or not self.show_legend:
+            if self.legend is not None:
+                self.legend.SetVisibility(False)
+            self.legend_title, self.legend_range = "", None
+            return
+        if self.legend is None:
+            from vtkmodules.vtkRenderingAnnotation import vtkScalarBarActor
+
+            bar = vtkScalarBarActor()
+            bar.SetOrientationToHorizontal()
+            bar.SetNumberOfLabels(5)
+            bar.SetLabelFormat("%-#6.3g")
+            bar.GetPositionCoordinate().SetCoordinateSystemToNormalizedViewport()
+            bar.GetPositionCoordinate().SetValue(0.30, 0.02)
+            bar.SetWidth(0.45)
+            bar.SetHeight(0.12)
+            bar.SetBarRatio(0.28)
+            bar.SetTextPositionToPrecedeScalarBar()  # labels under the bar, title above it
+            bar.SetVerticalTitleSeparation(4)
+            bar.UnconstrainedFontSizeOn()
+            for prop in (bar.GetTitleTextProperty(), bar.GetLabelTextProperty()):
+                prop.SetColor(0.08, 0.08, 0.1)
+                prop.SetShadow(False)
+                prop.SetBold(False)
+                prop.SetItalic(False)
+                prop.SetFontSize(13)
+            bar.SetPickable(False)
+            self.plotter.renderer.AddViewProp(bar)
+            self.legend = bar
+        self.legend.SetLookupTable(lut)
+        self.legend.SetTitle(title)
+        self.legend.SetVisibility(True)
+        self.legend_title, self.legend_range = title, (float(rng[0]), float(rng[1]))
 
     def _home_camera(self) -> None:
         # Most mesh files are Y-up: a three-quarter view from the front, Y pointing up.
@@ -347,17 +457,90 @@ class Viewport(QWidget):
         self.plotter.reset_camera()
         self.plotter.camera.zoom(1.15)
 
+    def camera_pose(self) -> dict | None:
+        """The camera as plain numbers (position, focal point, up; rounded), or None."""
+        try:
+            cam = self.plotter.camera
+            r = lambda v: [round(float(x), 6) for x in v]  # noqa: E731
+            return {"position": r(cam.position), "focal_point": r(cam.focal_point),
+                    "up": r(cam.up)}
+        except Exception:  # no render window yet / closed
+            return None
+
     def reset_camera(self) -> None:
         self._home_camera()
         self.render()
 
+    #: standard views of a Y-up mesh: (direction from the centre to the camera, up)
+    STANDARD_VIEWS = {"front": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+                      "top": ((0.0, 1.0, 0.0), (0.0, 0.0, -1.0)),
+                      "side": ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))}
+
+    def standard_view(self, name: str) -> None:
+        """Look at the whole mesh from the front (+Z), the top (+Y) or the right side (+X)."""
+        direction, up = self.STANDARD_VIEWS[name]
+        self.plotter.view_vector(direction, viewup=up)
+        self.plotter.reset_camera()
+        self.render()
+
+    def set_orthographic(self, on: bool) -> None:
+        """Parallel projection (no perspective: sizes compare across the view) or perspective."""
+        if on:
+            self.plotter.enable_parallel_projection()
+        else:
+            self.plotter.disable_parallel_projection()
+        self.render()
+
+    @property
+    def orthographic(self) -> bool:
+        return bool(self.plotter.camera.GetParallelProjection())
+
     def render(self) -> None:
+        """Ask for a redraw (see the class docstring): soon, once, at most REDRAW_SHARE busy."""
+        if self._paint_timer.isActive() or self._paint_asked:
+            return
+        idle_needed = self.render_seconds * (1.0 - REDRAW_SHARE) / REDRAW_SHARE
+        wait = self._last_paint_end + idle_needed - time.perf_counter()
+        self._paint_timer.start(max(0, int(wait * 1000)))
+
+    def render_now(self) -> None:
+        """Redraw at once (screenshots, picking)."""
+        self._paint_timer.stop()
+        self._before_paint()
         self.plotter.render()
+
+    def set_streaming(self, on: bool) -> None:
+        """While a job streams previews: no anti-aliasing (a redraw costs a third)."""
+        samples = 0 if on else MULTI_SAMPLES
+        rw = self.plotter.ren_win
+        if rw is not None and rw.GetMultiSamples() != samples:
+            rw.SetMultiSamples(samples)
+            self.render()
+
+    def _ask_paint(self) -> None:
+        self._paint_asked = True
+        self.plotter.update()
+
+    def _before_paint(self) -> None:
+        if self._normals_dirty and self.poly is not None:
+            self._normals_dirty = False
+            V = np.asarray(self.poly.points)
+            self.poly.point_data["Normals"] = vertex_normals(V, self._F)
+            self.poly.point_data.active_normals_name = "Normals"
+
+    def _after_paint(self, t0: float, t1: float) -> None:
+        self._paint_asked = False
+        cost = t1 - t0
+        self.redraws += 1
+        self.redraw_seconds_total += cost
+        self.render_seconds = cost if self.render_seconds == 0.0 else (
+            0.7 * self.render_seconds + 0.3 * cost)
+        self._last_paint_end = t1
         self.rendered.emit()
 
     def screenshot(self, path: str | None = None) -> np.ndarray:
         """Render and return the (h, w, 3) uint8 image; also write it as PNG when ``path`` is given."""
-        self.plotter.render()
+        self.render_now()
         img = self.plotter.screenshot(filename=None, return_img=True)
         if path is not None:
             from PySide6.QtGui import QImage

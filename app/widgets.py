@@ -4,9 +4,65 @@ from __future__ import annotations
 
 import math
 
-from PySide6.QtCore import QPointF, QRectF, Qt
+from PySide6.QtCore import QPointF, QRectF, Qt, Signal
 from PySide6.QtGui import QColor, QFont, QPainter, QPainterPath, QPen
-from PySide6.QtWidgets import QSizePolicy, QWidget
+from PySide6.QtWidgets import QSizePolicy, QToolButton, QVBoxLayout, QWidget
+
+
+def plural(n: int, singular: str, plural_form: str | None = None) -> str:
+    """ "1 iteration", "2 iterations", "1,024 vertices" (``plural_form`` when not singular + s)."""
+    word = singular if n == 1 else (plural_form or singular + "s")
+    return f"{n:,} {word}"
+
+
+def article(word: str) -> str:
+    """ "a cube", "an octahedron" (by the first letter; enough for the app's own words)."""
+    return ("an " if word[:1].lower() in "aeiou" else "a ") + word
+
+
+class CollapsibleSection(QWidget):
+    """A titled group of widgets that folds away: a flat arrow button ("▸ Advanced") and, when
+    open, its body. Folded it is one line of text, never an empty frame. ``setChecked`` /
+    ``isChecked`` / ``toggled`` read like a checkable group box's."""
+
+    toggled = Signal(bool)
+
+    def __init__(self, title: str, parent: QWidget | None = None, expanded: bool = False):
+        super().__init__(parent)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.setSpacing(2)
+        self.button = QToolButton()
+        self.button.setText(title)
+        self.button.setCheckable(True)
+        self.button.setAutoRaise(True)
+        self.button.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextBesideIcon)
+        self.button.setStyleSheet("QToolButton { border: none; font-weight: bold; }")
+        self.body = QWidget()
+        self.body.setVisible(False)
+        lay.addWidget(self.button)
+        lay.addWidget(self.body)
+        self.button.toggled.connect(self._on_toggled)
+        self._set_arrow(False)
+        self.setChecked(expanded)
+
+    def _set_arrow(self, on: bool) -> None:
+        self.button.setArrowType(Qt.ArrowType.DownArrow if on else Qt.ArrowType.RightArrow)
+
+    def _on_toggled(self, on: bool) -> None:
+        self._set_arrow(on)
+        self.body.setVisible(on)
+        self.toggled.emit(on)
+
+    def setChecked(self, on: bool) -> None:  # noqa: N802 (reads like QGroupBox)
+        self.button.setChecked(bool(on))
+
+    def isChecked(self) -> bool:  # noqa: N802
+        return self.button.isChecked()
+
+    def setToolTip(self, tip: str) -> None:  # noqa: N802
+        super().setToolTip(tip)
+        self.button.setToolTip(tip)
 
 
 class LinePlot(QWidget):
@@ -67,3 +123,43 @@ class LinePlot(QWidget):
                        Qt.AlignmentFlag.AlignLeft, (f"{name}: " if len(self.series) > 1 else "")
                        + f"last {last:.4g} · min {min(ys):.4g} · max {max(ys):.4g}")
         p.end()
+
+
+class MessageLog(QWidget):
+    """Every report the app gave (opened files and what cleaning changed, finished, cancelled
+    and failed jobs, saves), newest last, with the time. The status bar shows one line of each
+    for a few seconds; this keeps the whole text (View > Messages, or "Details…")."""
+
+    def __init__(self, parent: QWidget | None = None):
+        from PySide6.QtWidgets import QHBoxLayout, QPlainTextEdit, QPushButton, QVBoxLayout
+
+        super().__init__(parent)
+        self.entries: list[tuple[str, str, str]] = []  # (time, level, text)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(4, 4, 4, 4)
+        self.text = QPlainTextEdit()
+        self.text.setReadOnly(True)
+        self.text.setToolTip("Every message of this session; select and copy what you need.")
+        lay.addWidget(self.text)
+        row = QHBoxLayout()
+        row.addStretch(1)
+        self.clear_button = QPushButton("Clear")
+        self.clear_button.setToolTip("Remove all messages from this list.")
+        self.clear_button.clicked.connect(self.clear)
+        row.addWidget(self.clear_button)
+        lay.addLayout(row)
+
+    def add(self, text: str, level: str = "info") -> None:
+        import time
+
+        stamp = time.strftime("%H:%M:%S")
+        self.entries.append((stamp, level, text))
+        mark = {"error": "⚠ ", "warning": "⚠ "}.get(level, "")
+        self.text.appendPlainText(f"{stamp}  {mark}{text}")
+
+    def clear(self) -> None:
+        self.entries.clear()
+        self.text.clear()
+
+    def all_text(self) -> str:
+        return "\n".join(t for _s, _l, t in self.entries)

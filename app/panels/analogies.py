@@ -30,6 +30,7 @@ from app import dialogs
 from app.panels.base import MethodPanel
 from app.tools import BrushSettings
 from app.viewport import PickResult, Viewport
+from app.widgets import article
 
 STYLE_DIR = Path(__file__).resolve().parents[2] / "resources" / "styles"
 CAPTURE = "capture sphere"
@@ -140,7 +141,7 @@ class AnalogiesPanel(MethodPanel):
                                    name.replace("_", " "))
             item.setData(256, name)
             item.setToolTip("Paint your own targets on the sphere below" if name == CAPTURE
-                            else f"Closest normals of a {name.replace('_', ' ')}")
+                            else f"Closest normals of {article(name.replace('_', ' '))}")
             self.gallery.addItem(item)
         self.gallery.setCurrentRow(0)
         self.gallery.currentItemChanged.connect(self._on_gallery)
@@ -177,6 +178,7 @@ class AnalogiesPanel(MethodPanel):
         row.addWidget(self.save_capture_button)
         cv.addLayout(row)
         self.capture_view = Viewport(cap)
+        self.capture_view.show_legend = False  # hues are directions, shown on the sphere itself
         self.capture_view.setMinimumSize(200, 200)
         self.capture_view.set_mesh(self.capture.vertices, self.capture.faces)
         self.capture_brush = CaptureBrush(self, self.brush_settings)
@@ -234,7 +236,7 @@ class AnalogiesPanel(MethodPanel):
         self.style_name = item.data(256)
         self.custom_style = None
         self.style_label.setText("your painted capture sphere" if self.style_name == CAPTURE
-                                 else f"closest normals of a {item.text()}")
+                                 else f"closest normals of {article(item.text())}")
         self._on_params_changed(None)
         self.show_view()
 

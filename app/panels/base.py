@@ -11,13 +11,13 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Iterator
 
 from PySide6.QtCore import Qt, QTimer
-from PySide6.QtWidgets import (QCheckBox, QDockWidget, QHBoxLayout, QLabel, QPushButton,
-                               QScrollArea, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (QCheckBox, QDockWidget, QFrame, QHBoxLayout, QLabel,
+                               QPushButton, QScrollArea, QVBoxLayout, QWidget)
 
 from algorithms.steps import Step
 from app.document import MeshState
 from app.forms import ParamsForm
-from app.widgets import LinePlot
+from app.widgets import LinePlot, plural
 
 if TYPE_CHECKING:  # pragma: no cover
     from app.main_window import MainWindow
@@ -32,6 +32,15 @@ class MethodPanel(QDockWidget):
     plot_log_y = False
     live_debounce_ms = 300
     live_by_default = False
+    #: live re-runs start switched on only for meshes up to this many vertices (where a run
+    #: takes a second or two); on bigger meshes the user presses Run or ticks Live
+    live_max_vertices = 10_000
+    #: folded sections of rarely used fields (title -> field names), see ParamsForm
+    param_groups: dict[str, tuple[str, ...]] = {}
+    #: field -> the bool field that must be on for it to be editable, see ParamsForm
+    param_enable_when: dict[str, str] = {}
+    #: field -> f(params) -> text shown at the field's minimum ("auto (167)"), see ParamsForm
+    param_auto_text: dict = {}
     #: undo-merge id of live re-runs (one per panel class)
     _merge_ids: dict = {}
 
@@ -47,8 +56,17 @@ class MethodPanel(QDockWidget):
             desc.setWordWrap(True)
             desc.setStyleSheet("color: #444;")
             lay.addWidget(desc)
-        self.form = ParamsForm(self.params_cls)
+        self.form = ParamsForm(self.params_cls, groups=self.param_groups,
+                               enable_when=self.param_enable_when,
+                               auto_text=self.param_auto_text)
         lay.addWidget(self.form)
+        # the footer: Run / Stop / Defaults and the panel's status, always visible below the
+        # scrolling body (a tall panel never hides its Run button)
+        footer = QFrame()
+        footer.setObjectName("panel_footer")
+        footer.setFrameShape(QFrame.Shape.StyledPanel)
+        fl = QVBoxLayout(footer)
+        fl.setContentsMargins(6, 4, 6, 4)
         row = QHBoxLayout()
         self.run_button = QPushButton(f"Run {self.title.lower()}")
         self.run_button.setToolTip("Run with these settings. The result can be undone (Ctrl+Z).")
@@ -60,15 +78,16 @@ class MethodPanel(QDockWidget):
         row.addWidget(self.run_button, 2)
         row.addWidget(self.stop_button, 1)
         row.addWidget(self.defaults_button, 1)
-        lay.addLayout(row)
+        fl.addLayout(row)
+        self.status_label = QLabel("Ready.")
+        self.status_label.setWordWrap(True)
+        fl.addWidget(self.status_label)
+        self.footer = footer
         self.live_box = QCheckBox("Live: re-run when a parameter changes")
         self.live_box.setToolTip("Each parameter change restarts the method from the current mesh, "
                                  "so you see its effect at once. The result is applied only when "
                                  "the run finishes.")
         lay.addWidget(self.live_box)
-        self.status_label = QLabel("Ready.")
-        self.status_label.setWordWrap(True)
-        lay.addWidget(self.status_label)
         self.plot = LinePlot(self.plot_title or ", ".join(self.plot_metrics), log_y=self.plot_log_y)
         lay.addWidget(self.plot)
         lay.addStretch(1)
@@ -77,7 +96,14 @@ class MethodPanel(QDockWidget):
         scroll.setFrameShape(QScrollArea.Shape.NoFrame)
         scroll.setWidget(body)
         scroll.setMinimumWidth(body.sizeHint().width() + 24)
-        self.setWidget(scroll)
+        self.scroll_area = scroll
+        outer = QWidget()
+        ol = QVBoxLayout(outer)
+        ol.setContentsMargins(0, 0, 0, 0)
+        ol.setSpacing(0)
+        ol.addWidget(scroll, 1)
+        ol.addWidget(footer)
+        self.setWidget(outer)
 
         self._last: tuple[MeshState, MeshState] | None = None  # (input, result) of last run
         self._pending_input: MeshState | None = None
@@ -87,6 +113,8 @@ class MethodPanel(QDockWidget):
         self._debounce.setInterval(self.live_debounce_ms)
         self._debounce.timeout.connect(lambda: self.run(live=True))
         self.live_box.setChecked(self.live_by_default)
+        self._live_text = self.live_box.text()
+        window.document.subscribe(self._live_default_for_mesh)
         self.run_button.clicked.connect(lambda: self.run())
         self.stop_button.clicked.connect(window.cancel_job)
         self.defaults_button.clicked.connect(self.form.reset_defaults)
@@ -102,6 +130,11 @@ class MethodPanel(QDockWidget):
         self.visibilityChanged.connect(self._on_visibility_changed)
 
     # -- to implement -------------------------------------------------------------------------
+    def job_options(self) -> dict:
+        """Settings of the next run that are not in the Params form (e.g. a switch of the
+        panel's own), as a JSON-able dict: the study log records them with the run."""
+        return {}
+
     def build_steps(self, state: MeshState, params: Any) -> Iterator[Step]:
         raise NotImplementedError
 
@@ -158,6 +191,10 @@ class MethodPanel(QDockWidget):
                 and self._last[0].V is not self._last[1].V):  # (a field result keeps V)
             start = state.with_positions(self._last[0].V)
         self._pending_input = start
+        # what this run asks for, read by the study log (app/study/session.py) when it starts
+        self.last_request = {"params": params, "options": self.job_options(), "input": start}
+        self._debounce.stop()
+        self.show_live_state("running" if live else None)
         self.plot.clear()
         self.status_label.setText("Starting…")
         self.window_.start_positions_job(self.title, lambda: self.build_steps(start, params),
@@ -176,10 +213,31 @@ class MethodPanel(QDockWidget):
     def _on_params_changed(self, _params) -> None:
         if self.live_box.isChecked() and not self.window_.document.is_empty:
             self._debounce.start()
+            self.show_live_state("pending")
+
+    def show_live_state(self, state: str | None) -> None:
+        """Say on the Live switch whether a live re-run is "pending" (waiting for the slider to
+        rest), "running", or nothing (None)."""
+        suffix = {"pending": "  — re-run pending…", "running": "  — re-running…"}.get(state, "")
+        self.live_box.setText(self._live_text + suffix)
+        self.live_box.setStyleSheet("color: #b45309;" if suffix else "")
+
+    def _live_default_for_mesh(self, what: str) -> None:
+        if what != "mesh" or not self.live_by_default:
+            return
+        n = len(self.window_.document.V)
+        small = n <= self.live_max_vertices
+        self.live_box.setChecked(small)
+        if not small:
+            self.status_label.setText(
+                f"Live re-runs are off for this {n:,}-vertex mesh (each run takes a while): "
+                "press Run, or tick Live to re-run on every change.")
 
     def _on_busy(self, *_):
         busy = self.window_.runner.busy
         self.stop_button.setEnabled(busy and self._mine())
+        if not (busy and self._mine()):
+            self.show_live_state("pending" if self._debounce.isActive() else None)
 
     def _on_metrics(self, history) -> None:
         if not self._mine():
@@ -198,7 +256,7 @@ class MethodPanel(QDockWidget):
     def _on_finished(self, step: Step) -> None:
         if self.window_.last_job_name != self.title:
             return
-        self.status_label.setText(f"Done: {step.iteration} iterations in "
+        self.status_label.setText(f"Done: {plural(step.iteration, 'iteration')} in "
                                   f"{self.window_.runner.last_duration:.2f} s. Undo with Ctrl+Z.")
         self.stop_button.setEnabled(False)
 

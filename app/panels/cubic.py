@@ -18,59 +18,21 @@
 
 from __future__ import annotations
 
-import numpy as np
-
-from algorithms.errors import ParameterError
 from PySide6.QtWidgets import (QButtonGroup, QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout,
                                QGroupBox, QHBoxLayout, QLabel, QPushButton, QRadioButton,
                                QVBoxLayout)
 
-from algorithms.deform.cubic import CubicParams, CubicStylizer, rotation_from_degrees
-from algorithms.deform.progressive import ProgressiveCubic, ProgressiveParams
+from algorithms.deform.cubic import CubicParams
+from algorithms.deform.progressive import AUTO_PROGRESSIVE_FACES, ProgressiveParams
 from app.forms import ParamsForm
 from app.commands import StateCommand
 from app.gaussmap import GaussMapPainter
 from app.panels.base import MethodPanel
 from app.tools import BrushSettings, FieldBrush, HandleTool, StampBrush
 
-LAMBDA_FIELD = "lambda_scale"
-FIXED_FIELD = "fixed"
-PLANE_FIELD = "plane"
-FRAME_FIELDS = ("frame_rx", "frame_ry", "frame_rz")
-AUTO_PROGRESSIVE_FACES = 300_000
-
-
-def frames_of(state, global_rotation: np.ndarray) -> np.ndarray | None:
-    """(n, 3, 3) per-vertex cube frames from the painted angles, or None when none is painted;
-    vertices without a painted frame use ``global_rotation``."""
-    if FRAME_FIELDS[0] not in state.fields:
-        return None
-    ang = np.stack([np.asarray(state.fields.get(f, np.full(len(state.V), np.nan)))
-                    for f in FRAME_FIELDS], axis=1)
-    frames = np.broadcast_to(global_rotation, (len(ang), 3, 3)).copy()
-    ok = np.isfinite(ang).all(axis=1)
-    if ok.any():
-        uniq, inv = np.unique(ang[ok], axis=0, return_inverse=True)
-        mats = np.stack([rotation_from_degrees(*a) for a in uniq])
-        frames[ok] = mats[inv.reshape(-1)]
-    return frames
-
-
-def constraints_of(state, plane_axis: int):
-    """(fixed vertices, (handle indices, targets), (plane indices, axes, values)) of a state."""
-    n = len(state.V)
-    fixed = np.flatnonzero(state.fields.get(FIXED_FIELD, np.zeros(n)) > 0.5)
-    h = state.handle_dict
-    handles = None
-    if h:
-        idx = np.array(sorted(h), dtype=np.int64)
-        handles = (idx, np.array([h[i] for i in idx], dtype=np.float64))
-    plane = None
-    pv = np.flatnonzero(state.fields.get(PLANE_FIELD, np.zeros(n)) > 0.5)
-    if pv.size:
-        value = float(state.V[pv, plane_axis].mean())
-        plane = (pv, np.full(pv.size, plane_axis), np.full(pv.size, value))
-    return fixed, handles, plane
+# the painted fields and the run itself are the Qt-free recipe's (replayed by the study log)
+from app.recipes import (FIXED_FIELD, FRAME_FIELDS, LAMBDA_FIELD, PLANE_FIELD,  # noqa: E402,F401
+                         constraints_of, cubic_steps, frames_of)
 
 
 class CubicPanel(MethodPanel):
@@ -82,10 +44,14 @@ class CubicPanel(MethodPanel):
     plot_metrics = ("energy",)
     plot_title = "Energy (ARAP + λ·L1) per iteration"
     live_by_default = True
+    param_groups = {"Per-axis λ": ("per_axis", "axis_factor_x", "axis_factor_y", "axis_factor_z"),
+                    "Cube orientation": ("rot_x", "rot_y", "rot_z")}
+    param_enable_when = {f"axis_factor_{a}": "per_axis" for a in "xyz"}
 
     def __init__(self, window):
         super().__init__(window)
-        self._cache: tuple | None = None
+        self._recipe_cache: dict = {}  # the recipe's precomputation, reused between runs
+        self._options: dict = {}
         self.brush_settings = BrushSettings(radius=0.06, strength=0.5)
         self.lambda_brush = FieldBrush(window, LAMBDA_FIELD, low=0.0, high=2.0, default=1.0,
                                        label="λ", settings=self.brush_settings, cmap="coolwarm")
@@ -258,6 +224,7 @@ class CubicPanel(MethodPanel):
 
     def refresh_view(self) -> None:
         self._show_field(self.show_combo.currentIndex())
+        self.gauss.refresh_if_stale()
 
     def clear_constraints(self) -> None:
         doc = self.window_.document
@@ -277,46 +244,18 @@ class CubicPanel(MethodPanel):
         self._on_params_changed(None)
 
     # -- the method ------------------------------------------------------------------------------
+    def job_options(self) -> dict:
+        """Plane axis, progressive meshes and the multigrid switch (read on the GUI thread)."""
+        prog = (self.progressive_form.params() if self.progressive_box.isChecked() else None)
+        from algorithms.params import params_to_dict
+
+        return {"plane_axis": self.plane_axis.currentIndex(),
+                "progressive": None if prog is None else params_to_dict(prog),
+                "multigrid": self.multigrid_box.isChecked() and prog is None}
+
     def build_steps(self, state, params):
-        fixed, handles, plane = constraints_of(state, self._plane_axis)
-        prog = self._progressive  # read on the GUI thread in run()
-        key = (id(state.V), id(state.F), fixed.tobytes(),
-               None if handles is None else (handles[0].tobytes(), handles[1].tobytes()),
-               None if plane is None else (plane[0].tobytes(), plane[1].tobytes(),
-                                           plane[2].tobytes()),
-               params.normalize, params.pin_one_vertex,
-               None if prog is None else (prog.target_faces, prog.strategy, prog.tikhonov),
-               self._multigrid)
-        if self._cache is not None and self._cache[0] == key:
-            solver = self._cache[1]
-        elif prog is None:
-            solver = CubicStylizer(state.V, state.F, fixed=fixed, handles=handles,
-                                   coord_constraints=plane, normalize=params.normalize,
-                                   pin_one_vertex=params.pin_one_vertex,
-                                   backend="multigrid" if self._multigrid else "auto")
-        else:
-            solver = ProgressiveCubic(state.V, state.F, target_faces=prog.target_faces,
-                                      strategy=prog.strategy, tikhonov=prog.tikhonov,
-                                      fixed=fixed, handles=handles, coord_constraints=plane,
-                                      normalize=params.normalize,
-                                      pin_one_vertex=params.pin_one_vertex)
-        self._cache = (key, solver)
-        scale = state.fields.get(LAMBDA_FIELD)
-        lam_v = None if scale is None else params.lam * np.asarray(scale)
-        rotation = rotation_from_degrees(params.rot_x, params.rot_y, params.rot_z)
-        frames = frames_of(state, rotation)
-        extra = {} if frames is None else {"frames": frames}
-        if prog is None:
-            return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation, **extra)
-        if frames is not None:
-            raise ParameterError("Painted local cube frames do not work with progressive meshes "
-                                 "yet: switch progressive meshes off, or clear the frames.")
-        return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation,
-                            preview_every=prog.preview_every)
+        return cubic_steps(state, params, self._options, self._recipe_cache)
 
     def run(self, live: bool = False) -> None:
-        self._plane_axis = self.plane_axis.currentIndex()  # read on the GUI thread
-        self._progressive = (self.progressive_form.params() if self.progressive_box.isChecked()
-                             else None)
-        self._multigrid = self.multigrid_box.isChecked() and self._progressive is None
+        self._options = self.job_options()  # read on the GUI thread; the worker only reads this
         super().run(live)

@@ -29,6 +29,7 @@ from algorithms.steps import Step, with_progress
 from app import dialogs
 from app.commands import StateCommand
 from app.panels.base import MethodPanel
+from app.widgets import plural
 
 NOISY_FIELD = "noisy input"
 LOADED_FIELD = "loaded field"
@@ -49,6 +50,7 @@ class MultigridPanel(MethodPanel):
     plot_log_y = True
     live_by_default = True
     live_debounce_ms = 120
+    live_max_vertices = 200_000  # a solve on the built hierarchy takes well under a second
 
     def __init__(self, window):
         super().__init__(window)
@@ -341,7 +343,7 @@ class MultigridPanel(MethodPanel):
             self.analysis_finished()
             return
         name = holder["solver"]
-        cyc = f", {info['cycles']} cycles" if info.get("cycles") else ""
+        cyc = f", {plural(info['cycles'], 'cycle')}" if info.get("cycles") else ""
         if info.get("warm_start") and cyc:
             cyc += " from the last α"
         self.solve_times[name] = f"{info['seconds'] * 1000:.0f} ms{cyc}"
@@ -426,7 +428,7 @@ class MultigridPanel(MethodPanel):
             self.level_spin.setRange(1, 1)
             return
         sizes = " → ".join(f"{len(Vh):,}" for Vh, _ in mg.levels)
-        self.hier_label.setText(f"{mg.n_levels} levels: {sizes} vertices; built in "
+        self.hier_label.setText(f"{plural(mg.n_levels, 'level')}: {sizes} vertices; built in "
                                 f"{mg.build_seconds:.1f} s ({mg.report.get('prolongation')} "
                                 "prolongation).")
         self.level_spin.setRange(1, max(1, mg.n_levels - 1))
@@ -519,7 +521,7 @@ class MultigridPanel(MethodPanel):
         times = self._holder.get("times")
         if times:
             for k, info in times.items():
-                cyc = f", {info['cycles']} cycles" if info.get("cycles") else ""
+                cyc = f", {plural(info['cycles'], 'cycle')}" if info.get("cycles") else ""
                 self.solve_times[k] = f"{info['seconds'] * 1000:.0f} ms{cyc}"
             self._show_times()
             mgt, dt = times["multigrid"]["seconds"], times["direct"]["seconds"]

@@ -112,3 +112,278 @@ def test_every_listed_shortcut_works_when_pressed(window, dialogs, qtbot, tmp_pa
                 assert window.undo_stack.index() == index + 1, key
     assert window.isVisible()
     assert any("Ctrl+Y" in text for _t, text in dialogs.infos)  # F1 showed the sheet
+
+
+# -- defect 3: the window keeps answering while a job streams -------------------------------------
+def _gui_gaps_during(qtbot, window, start, timeout_ms=180000):
+    """Start a job with ``start()``; return (gaps between 10 ms timer ticks in ms, job seconds,
+    seconds the main viewport spent redrawing)."""
+    import time
+
+    from PySide6.QtCore import QTimer
+
+    gaps, last = [], [time.perf_counter()]
+
+    def tick():
+        now = time.perf_counter()
+        gaps.append((now - last[0]) * 1000)
+        last[0] = now
+
+    timer = QTimer()
+    timer.setInterval(10)
+    timer.timeout.connect(tick)
+    vp = window.viewport
+    redraw0 = vp.redraw_seconds_total
+    t0 = time.perf_counter()
+    last[0] = t0
+    timer.start()
+    with qtbot.waitSignal(window.runner.busy_changed, timeout=timeout_ms,
+                          check_params_cb=lambda busy: not busy):
+        start()
+    timer.stop()
+    return np.array(gaps), time.perf_counter() - t0, vp.redraw_seconds_total - redraw0
+
+
+def test_gui_thread_stays_responsive_during_jobs_on_armadillo(window, dialogs, qtbot):
+    import os
+
+    from tests.conftest import shared_mesh
+
+    assert window.open_path(shared_mesh("armadillo.obj"))
+    qtbot.wait(300)
+    cubic = window.panels["Cubic"]
+    cubic.live_box.setChecked(False)
+    cubic.form.editors["max_iterations"].setValue(12)
+    cubic.form.editors["rel_displacement_tol"].setValue(0.0)
+    mg = window.panels["Multigrid smoothing"]
+    mg.live_box.setChecked(False)
+    load = os.getloadavg()[0]
+    for name, panel in (("Cubic", cubic), ("Multigrid smoothing", mg)):
+        panel.raise_()
+        qtbot.waitUntil(panel.is_shown)
+        redraws0 = window.viewport.redraws
+        gaps, seconds, redraw = _gui_gaps_during(
+            qtbot, window, lambda: qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton))
+        print(f"\n{name} on armadillo: job {seconds:.1f} s, {window.viewport.redraws - redraws0} "
+              f"redraws of ~{window.viewport.render_seconds * 1000:.0f} ms "
+              f"({100 * redraw / seconds:.0f}% of the time); GUI-thread gaps: longest "
+              f"{gaps.max():.0f} ms, 99th percentile {np.percentile(gaps, 99):.0f} ms, median "
+              f"{np.median(gaps):.0f} ms; load average {load:.1f}")
+        assert len(gaps) > 10
+        # the throttle: redraws take at most about half of the GUI thread's time
+        assert redraw <= 0.7 * seconds + 0.5
+        assert gaps.max() < 10000  # generous: the figure is printed and reported
+    assert window.undo_stack.count() == 3  # cubic, new noise field, smoothing
+
+
+# -- defect 4: long reports stay readable ---------------------------------------------------------
+def test_reports_are_kept_in_the_message_log_and_elided_in_the_status_bar(window, dialogs, qtbot,
+                                                                           bad_files):
+    dialogs.answers.append("Clean and open")
+    assert window.open_path(bad_files["duplicates"])
+    log = window.message_log.all_text()
+    assert "duplicates.obj" in log and "merged" in log.lower()
+    shown = window.statusBar().currentMessage()
+    assert shown and (shown in log or shown.endswith("…"))
+    # a report longer than the free space is shortened with an ellipsis, never clipped
+    long = "Cubic finished: " + "a long explanation " * 40
+    window.report(long)
+    shown = window.statusBar().currentMessage()
+    assert shown.endswith("…") and len(shown) < len(long)
+    assert window.statusBar().fontMetrics().horizontalAdvance(shown) < window.statusBar().width()
+    assert long in window.message_log.all_text()
+    # the whole text is one click away
+    assert not window.messages_dock.isVisible()
+    qtbot.mouseClick(window.details_button, Qt.MouseButton.LeftButton)
+    assert window.messages_dock.isVisible()
+    assert long.strip() in window.message_log.text.toPlainText()
+    # failures go there too
+    window._error("Could not save", "The disk is full.")
+    assert "The disk is full." in window.message_log.text.toPlainText()
+
+
+# -- defect 5: layout -------------------------------------------------------------------------------
+def test_run_stays_visible_at_1024x700_and_rare_fields_fold_away(window, dialogs, qtbot):
+    assert window.open_path(SAMPLES / "blob.obj")
+    window.resize(1024, 700)
+    for panel in window.panels.values():
+        panel.live_box.setChecked(False)
+        panel.raise_()
+        qtbot.waitUntil(panel.is_shown)
+        qtbot.wait(50)
+        for b in (panel.run_button, panel.stop_button):
+            assert not b.visibleRegion().isEmpty(), f"{panel.title}: {b.text()} is off-screen"
+            top = b.mapTo(window, b.rect().topLeft()).y()
+            assert 0 < top and top + b.height() <= window.height()
+    cubic = window.panels["Cubic"]
+    cubic.raise_()
+    qtbot.waitUntil(cubic.is_shown)
+    form = cubic.form
+    adv = form.advanced_box
+    assert not adv.isChecked() and not adv.body.isVisible()
+    assert adv.height() < 40  # folded: one line, no empty frame
+    qtbot.mouseClick(adv.button, Qt.MouseButton.LeftButton)
+    assert adv.body.isVisible() and form.editors["mu"].isVisible()
+    # x/y/z factors only take effect with per-axis λ: greyed out until it is on
+    factors = [form.editors[f"axis_factor_{a}"] for a in "xyz"]
+    assert not any(f.isEnabled() for f in factors)
+    form.sections["Per-axis λ"].setChecked(True)
+    per_axis = form.editors["per_axis"]
+    per_axis.click()  # (a check box without text: its indicator is the hit area)
+    assert per_axis.isChecked() and all(f.isEnabled() for f in factors)
+    assert form.params().per_axis
+
+
+# -- defect 6: wording ------------------------------------------------------------------------------
+def test_counts_and_articles_read_right(window, dialogs, qtbot):
+    from app.widgets import article, plural
+
+    assert plural(1, "level") == "1 level" and plural(2, "cycle") == "2 cycles"
+    assert plural(1, "vertex", "vertices") == "1 vertex"
+    assert article("octahedron") == "an octahedron" and article("cube") == "a cube"
+    # a one-iteration run says "1 iteration" in the panel and in the message log
+    assert window.open_path(SAMPLES / "blob.obj")
+    cubic = window.panels["Cubic"]
+    cubic.live_box.setChecked(False)
+    cubic.form.editors["max_iterations"].setValue(1)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        qtbot.mouseClick(cubic.run_button, Qt.MouseButton.LeftButton)
+    assert "(1 iteration)" in window.message_log.all_text()
+    assert "1 iteration in" in cubic.status_label.text()
+    # the gallery says "an octahedron"
+    ana = window.panels["Analogies"]
+    item = next(ana.gallery.item(i) for i in range(ana.gallery.count())
+                if ana.gallery.item(i).data(256) == "octahedron")
+    assert "an octahedron" in item.toolTip()
+    ana.live_box.setChecked(False)
+    ana.gallery.setCurrentItem(item)
+    assert ana.style_label.text() == "closest normals of an octahedron"
+    # "Eigenvectors 0" says what 0 means for the current coarse size
+    spec = window.panels["Spectral coarsening"]
+    spec.form.set_value("m", 500)
+    spec.form.set_value("k", 0)
+    assert spec.form.editors["k"].spin.text() == "auto (167)"
+    spec.form.set_value("m", 300)
+    assert spec.form.editors["k"].spin.text() == "auto (100)"
+    spec.form.set_value("k", 20)
+    assert spec.form.editors["k"].spin.text() == "20"
+
+
+def test_screenshot_of_a_mesh_that_needs_cleaning_says_what_is_wrong(bad_files, tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    import pytest
+
+    from tests.conftest import ROOT
+
+    if not os.environ.get("DISPLAY"):
+        pytest.skip("needs an X display (pytest-xvfb with Debian's xvfb)")
+    r = subprocess.run([sys.executable, "-m", "app", str(bad_files["duplicates"]), "--screenshot",
+                        str(tmp_path / "x.png")], cwd=ROOT, capture_output=True, text=True,
+                       timeout=180, env={**os.environ, "HOME": str(tmp_path)})
+    assert r.returncode == 2
+    assert "could not open" in r.stderr and "duplicate" in r.stderr.lower()
+    assert "stylize3d clean" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "x.png").exists()
+
+
+# -- defect 7: live re-runs by default only where a run is short -----------------------------------
+def test_live_is_on_for_small_meshes_only_and_says_when_it_is_pending(window, dialogs, qtbot):
+    from tests.conftest import shared_mesh
+
+    cubic = window.panels["Cubic"]
+    assert window.open_path(shared_mesh("armadillo.obj"))  # 14,587 vertices
+    assert not cubic.live_box.isChecked()
+    assert "Live re-runs are off" in cubic.status_label.text()
+    assert window.panels["Multigrid smoothing"].live_box.isChecked()  # solves are fast
+    assert window.open_path(SAMPLES / "blob.obj")  # 3,232 vertices
+    assert cubic.live_box.isChecked()
+    cubic.form.editors["max_iterations"].setValue(5)
+    with qtbot.waitSignal(window.runner.started, timeout=10000):
+        cubic.form.set_value("lam", 0.3)
+        assert "pending" in cubic.live_box.text()
+    assert "re-running" in cubic.live_box.text()
+    qtbot.waitUntil(lambda: not window.runner.busy, timeout=120000)
+    assert "pending" not in cubic.live_box.text() and "re-running" not in cubic.live_box.text()
+
+
+# -- colour legend -----------------------------------------------------------------------------------
+def test_every_colour_view_has_a_legend_with_its_range(window, dialogs, qtbot):
+    assert window.open_path(SAMPLES / "blob.obj")
+    vp = window.viewport
+    assert vp.legend is None or not vp.legend.GetVisibility()
+    cubic = window.panels["Cubic"]
+    cubic.live_box.setChecked(False)
+    cubic.show_combo.setCurrentText("λ scale")
+    assert vp.legend.GetVisibility() and "λ" in vp.legend.GetTitle()
+    assert vp.legend_range == (0.0, 2.0)
+    assert vp.legend.GetLookupTable().GetRange() == (0.0, 2.0)
+    ana = window.panels["Analogies"]
+    ana.live_box.setChecked(False)
+    ana.raise_()
+    qtbot.waitUntil(ana.is_shown)
+    ana.view_combo.setCurrentText("Angle to targets")
+    assert "(°)" in vp.legend.GetTitle() and vp.legend_range == (0.0, 45.0)
+    ana.view_combo.setCurrentText("Gaussian curvature")
+    lo, hi = vp.legend_range
+    assert "curvature" in vp.legend.GetTitle() and lo == -hi and hi > 0
+    # a field without a given range: the bar spans the values
+    vals = np.linspace(-3.0, 5.0, len(window.document.V))
+    vp.show_field("signal", vals)
+    assert vp.legend_range == (-3.0, 5.0) and vp.legend.GetVisibility()
+    # region labels: flat colours per triangle, no colour bar
+    labels = (np.arange(len(window.document.V)) % 7).astype(float)
+    vp.show_field("clusters", labels, "tab20", (0.0, 6.0), categorical=True)
+    assert not vp.legend.GetVisibility()
+    assert vp.poly.cell_data["clusters"].shape == (len(window.document.F),)
+    ana.view_combo.setCurrentText("Shape only")
+    assert not vp.legend.GetVisibility()
+
+
+# -- toolbar -------------------------------------------------------------------------------------------
+def test_toolbar_buttons_do_what_they_say(window, dialogs, qtbot):
+    assert window.open_path(SAMPLES / "blob.obj")
+    buttons = window.toolbar_buttons
+    for name in ("open", "save", "undo", "redo", "reset_camera", "ghost", "screenshot",
+                 "view_front", "view_top", "view_side", "orthographic"):
+        assert buttons[name].isVisible() and buttons[name].toolTip(), name
+    cam = window.viewport.plotter.camera
+
+    def direction():
+        d = np.array(cam.position) - np.array(cam.focal_point)
+        return d / np.linalg.norm(d)
+
+    for name, expect, up in (("view_front", (0, 0, 1), (0, 1, 0)), ("view_top", (0, 1, 0), None),
+                             ("view_side", (1, 0, 0), (0, 1, 0))):
+        qtbot.mouseClick(buttons[name], Qt.MouseButton.LeftButton)
+        np.testing.assert_allclose(direction(), expect, atol=1e-6)
+        if up:
+            np.testing.assert_allclose(cam.up, up, atol=1e-6)
+    qtbot.mouseClick(buttons["orthographic"], Qt.MouseButton.LeftButton)
+    assert window.viewport.orthographic
+    qtbot.mouseClick(buttons["orthographic"], Qt.MouseButton.LeftButton)
+    assert not window.viewport.orthographic
+    qtbot.mouseClick(buttons["reset_camera"], Qt.MouseButton.LeftButton)
+    h = np.array((0.55, 0.35, 1.0))
+    np.testing.assert_allclose(direction(), h / np.linalg.norm(h), atol=1e-6)
+    qtbot.mouseClick(buttons["ghost"], Qt.MouseButton.LeftButton)
+    assert window.viewport.ghost_actor is not None
+    # undo / redo from the toolbar
+    doc = window.document
+    from app.commands import StateCommand
+
+    window.undo_stack.push(StateCommand(doc, doc.state, doc.state.with_positions(doc.V * 1.1),
+                                        "Scale"))
+    V1 = doc.V.copy()
+    qtbot.mouseClick(buttons["undo"], Qt.MouseButton.LeftButton)
+    assert not np.allclose(doc.V, V1)
+    qtbot.mouseClick(buttons["redo"], Qt.MouseButton.LeftButton)
+    np.testing.assert_array_equal(doc.V, V1)
+    dialogs.open_paths.append(None)
+    qtbot.mouseClick(buttons["open"], Qt.MouseButton.LeftButton)
+    assert not dialogs.open_paths  # the open dialog was asked for
+    dialogs.save_paths.append(None)
+    qtbot.mouseClick(buttons["screenshot"], Qt.MouseButton.LeftButton)
+    assert not dialogs.save_paths
