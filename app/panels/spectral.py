@@ -48,6 +48,7 @@ class SpectralPanel(MethodPanel):
     plot_metrics = ("energy",)
     plot_title = "Energy per optimizer iteration"
     plot_log_y = True
+    param_auto_text = {"k": lambda p: f"auto ({max(1, round(p.m / 3))})"}  # 0 = round(m/3)
 
     def __init__(self, window):
         super().__init__(window)
