@@ -12,7 +12,7 @@ Checks, with the built binary ``BUNDLE_DIR/stylize3d``:
 3. under Xvfb (``xvfb-run -a -s "-screen 0 1600x1000x24"``):
    ``stylize3d resources/samples/blob.obj --screenshot PNG`` exits 0 and the PNG is a window-sized,
    non-blank picture (grey-level standard deviation, share of mesh-coloured pixels); with --venv
-   the same screenshot from the venv is taken and the two, downscaled, must agree.
+   the same screenshot from the venv is taken and the mesh must cover about as much of it.
 
 Then it times ``--help``, ``info blob.obj --json`` and the screenshot run (median of --repeats),
 for the bundle and, with --venv, for ``VENV/bin/stylize3d``, and prints a table. Exit 0 when every
@@ -161,9 +161,15 @@ def check_screenshot(binary: Path, png: Path, reference: Path | None) -> None:
     check(s["std"] > 10, f"screenshot not blank: grey-level std {s['std']:.1f}")
     check(s["mesh_share"] > 0.02, f"mesh visible: {100 * s['mesh_share']:.1f}% mesh-coloured pixels")
     if reference is not None and reference.is_file():
-        a, b = small(png), small(reference)
-        diff = float(np.abs(a - b).mean())
-        check(diff < 12, f"matches the venv's screenshot (mean |diff| {diff:.1f} / 255, 160x100)")
+        # The venv runs the working tree as it is now, the bundle the tree as it was at build
+        # time: panels and toolbars may differ, so the whole-window difference is only printed;
+        # the check is that the mesh covers about as much of the window in both.
+        r = image_stats(reference)
+        diff = float(np.abs(small(png) - small(reference)).mean())
+        ratio = s["mesh_share"] / max(r["mesh_share"], 1e-9)
+        check(0.5 < ratio < 2.0, f"mesh area like the venv's screenshot ({100 * s['mesh_share']:.1f}%"
+              f" vs {100 * r['mesh_share']:.1f}%; whole window downscaled to 160x100: mean "
+              f"|diff| {diff:.1f} / 255)")
 
 
 def time_commands(binary: Path, repeats: int, png: Path) -> dict[str, float]:
