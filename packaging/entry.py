@@ -30,6 +30,12 @@ def _bundle_check() -> int:
 
 
 if __name__ == "__main__":
+    # Worker processes started with the "spawn" method (e.g. the neural-subdivision data
+    # generation's process pool) re-run this binary; freeze_support() makes them run the worker,
+    # not a second app. A no-op outside a frozen app.
+    import multiprocessing
+
+    multiprocessing.freeze_support()
     if os.environ.get("STYLIZE3D_BUNDLE_CHECK") == "1":
         sys.exit(_bundle_check())
     from app.__main__ import main
