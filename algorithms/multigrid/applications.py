@@ -44,11 +44,48 @@ from ..linalg import SPDSolver
 from ..mesh.operators import cotangent_laplacian, cotangent_laplacian_psd, mass_matrix
 from .hierarchy import SurfaceMultigrid, surface_multigrid
 from .relaxation import greedy_coloring
-from .solver import MultigridSolver, pcg_iterate
+from .solver import MultigridSolver, NotConvergedError, failure_reason, pcg_iterate
 
-__all__ = ["ENERGIES", "smoothness_matrix", "DataSmoother", "AlignedPair"]
+__all__ = ["ENERGIES", "SOLVERS", "smoothness_matrix", "DataSmoother", "AlignedPair",
+           "choose_solver", "direct_fits_in_memory"]
 
 ENERGIES = ("dirichlet", "bilaplacian", "hessian")
+SOLVERS = ("auto", "multigrid", "direct")
+#: ``solver="auto"``: the direct solver up to this many vertices (one solve; measured in
+#: benchmarks/multigrid.py: a CHOLMOD factorization is faster than building the hierarchy
+#: below these sizes), surface multigrid above
+AUTO_DIRECT_MAX = {"dirichlet": 150_000, "bilaplacian": 60_000, "hessian": 60_000}
+
+
+def _available_memory() -> int:
+    """Bytes of memory available now (Linux /proc/meminfo; 4 GiB when unknown)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 4 << 30
+
+
+def direct_fits_in_memory(n: int, energy: str) -> tuple[bool, int]:
+    """Whether a Cholesky factor of the smoothing system of ``n`` vertices fits in half the
+    available memory, and its estimated size in bytes (nested-dissection fill of a surface mesh,
+    ~12 n log2 n non-zeros for a 1-ring matrix, 3 times that for the 2-ring bilaplacian and
+    Hessian; 16 bytes per non-zero with the indices, an over-estimate on purpose)."""
+    nnz = 12.0 * n * max(np.log2(max(n, 2)), 1.0) * (1.0 if energy == "dirichlet" else 3.0)
+    need = int(16 * nnz)
+    return need <= _available_memory() // 2, need
+
+
+def choose_solver(n: int, energy: str) -> tuple[str, str]:
+    """``solver="auto"``: ("direct" or "multigrid", a sentence saying why)."""
+    limit = AUTO_DIRECT_MAX.get(energy, 60_000)
+    if n <= limit:
+        return "direct", (f"auto: direct solver ({n:,} vertices; up to {limit:,} a direct "
+                          f"factorization is faster than building the multigrid hierarchy)")
+    return "multigrid", (f"auto: surface multigrid ({n:,} vertices, more than {limit:,})")
 
 
 def smoothness_matrix(V, F, energy: str = "dirichlet") -> sp.csr_matrix:
@@ -110,18 +147,23 @@ class DataSmoother:
     ----------
     V : (n, 3) float64, F : (m, 3) int64 the mesh.
     energy : "dirichlet", "bilaplacian" or "hessian" (optional, see the module docstring).
-    solver : "multigrid" (V-cycles on the precomputed hierarchy) or "direct" (a new Cholesky
-        factorization per alpha: CHOLMOD when available, else SuperLU; the peer of the thesis).
+    solver : "multigrid" (V-cycles on the precomputed hierarchy), "direct" (a new Cholesky
+        factorization per alpha: CHOLMOD when available, else SuperLU; the peer of the thesis)
+        or "auto" (:func:`choose_solver`: by size and energy; ``auto_reason`` says which).
     mg : an existing :class:`SurfaceMultigrid` of this mesh (built with defaults when omitted and
         ``solver="multigrid"``).
     smoother, presmooth, postsmooth : relaxation of the V-cycle.
     """
 
     def __init__(self, V, F, energy: str = "dirichlet", solver: str = "multigrid",
-                 mg: SurfaceMultigrid | None = None, smoother: str = "gauss_seidel",
+                 mg: SurfaceMultigrid | None = None, smoother: str = "block_gauss_seidel",
                  presmooth: int = 2, postsmooth: int = 2):
-        if solver not in ("multigrid", "direct"):
-            raise ParameterError(f"Unknown solver {solver!r}; choose 'multigrid' or 'direct'.")
+        if solver not in SOLVERS:
+            raise ParameterError(f"Unknown solver {solver!r}; choose 'auto', 'multigrid' or "
+                                 f"'direct'.")
+        self.auto_reason = None
+        if solver == "auto":
+            solver, self.auto_reason = choose_solver(len(V), energy)
         t = time.perf_counter()
         self.V = np.ascontiguousarray(V, dtype=np.float64)
         self.F = np.ascontiguousarray(F, dtype=np.int64)
@@ -165,7 +207,7 @@ class DataSmoother:
         return (alpha * self.Q + (1.0 - alpha) * self.M).tocsr()
 
     def smooth(self, f, alpha: float, *, rtol: float = 1e-5, maxiter: int = 100,
-               x0=None, accel: str | None = None, callback=None,
+               x0=None, accel: str | None = "cg", callback=None,
                preconditioner: str = "factored") -> tuple[np.ndarray, dict]:
         """Smooth ``f`` ((n,) or (n, d)) with parameter ``alpha`` in (0, 1).
 
@@ -177,9 +219,10 @@ class DataSmoother:
             ``residuals`` (absolute norms, initial first; empty for "direct").
             The iterations start from ``x0`` (default: zero, as SciPy and PyAMG; starting from
             ``f`` looks natural but its residual ``(1-alpha) M f - A f`` is dominated by the
-            noise that ``Q`` amplifies, 1e2-1e5 times ``||b||``, so it needs more iterations). ``accel="cg"``: CG
-            preconditioned by the V-cycle (advised for the bilaplacian, see
-            :meth:`MultigridSolver.solve`). ``callback(u)`` is called after each cycle.
+            noise that ``Q`` amplifies, 1e2-1e5 times ``||b||``, so it needs more iterations). ``accel="cg"``
+            (default): CG preconditioned by the V-cycle (Dirichlet on camelhead 22 -> 10
+            iterations, on a scan with thin triangles 96 -> 18; ``None``: plain V-cycles, the
+            thesis; see :meth:`MultigridSolver.solve`). ``callback(u)`` is called after each cycle.
             ``preconditioner`` (bilaplacian only): "factored" (default; CG preconditioned by
             two V-cycles of the second-order ``sqrt(alpha)(-L) + sqrt(1-alpha) M``, see
             :meth:`_smooth_factored`; ``accel`` is ignored) or "galerkin" (V-cycles on the
@@ -195,12 +238,7 @@ class DataSmoother:
         t0 = time.perf_counter()
         rhs = (1.0 - alpha) * (self.M @ f)
         if self.solver_kind == "direct":
-            s = SPDSolver(self.system(alpha))  # CHOLMOD when installed, else SuperLU
-            t1 = time.perf_counter()
-            u = s.solve(rhs)
-            t2 = time.perf_counter()
-            return u, dict(seconds=t2 - t0, setup_seconds=t1 - t0, solve_seconds=t2 - t1,
-                           cycles=0, residuals=[], backend=s.backend)
+            return self._direct(rhs, alpha, t0)
         if self.energy == "bilaplacian" and preconditioner == "factored":
             return self._smooth_factored(f, alpha, rhs, rtol, maxiter, x0, callback, t0)
         if preconditioner not in ("galerkin", "factored"):
@@ -216,9 +254,62 @@ class DataSmoother:
         t2 = time.perf_counter()
         info = dict(seconds=t2 - t0, setup_seconds=t1 - t0, solve_seconds=t2 - t1,
                     cycles=s.last_info["cycles"], residuals=s.last_info["residuals"],
-                    converged=s.last_info["converged"], method="galerkin")
+                    converged=s.last_info["converged"], method="galerkin",
+                    stop=s.last_info.get("stop"))
         self.last_solver = s
         return u, info
+
+    def _direct(self, rhs, alpha, t0):
+        s = SPDSolver(self.system(alpha))  # CHOLMOD when installed, else SuperLU
+        t1 = time.perf_counter()
+        u = s.solve(rhs)
+        t2 = time.perf_counter()
+        return u, dict(seconds=t2 - t0, setup_seconds=t1 - t0, solve_seconds=t2 - t1,
+                       cycles=0, residuals=[], backend=s.backend, converged=True,
+                       stop="converged", solver="direct")
+
+    def smooth_checked(self, f, alpha: float, *, rtol: float = 1e-5, maxiter: int = 100,
+                       x0=None, callback=None, fallback: bool = True,
+                       preconditioner: str = "factored") -> tuple[np.ndarray, dict]:
+        """:meth:`smooth` that never returns an unconverged result.
+
+        When the multigrid iteration stops before ``rtol`` (too many cycles, a growing or
+        stalled residual), the system is solved by the direct solver instead if ``fallback``
+        and its factor fits in memory (:func:`direct_fits_in_memory`); ``info["fallback"]``
+        then says so in a sentence. Otherwise :class:`NotConvergedError` is raised with a plain
+        message. ``info["solver"]`` is the solver whose result is returned.
+        """
+        u, info = self.smooth(f, alpha, rtol=rtol, maxiter=maxiter, x0=x0, callback=callback,
+                              preconditioner=preconditioner)
+        info.setdefault("solver", self.solver_kind)
+        if self.solver_kind == "direct" or info.get("converged"):
+            return u, info
+        res = info.get("residuals") or [1.0]
+        relres = res[-1] / res[0] if res[0] > 0 else float("nan")
+        what = {"maxiter": f"it did not reach the tolerance {rtol:g} in {info['cycles']} "
+                           f"iterations",
+                "diverged": "the residual grew (the iteration diverged)",
+                "stalled": "the residual stopped decreasing",
+                "breakdown": "the iteration broke down (the preconditioned system is not "
+                             "positive definite)"}.get(info.get("stop"), "it did not converge")
+        reason = (f"Multigrid stopped after {info['cycles']} iterations at relative residual "
+                  f"{relres:.2g}: {what}")
+        fits, need = direct_fits_in_memory(len(self.V), self.energy)
+        if fallback and fits:
+            t0 = time.perf_counter()
+            rhs = (1.0 - float(alpha)) * (self.M @ np.asarray(f, dtype=np.float64))
+            u, dinfo = self._direct(rhs, float(alpha), t0)
+            dinfo.update(fallback=f"{reason}; solved with the direct solver instead.",
+                         multigrid_cycles=info["cycles"], multigrid_residuals=res,
+                         multigrid_stop=info.get("stop"),
+                         seconds=info["seconds"] + dinfo["seconds"])
+            return u, dinfo
+        hint = ("The direct solver needs about "
+                f"{need / 2**30:.1f} GiB here, more than half the free memory"
+                if fallback and not fits else "Use the direct solver (--solver direct, or Solver: "
+                "direct in the app)")
+        raise NotConvergedError(f"{reason}. Nothing was changed. {hint}; a smaller alpha or a "
+                                f"cleaned mesh also helps.")
 
     def _smooth_factored(self, f, alpha, rhs, rtol, maxiter, x0, callback, t0):
         """Bilaplacian by CG preconditioned with ``S^-1 M S^-1``, ``S = sqrt(a) (-L) + sqrt(1-a) M``.
@@ -229,9 +320,11 @@ class DataSmoother:
         second-order (1-ring) system on the same hierarchy, Galerkin parts precomputed.
         """
         a, c = np.sqrt(alpha), np.sqrt(1.0 - alpha)
+        # one more sweep each side than the V-cycle settings (3+3 by default): camelhead,
+        # alpha 1e-3, 32 -> 25 CG steps for the same time
         S = MultigridSolver([p.combine(a, c) for p in self.lap_pairs], self.mg.prolongations,
-                            smoother=self.smoother, presmooth=self.presmooth,
-                            postsmooth=self.postsmooth, colorings=self.lap_colorings)
+                            smoother=self.smoother, presmooth=self.presmooth + 1,
+                            postsmooth=self.postsmooth + 1, colorings=self.lap_colorings)
         A = self.pairs[0].combine(alpha, 1.0 - alpha)
         m = self.M.diagonal()[:, None]
 
@@ -249,6 +342,7 @@ class DataSmoother:
         R = B - A @ X
         hist = [float(np.sqrt(np.einsum("ij,ij->", R, R)))]
         converged = hist[0] <= rtol * nb
+        stop = "converged" if converged else "maxiter"
         k = 0
         if not converged:
             it = pcg_iterate(A, B, X, precondition)
@@ -259,9 +353,15 @@ class DataSmoother:
                     callback(X.reshape(shape).copy())
                 if hist[-1] <= rtol * nb:
                     converged = True
+                    stop = "converged"
+                    break
+                why = failure_reason(hist, "cg")
+                if why is not None:
+                    stop = why
                     break
         t2 = time.perf_counter()
         info = dict(seconds=t2 - t0, setup_seconds=t1 - t0, solve_seconds=t2 - t1, cycles=k,
-                    vcycles=2 * k + 1, residuals=hist, converged=converged, method="factored")
+                    vcycles=2 * k + 1, residuals=hist, converged=converged, method="factored",
+                    stop=stop)
         self.last_solver = S
         return X.reshape(shape), info

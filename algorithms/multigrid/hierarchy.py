@@ -17,6 +17,27 @@ Prolongation sources (pluggable, ``prolongation=``):
     the closest point on the coarse mesh (``igl.point_mesh_squared_distance``) and its
     barycentric coordinates in that triangle (clamped to the triangle, renormalized).
 
+Robustness on real meshes (our additions, issue 10; each recorded in ``report["notes"]``):
+
+* **Seed vertices** (``seeded=True``, default with the intrinsic prolongation). Shortest-edge
+  mid-point collapses make the coarse mesh uniform: on a graded mesh (a scan with a finely
+  tessellated region, camelhead's 4 decades of vertex areas) the fine region loses nearly all
+  its vertices at the first level, the coarse space cannot represent its error there and the
+  V-cycle stalls (rate 0.85 on camelhead's screened Laplacian). Every level therefore keeps a
+  maximal independent set of the vertex graph (:func:`spread_seeds`, about a quarter of the
+  vertices, as dense as the mesh is) through ``self_parameterize(keep=...)``: an edge to a seed
+  collapses into the seed, other edges at their mid-point, so every region loses about three
+  vertices in four. The collapses are still shortest first and every validity check is kept.
+* **Rough surfaces** (more than 20 % of neighbouring triangles at > 60 degrees: scan noise) are
+  collapsed on :func:`smoothed_copy` of their geometry (5 uniform Laplacian steps); the 3D flip
+  and quality checks otherwise refuse most collapses. The map's domain (the connectivity) is the
+  same, so the prolongation is still a bijective barycentric map of the real mesh.
+* **Stalls.** When a level removes less than half of the vertices it should, the collapses
+  continue from where they stopped on a smoothed copy without seeds, then with relaxed 3D
+  checks (quality 0.02 instead of 0.2, normals turning up to 120 degrees; the UV checks that make
+  the map bijective are never relaxed); the two maps are composed. A coarsest level above 2,000
+  vertices is reported with the refused checks.
+
 Nothing here depends on a linear system: :meth:`SurfaceMultigrid.solver` builds the Galerkin
 matrices ``A_{h+1} = P^T A_h P`` of a given matrix on the stored hierarchy (cheap, repeated every
 time the matrix changes).
@@ -25,19 +46,113 @@ time the matrix changes).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidMeshError, ParameterError
+from ..mesh.operators import face_normals
 from ..mesh.selfparam import barycentric_prolongation, self_parameterize
+from ..mesh.topology import edge_flaps, vertex_adjacency
 
 __all__ = ["SurfaceMultigrid", "surface_multigrid", "barycentric_prolongation",
            "closest_point_prolongation", "PROLONGATIONS"]
 
 PROLONGATIONS = ("intrinsic", "closest_point")
+
+#: the coarsest level should be at most this big (its direct factorization runs every V-cycle)
+COARSEST_TARGET = 2000
+#: a level that removed fewer vertices than this fraction of the wanted number has stalled
+STALL_FRACTION = 0.5
+#: a surface is rough when more than this fraction of adjacent triangles meet at > 60 degrees
+ROUGH_FRACTION = 0.2
+#: relaxed checks of the last fallback (the thesis: quality 0.2, flip 0.2; UV bijectivity kept)
+RELAXED_QUALITY, RELAXED_FLIP = 0.02, -0.5
+
+
+def spread_seeds(F, n: int, seed: int = 0) -> np.ndarray:
+    """A maximal independent set of the vertex graph (Luby's algorithm, fixed random priorities).
+
+    No two seeds share an edge and every other vertex has a seed neighbour, so the seeds are
+    spread like the vertices themselves: about a quarter of them on a triangle mesh, dense where
+    the mesh is dense. Returns sorted vertex indices.
+    """
+    A = vertex_adjacency(F, n).tocoo()
+    rows, cols = A.row, A.col
+    pri = np.random.default_rng(seed).random(n)
+    state = np.zeros(n, dtype=np.int8)  # 0 undecided, 1 seed, -1 not a seed
+    used = np.zeros(n, dtype=bool)
+    used[np.asarray(F).ravel()] = True
+    state[~used] = -1
+    while (state == 0).any():
+        p = np.where(state == 0, pri, -1.0)
+        best = np.full(n, -1.0)
+        np.maximum.at(best, rows, p[cols])
+        win = (state == 0) & (p > best)
+        state[win] = 1
+        lose = np.zeros(n, dtype=bool)
+        lose[rows[win[cols]]] = True
+        state[lose & (state == 0)] = -1
+    return np.flatnonzero(state == 1)
+
+
+def rough_fraction(V, F) -> float:
+    """Fraction of interior edges whose two triangles' normals differ by more than 60 degrees."""
+    N = face_normals(V, F)
+    _, _, EF, _ = edge_flaps(F)
+    ok = (EF >= 0).all(axis=1)
+    if not ok.any():
+        return 0.0
+    d = np.einsum("ij,ij->i", N[EF[ok, 0]], N[EF[ok, 1]])
+    return float((d < 0.5).mean())
+
+
+def smoothed_copy(V, F, steps: int = 5) -> np.ndarray:
+    """``steps`` uniform Laplacian smoothing steps (factor 1/2): the geometry the collapses of a
+    rough surface are checked on (the connectivity, hence the map's domain, is unchanged)."""
+    A = vertex_adjacency(F, len(V)).tocsr()
+    deg = np.asarray(A.sum(axis=1)).ravel()
+    inv = np.where(deg > 0, 1.0 / np.maximum(deg, 1), 0.0)[:, None]
+    X = np.array(V, dtype=np.float64, copy=True)
+    for _ in range(int(steps)):
+        X = 0.5 * X + 0.5 * np.where(deg[:, None] > 0, (A @ X) * inv, X)
+    return X
+
+
+def _coarsen_level(Vh, Fh, target, strategy, seeded, progress, notes, level):
+    """One level of self-parameterization with the fallbacks of issue 10 (see the module
+    docstring); the reason of every fallback goes into ``notes``."""
+    keep = spread_seeds(Fh, len(Vh)) if seeded else None
+    rough = rough_fraction(Vh, Fh) > ROUGH_FRACTION
+    Vg = smoothed_copy(Vh, Fh) if rough else Vh
+    res = self_parameterize(Vg, Fh, target, strategy=strategy, keep=keep, progress=progress)
+    if rough:
+        res = replace(res, V_fine=Vh)
+        notes.append(f"Level {level}: the surface is rough (more than "
+                     f"{ROUGH_FRACTION:.0%} of neighbouring triangles meet at sharp angles), so "
+                     f"the collapses were checked on a smoothed copy of its geometry.")
+    wanted = len(Vh) - target / 2.0  # a closed mesh has about half as many vertices as faces
+    attempts = [(True, 0.2, 0.2, "the collapses were continued on a smoothed copy of the "
+                 "geometry, without seed vertices"),
+                (True, RELAXED_QUALITY, RELAXED_FLIP,
+                 f"the collapses were continued with relaxed checks (triangle quality "
+                 f"> {RELAXED_QUALITY}, normals may turn by up to 120 degrees; the map stays "
+                 f"bijective)")]
+    for smooth, q, flip, what in attempts:
+        removed = len(Vh) - len(res.V_coarse)
+        if res.report.get("reached_target", True) or removed >= STALL_FRACTION * wanted:
+            break
+        Vp, Fp = res.V_coarse, res.F_coarse
+        nxt = self_parameterize(smoothed_copy(Vp, Fp) if smooth else Vp, Fp, target,
+                                strategy=strategy, min_quality=q, flip_delta=flip)
+        nxt = replace(nxt, V_fine=Vp)
+        notes.append(f"Level {level}: the collapses stalled at {len(Vp):,} vertices "
+                     f"({removed:,} of about {int(wanted):,} removed); {what}: "
+                     f"{len(nxt.V_coarse):,} vertices.")
+        res = res.compose(nxt)
+    return res
 
 
 def _closest_barycentric(Q: np.ndarray, V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -122,7 +237,7 @@ class SurfaceMultigrid:
     def n_vertices(self) -> int:
         return len(self.levels[0][0])
 
-    def solver(self, A, *, fixed=None, smoother: str = "gauss_seidel", presmooth: int = 2,
+    def solver(self, A, *, fixed=None, smoother: str = "block_gauss_seidel", presmooth: int = 2,
                postsmooth: int = 2, block: int | None = None):
         """Galerkin multigrid solver of ``A`` on this hierarchy (only the matrices are built).
 
@@ -133,7 +248,9 @@ class SurfaceMultigrid:
             ``i`` is row ``b*i + k`` (xyzxyz...; the prolongation is ``kron(P, I_b)``).
         fixed : (k,) int indices of Dirichlet unknowns (in A's numbering); their values are given
             to :meth:`MultigridSolver.solve` (``fixed_values``). The reduced system of App. 8.9.2.
-        smoother : "gauss_seidel" (serial, the thesis default) or "multicolor" (App. 8.9.1).
+        smoother : "block_gauss_seidel" (default: Gauss-Seidel with strongly coupled rows solved
+            together, see :mod:`.relaxation`), "gauss_seidel" (serial, the thesis) or "multicolor"
+            (App. 8.9.1).
         presmooth, postsmooth : relaxation sweeps before / after the coarse-grid correction.
         block : None or the number of unknowns per vertex.
 
@@ -163,6 +280,7 @@ class SurfaceMultigrid:
 
 def surface_multigrid(V, F, *, ratio: float = 0.25, min_vertices: int = 500,
                       strategy: str = "midpoint", prolongation: str = "intrinsic",
+                      seeded: bool = True,
                       progress: Callable[[float, str], None] | None = None) -> SurfaceMultigrid:
     """Build the multigrid hierarchy of a triangle mesh (geometry only).
 
@@ -177,6 +295,9 @@ def surface_multigrid(V, F, *, ratio: float = 0.25, min_vertices: int = 500,
     strategy : decimation strategy ("midpoint": uniform mid-point collapse, the thesis default;
         "qslim").
     prolongation : "intrinsic" (successive self-parameterization) or "closest_point".
+    seeded : keep a spread set of seed vertices on every level (intrinsic prolongation; our
+        addition, see the module docstring): every region is coarsened by about ``ratio``, also
+        on graded meshes. False: plain shortest-edge-first collapses (the thesis).
     progress : optional ``progress(fraction, message)`` called during and after each level.
 
     Returns
@@ -226,7 +347,7 @@ def surface_multigrid(V, F, *, ratio: float = 0.25, min_vertices: int = 500,
                 def sub(frac, _done=done, _total=total):
                     progress(min(1.0, (_done + float(frac)) / _total),
                              f"multigrid level {_done + 1}: self-parameterization")
-            res = self_parameterize(Vh, Fh, target, strategy=strategy, progress=sub)
+            res = _coarsen_level(Vh, Fh, target, strategy, seeded, sub, notes, len(levels))
             Vc = np.ascontiguousarray(res.V_coarse, dtype=np.float64)
             Fc = np.ascontiguousarray(res.F_coarse, dtype=np.int64)
             P = sp.csr_matrix(res.prolongation(), dtype=np.float64)
@@ -254,8 +375,17 @@ def surface_multigrid(V, F, *, ratio: float = 0.25, min_vertices: int = 500,
             progress(min(1.0, len(Ps) / max(1, n_expected)),
                      f"multigrid level {len(Ps)}: {len(Vc):,} vertices")
     seconds = time.perf_counter() - t0
+    coarsest = len(levels[-1][0])
+    if coarsest > max(COARSEST_TARGET, int(min_vertices / ratio)):
+        last = per_level[-1].get("selfparam") or {}
+        why = ", ".join(f"{k} {v:,}" for k, v in sorted(
+            (last.get("rejections") or {}).items(), key=lambda kv: -kv[1]) if v)
+        notes.append(f"The coarsest level keeps {coarsest:,} vertices (more than "
+                     f"{COARSEST_TARGET:,}): no more edges could be collapsed without breaking "
+                     f"the map's validity checks" + (f" (refused: {why})" if why else "") +
+                     ". Its direct solve is the expensive part of every V-cycle.")
     report = dict(prolongation=prolongation, strategy=strategy, ratio=float(ratio),
                   min_vertices=int(min_vertices), levels=per_level, notes=notes,
-                  build_seconds=seconds)
+                  build_seconds=seconds, seeded=bool(seeded and prolongation == "intrinsic"))
     return SurfaceMultigrid(levels=levels, prolongations=Ps, build_seconds=seconds, report=report,
                             maps=maps)

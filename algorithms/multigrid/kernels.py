@@ -14,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["gauss_seidel_sweeps", "greedy_coloring"]
+__all__ = ["gauss_seidel_sweeps", "greedy_coloring", "merge_strong_pairs",
+           "block_gauss_seidel_sweeps"]
 
 
 @njit(cache=True)
@@ -91,3 +92,68 @@ def greedy_coloring(indptr, indices, order):
             palette[k - 1] = c
         color[i] = c
     return color
+
+
+@njit(cache=True)
+def merge_strong_pairs(n, ri, rj, max_block):
+    """Union-find over the strong couplings ``(ri[t], rj[t])``, strongest first, never letting a
+    block grow past ``max_block`` vertices. Returns each vertex's block root."""
+    parent = np.arange(n)
+    size = np.ones(n, dtype=np.int64)
+    for t in range(ri.shape[0]):
+        a = ri[t]
+        b = rj[t]
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a == b or size[a] + size[b] > max_block:
+            continue
+        if size[a] < size[b]:
+            a, b = b, a
+        parent[b] = a
+        size[a] += size[b]
+    for i in range(n):
+        r = i
+        while parent[r] != r:
+            r = parent[r]
+        parent[i] = r
+    return parent
+
+
+@njit(cache=True)
+def block_gauss_seidel_sweeps(indptr, indices, data, bptr, bverts, iptr, inv, x, b, sweeps,
+                              backward):
+    """In place: block Gauss-Seidel sweeps; block ``c`` is ``bverts[bptr[c]:bptr[c+1]]`` and
+    its inverse the row-major ``inv[iptr[c]:iptr[c+1]]``. Each block's rows are solved together:
+    ``x_B += A_BB^-1 (b_B - A_B: x)``, blocks in ascending (or, ``backward``, descending) order."""
+    nb = bptr.shape[0] - 1
+    d = b.shape[1]
+    mx = 1
+    for c in range(nb):
+        mx = max(mx, bptr[c + 1] - bptr[c])
+    r = np.empty((mx, d))
+    for s in range(sweeps):
+        for t in range(nb):
+            c = nb - 1 - t if backward else t
+            p0 = bptr[c]
+            m = bptr[c + 1] - p0
+            for a in range(m):
+                i = bverts[p0 + a]
+                for q in range(d):
+                    r[a, q] = b[i, q]
+                for k in range(indptr[i], indptr[i + 1]):
+                    j = indices[k]
+                    v = data[k]
+                    for q in range(d):
+                        r[a, q] -= v * x[j, q]
+            o = iptr[c]
+            for a in range(m):
+                i = bverts[p0 + a]
+                for q in range(d):
+                    acc = 0.0
+                    for e in range(m):
+                        acc += inv[o + a * m + e] * r[e, q]
+                    x[i, q] += acc

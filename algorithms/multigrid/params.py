@@ -39,9 +39,11 @@ class MultigridParams:
         tooltip="intrinsic: map vertices between levels through a self-parameterization (the "
                 "method of the thesis). closest_point: the naive projection, for comparison.")
     smoother: str = param(
-        "gauss_seidel", label="Relaxation", choices=SMOOTHERS, advanced=True,
-        tooltip="gauss_seidel: serial Gauss-Seidel. multicolor: Gauss-Seidel by independent "
-                "colour groups (same result quality, vectorized).")
+        "block_gauss_seidel", label="Relaxation", choices=SMOOTHERS, advanced=True,
+        tooltip="block_gauss_seidel: Gauss-Seidel that solves strongly coupled vertices (thin "
+                "triangles) together; plain Gauss-Seidel elsewhere. gauss_seidel: serial "
+                "Gauss-Seidel (the thesis). multicolor: Gauss-Seidel by independent colour "
+                "groups (vectorized).")
     presmooth: int = param(
         2, label="Pre-sweeps", minimum=0, maximum=10, step=1, advanced=True,
         tooltip="Relaxation sweeps before each coarse-grid correction.")
@@ -74,6 +76,8 @@ class DataSmoothingParams:
                 "apply it to the mesh scaled to unit area, so it does not depend on units: "
                 "about 1e-4 to 1e-2 for dirichlet, 1e-7 to 1e-4 for bilaplacian.")
     solver: str = param(
-        "multigrid", label="Solver", choices=("multigrid", "direct"),
-        tooltip="multigrid: reuses the hierarchy, fast when alpha changes. direct: a new "
-                "Cholesky factorization for every alpha.")
+        "auto", label="Solver", choices=("auto", "multigrid", "direct"),
+        tooltip="auto: direct for small and medium meshes, multigrid for big ones (says which). "
+                "multigrid: reuses the hierarchy, fast when alpha changes; falls back to the "
+                "direct solver, saying so, if it does not converge. direct: a new Cholesky "
+                "factorization for every alpha.")

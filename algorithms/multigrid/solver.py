@@ -40,13 +40,56 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..errors import ParameterError
+from ..errors import ParameterError, Stylize3DError
 from ..linalg import SPDSolver
 from .relaxation import SMOOTHERS, make_smoother
 
-__all__ = ["MultigridSolver", "Cycle", "galerkin_matrices", "reduce_dirichlet", "pcg_iterate"]
+__all__ = ["MultigridSolver", "Cycle", "galerkin_matrices", "reduce_dirichlet", "pcg_iterate",
+           "NotConvergedError", "failure_reason", "STOP_REASONS"]
 
 COARSE_SHIFT = 1e-12
+#: plain V-cycles: this many consecutive growing residuals mean divergence
+GROWTH_CYCLES = 3
+#: CG: no new smallest residual in this many steps means a stall
+STALL_STEPS = 12
+#: why an iteration stopped (``last_info["stop"]``)
+STOP_REASONS = ("converged", "maxiter", "diverged", "stalled", "breakdown")
+
+
+class NotConvergedError(Stylize3DError):
+    """An iterative solve stopped before its tolerance: its result must not be used."""
+
+    exit_code = 6
+
+
+def failure_reason(hist: list, accel: str | None) -> str | None:
+    """None while an iteration may go on, else why it must stop ("diverged", "stalled",
+    "breakdown"), from the residual norms so far (initial first).
+
+    Plain V-cycles contract the error every cycle when they work: ``GROWTH_CYCLES`` growing
+    residuals in a row (or one above 1e3 times the initial) is divergence. CG's residual norm
+    may rise now and then (it minimizes the energy norm of the error; on the bilaplacian the
+    first step can raise it 1e4-fold), so, counting from the first step, a stall there is
+    ``STALL_STEPS`` steps without a new smallest residual and a growth by 1e6 over the smallest
+    is divergence. A non-finite value is a breakdown (the preconditioned system is not positive
+    definite, see :func:`pcg_iterate`)."""
+    r = hist[-1]
+    if not np.isfinite(r):
+        return "breakdown"
+    if accel is None:
+        if hist[0] > 0 and r > 1e3 * hist[0]:
+            return "diverged"
+        if len(hist) > GROWTH_CYCLES and all(hist[-k] > hist[-k - 1]
+                                             for k in range(1, GROWTH_CYCLES + 1)):
+            return "diverged"
+        return None
+    h = hist[1:]  # the first CG steps may raise the residual norm by 1e4 and more (bilaplacian)
+    best = min(h)
+    if best > 0 and r > 1e6 * best:
+        return "diverged"
+    if len(h) > STALL_STEPS and min(h[-STALL_STEPS:]) > min(h[:-STALL_STEPS]):
+        return "stalled"
+    return None
 
 
 @dataclass
@@ -112,7 +155,9 @@ def pcg_iterate(A, b: np.ndarray, x: np.ndarray,
                 precondition: Callable[[np.ndarray], np.ndarray]) -> Iterator[float]:
     """Preconditioned conjugate gradients on ``A x = b``, in place on ``x`` ((n, d) arrays, one
     scalar recurrence per column); yields the (recursively updated) residual norm after each
-    step. ``precondition(r)`` must be a symmetric positive definite operator."""
+    step. ``precondition(r)`` must be a symmetric positive definite operator. When it is not
+    (or ``A`` is not), CG breaks down: a step with ``p^T A p <= 0`` or ``r^T z < 0`` yields NaN and
+    leaves ``x`` as it was (callers stop on a non-finite residual)."""
     r = b - A @ x
     z = precondition(r)
     p = z.copy()
@@ -120,6 +165,9 @@ def pcg_iterate(A, b: np.ndarray, x: np.ndarray,
     while True:
         Ap = A @ p
         pAp = np.einsum("ij,ij->j", p, Ap)
+        if np.any(pAp < 0) or np.any(rz < 0) or not np.all(np.isfinite(pAp)):
+            while True:
+                yield float("nan")
         a = np.divide(rz, pAp, out=np.zeros_like(rz), where=pAp != 0)
         x += p * a
         r -= Ap * a
@@ -144,7 +192,7 @@ class MultigridSolver:
     """
 
     def __init__(self, matrices: list, prolongations: list, *, n: int | None = None,
-                 fixed=None, A_uk=None, smoother: str = "gauss_seidel", presmooth: int = 2,
+                 fixed=None, A_uk=None, smoother: str = "block_gauss_seidel", presmooth: int = 2,
                  postsmooth: int = 2, colorings: list | None = None,
                  coarse_backend: str = "superlu"):
         t = time.perf_counter()
@@ -184,7 +232,7 @@ class MultigridSolver:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_hierarchy(cls, mg, A, *, fixed=None, smoother="gauss_seidel", presmooth=2,
+    def from_hierarchy(cls, mg, A, *, fixed=None, smoother="block_gauss_seidel", presmooth=2,
                        postsmooth=2, block=None):
         t = time.perf_counter()
         A = sp.csr_matrix(A, dtype=np.float64)
@@ -349,7 +397,11 @@ class MultigridSolver:
 
         Returns
         -------
-        x : the solution, shaped like ``b``. ``last_info`` holds cycles, residuals, converged.
+        x : the solution, shaped like ``b``. ``last_info`` holds cycles, residuals, converged
+        and ``stop`` (one of :data:`STOP_REASONS`): the iteration stops early, unconverged, when
+        the residual grows or stalls (:func:`failure_reason`). An unconverged result is not a
+        solution; callers must check ``converged`` (the applications raise
+        :class:`NotConvergedError` or fall back to a direct solve, saying so).
         """
         if rtol <= 0:
             raise ParameterError("rtol must be positive.")
@@ -363,6 +415,7 @@ class MultigridSolver:
             xu[...] = 0.0
             hist[0] = 0.0
         k = 0
+        stop = "converged" if converged else "maxiter"
         if not converged and int(maxiter) > 0:
             it = self._iterate(bu, xu, accel)
             while k < int(maxiter):
@@ -372,12 +425,17 @@ class MultigridSolver:
                     callback(self._expand(xu, ctx))
                 converged = hist[-1] <= rtol * nb
                 if converged:
+                    stop = "converged"
+                    break
+                why = failure_reason(hist, accel)
+                if why is not None:
+                    stop = why
                     break
         if residuals is not None:
             residuals[:] = hist
         self.last_info = dict(cycles=k, residuals=hist, converged=bool(converged),
                               relative_residual=hist[-1] / nb if nb > 0 else 0.0,
-                              seconds=time.perf_counter() - t, accel=accel)
+                              seconds=time.perf_counter() - t, accel=accel, stop=stop)
         return self._expand(xu, ctx)
 
     def convergence_factor(self) -> float:

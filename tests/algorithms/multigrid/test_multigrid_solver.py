@@ -36,8 +36,12 @@ def test_hierarchy_prolongations(name, kind):
         assert nnz.max() <= 3 and nnz.min() >= 1
         assert np.all(P.data >= 0)
         np.testing.assert_allclose(np.asarray(P.sum(axis=1)).ravel(), 1.0, atol=1e-12)
-        # x0.25 faces per level
-        assert abs(len(mg.levels[h + 1][1]) - 0.25 * len(mg.levels[h][1])) <= 2
+        # x0.25 faces per level (the seed vertices may stop it a little above the target)
+        mf, mc = len(mg.levels[h][1]), len(mg.levels[h + 1][1])
+        if mg.report.get("seeded"):
+            assert 0.25 * mf - 2 <= mc <= 0.34 * mf
+        else:
+            assert abs(mc - 0.25 * mf) <= 2
         # positions are nearly reproduced: the interpolated coarse positions stay within a coarse
         # edge length of the fine ones (the coarse mesh approximates the fine one)
         Vc, Fc = mg.levels[h + 1]
