@@ -24,6 +24,11 @@ def run_app(mesh: str | None = None, screenshot: str | None = None,
         _unattended_dialogs(said)
     if mesh:
         QTimer.singleShot(0, lambda: win.open_path(mesh))
+    elif not screenshot and not study:  # first start (or "Show at start" left on)
+        from app.welcome import WelcomeDialog
+
+        if WelcomeDialog.show_at_start(win):
+            QTimer.singleShot(0, win.show_welcome)
     if study:
         QTimer.singleShot(0, lambda: _start_study(win, study, status))
     if screenshot:

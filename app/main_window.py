@@ -167,6 +167,8 @@ class MainWindow(QMainWindow):
               tip=f"Look at the whole mesh from the {key}")
         A("orthographic", "&Orthographic", self.viewport.set_orthographic, checkable=True,
           tip="Parallel projection: no perspective, so sizes compare across the view")
+        A("welcome", "&Welcome…", lambda: self.show_welcome(),
+          tip="Open a sample mesh or your own file, with a suggestion of what to try first")
         A("about", "&About Stylize3D", self.show_about)
         A("shortcuts", "&Keyboard Shortcuts", self.show_shortcuts)
 
@@ -195,6 +197,7 @@ class MainWindow(QMainWindow):
         self.panels_menu = m.addMenu("&Panels")
         self.view_menu = m
         m = mb.addMenu("&Help")
+        m.addAction(a["welcome"])
         m.addAction(a["shortcuts"])
         m.addAction(a["about"])
         self._fill_recent_menu()
@@ -674,6 +677,17 @@ class MainWindow(QMainWindow):
                      "Cubic stylization, shape analogies, Paparazzi, neural subdivision, spectral "
                      "coarsening and surface multigrid, after one PhD thesis on data-driven "
                      "geometric stylization and scalable geometry processing.")
+
+    def show_welcome(self):
+        """Help > Welcome (and the first start): samples with thumbnails, or open a file."""
+        from app.welcome import WelcomeDialog
+
+        dlg = getattr(self, "welcome_dialog", None)
+        if dlg is None:
+            dlg = self.welcome_dialog = WelcomeDialog(self)
+        dlg.show()
+        dlg.raise_()
+        return dlg
 
     def show_shortcuts(self) -> None:
         dialogs.info(self, "Keyboard shortcuts", SHORTCUTS_TEXT)

@@ -387,3 +387,25 @@ def test_toolbar_buttons_do_what_they_say(window, dialogs, qtbot):
     dialogs.save_paths.append(None)
     qtbot.mouseClick(buttons["screenshot"], Qt.MouseButton.LeftButton)
     assert not dialogs.save_paths
+
+
+# -- welcome -------------------------------------------------------------------------------------------
+def test_welcome_opens_a_sample_from_its_thumbnail(window, dialogs, qtbot):
+    window.actions_by_name["welcome"].trigger()
+    dlg = window.welcome_dialog
+    qtbot.waitExposed(dlg)
+    assert set(dlg.sample_buttons) == {"blob.obj", "bumpy.obj", "pretzel.obj"}
+    b = dlg.sample_buttons["pretzel.obj"]
+    assert "Analogies" in b.text()  # one suggestion per sample
+    assert not b.icon().isNull()  # a thumbnail made by the app
+    qtbot.mouseClick(b, Qt.MouseButton.LeftButton)
+    assert window.document.path.name == "pretzel.obj" and window.viewport.n_points > 0
+    assert not dlg.isVisible()
+    qtbot.waitUntil(window.panels["Analogies"].is_shown)
+    # "Show at start" is remembered
+    window.show_welcome()
+    dlg.show_box.click()
+    assert not dlg.show_at_start(window)
+    dialogs.open_paths.append(str(SAMPLES / "blob.obj"))
+    qtbot.mouseClick(dlg.open_button, Qt.MouseButton.LeftButton)
+    assert window.document.path.name == "blob.obj" and not dlg.isVisible()

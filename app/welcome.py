@@ -1,0 +1,138 @@
+"""The welcome window: shown on first start (and from Help > Welcome). Open a file, or one of the
+bundled samples from its thumbnail, each with one suggestion of what to try first.
+
+Thumbnails are rendered by the app itself (an off-screen pyvista plot of the sample, the same
+colours as the viewport) on first use and cached in the user's cache folder.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from PySide6.QtCore import QSize, QStandardPaths, Qt
+from PySide6.QtGui import QIcon
+from PySide6.QtWidgets import (QCheckBox, QDialog, QGridLayout, QHBoxLayout, QLabel, QPushButton,
+                               QToolButton, QVBoxLayout)
+
+if TYPE_CHECKING:  # pragma: no cover
+    from app.main_window import MainWindow
+
+SAMPLES_DIR = Path(__file__).resolve().parents[1] / "resources" / "samples"
+#: (file, panel brought to the front, what to try first)
+SAMPLES = (
+    ("blob.obj", "Cubic", "Cubic: drag λ and watch it turn into cubes"),
+    ("bumpy.obj", "Smooth", "Smooth: press Run to smooth the bumps away"),
+    ("pretzel.obj", "Analogies", "Analogies: pick a style in the gallery, drag λ"),
+)
+THUMB_SIZE = (176, 132)
+
+
+def thumbnail(mesh: Path) -> QIcon:
+    """A picture of ``mesh`` (cached PNG, made once with an off-screen render)."""
+    cache = Path(QStandardPaths.writableLocation(
+        QStandardPaths.StandardLocation.CacheLocation) or Path.home() / ".cache") / "thumbnails"
+    png = cache / f"{mesh.stem}-{int(mesh.stat().st_mtime)}.png"
+    if not png.exists():
+        try:
+            _render_thumbnail(mesh, png)
+        except Exception:  # no off-screen OpenGL: a button without a picture still works
+            return QIcon()
+    return QIcon(str(png))
+
+
+def _render_thumbnail(mesh: Path, png: Path) -> None:
+    import numpy as np
+    import pyvista as pv
+
+    from algorithms.mesh import read_mesh
+    from app.viewport import BACKGROUND_BOTTOM, BACKGROUND_TOP, HOME_VIEW_DIRECTION, MESH_COLOR
+
+    data = read_mesh(mesh)
+    faces = np.hstack([np.full((len(data.F), 1), 3), data.F]).ravel()
+    p = pv.Plotter(off_screen=True, window_size=THUMB_SIZE)
+    try:
+        p.set_background(BACKGROUND_BOTTOM, top=BACKGROUND_TOP)
+        p.add_mesh(pv.PolyData(data.V, faces), color=MESH_COLOR, smooth_shading=True,
+                   specular=0.25)
+        p.view_vector(HOME_VIEW_DIRECTION, viewup=(0.0, 1.0, 0.0))
+        p.reset_camera()
+        p.camera.zoom(1.2)
+        png.parent.mkdir(parents=True, exist_ok=True)
+        tmp = png.with_suffix(".part.png")
+        p.screenshot(str(tmp))
+        tmp.replace(png)
+    finally:
+        p.close()
+
+
+class WelcomeDialog(QDialog):
+    """See the module docstring. ``sample_buttons[file]`` are the thumbnails (tests click them)."""
+
+    def __init__(self, window: "MainWindow"):
+        super().__init__(window)
+        self.window_ = window
+        self.setWindowTitle("Welcome to Stylize3D")
+        lay = QVBoxLayout(self)
+        intro = QLabel("<h2>Welcome to Stylize3D</h2>"
+                       "Stylize a 3D surface mesh: make it cubic, give it the look of another "
+                       "shape, smooth it, or coarsen its operator. Open your own mesh (OBJ, PLY, "
+                       "STL, OFF; or drop it on the window), or start with a sample:")
+        intro.setWordWrap(True)
+        lay.addWidget(intro)
+        grid = QGridLayout()
+        self.sample_buttons: dict[str, QToolButton] = {}
+        for col, (name, panel, hint) in enumerate(SAMPLES):
+            path = SAMPLES_DIR / name
+            if not path.exists():
+                continue
+            b = QToolButton()
+            b.setIcon(thumbnail(path))
+            b.setIconSize(QSize(*THUMB_SIZE))
+            b.setText(f"{Path(name).stem}\n{hint}")
+            b.setToolTip(f"Open the sample {name} and bring the {panel} panel to the front.")
+            b.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextUnderIcon)
+            b.setMinimumWidth(THUMB_SIZE[0] + 40)
+            b.clicked.connect(lambda _=False, n=name, p=panel: self.open_sample(n, p))
+            grid.addWidget(b, 0, col)
+            self.sample_buttons[name] = b
+        lay.addLayout(grid)
+        row = QHBoxLayout()
+        self.open_button = QPushButton("Open a mesh file…")
+        self.open_button.setDefault(True)
+        self.open_button.clicked.connect(self._open_file)
+        self.show_box = QCheckBox("Show this window at start")
+        self.show_box.setChecked(self.show_at_start(window))
+        self.show_box.toggled.connect(
+            lambda on: window.settings.setValue("welcome/show_at_start", bool(on)))
+        close = QPushButton("Close")
+        close.clicked.connect(self.close)
+        row.addWidget(self.show_box, 1)
+        row.addWidget(self.open_button)
+        row.addWidget(close)
+        lay.addLayout(row)
+        hint = QLabel("Later: File > Open, Help > Welcome, Help > Keyboard Shortcuts (F1). Each "
+                      "panel's \"What does this do?\" explains its method in plain words.")
+        hint.setWordWrap(True)
+        hint.setStyleSheet("color: #555;")
+        lay.addWidget(hint)
+
+    @staticmethod
+    def show_at_start(window: "MainWindow") -> bool:
+        v = window.settings.value("welcome/show_at_start", True)
+        return v not in (False, "false", "0", 0)
+
+    def open_sample(self, name: str, panel: str) -> bool:
+        if not self.window_.open_path(SAMPLES_DIR / name):
+            return False
+        dock = self.window_.panels.get(panel)
+        if dock is not None:
+            dock.show()
+            dock.raise_()
+            dock.status_label.setText(next(h for n, _p, h in SAMPLES if n == name) + ".")
+        self.close()
+        return True
+
+    def _open_file(self) -> None:
+        if self.window_.open_dialog():
+            self.close()
