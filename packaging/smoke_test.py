@@ -9,6 +9,8 @@ Checks, with the built binary ``BUNDLE_DIR/stylize3d``:
 2. headless (no DISPLAY): ``stylize3d cubic resources/samples/blob.obj -o OUT.obj --json`` exits 0,
    its JSON names the output, ran iterations and made the mesh more cubic (L1 norm of the normals
    went down), and OUT.obj has the input's vertex / face counts, finite coordinates, moved vertices;
+   then ``stylize3d subdivide ... --method neural --levels 1`` (torch and the shipped weights in
+   resources/subdivision, when the tree has them) gives 4x the faces;
 3. under Xvfb (``xvfb-run -a -s "-screen 0 1600x1000x24"``):
    ``stylize3d resources/samples/blob.obj --screenshot PNG`` exits 0 and the PNG is a window-sized,
    non-blank picture (grey-level standard deviation, share of mesh-coloured pixels); with --venv
@@ -131,6 +133,29 @@ def check_cubic(binary: Path, out: Path) -> None:
           f"({report.get('seconds', float('nan')):.1f} s in the method)")
 
 
+def check_subdivide(binary: Path, out: Path) -> None:
+    """Neural subdivision with the shipped weights: torch and resources/subdivision in the bundle."""
+    if not (ROOT / "resources" / "subdivision").is_dir():
+        print("        (no resources/subdivision in this tree: skipped)")
+        return
+    p, _ = run([str(binary), "subdivide", "--help"])
+    if p.returncode != 0:
+        print("        (this build has no subdivide command: skipped)")
+        return
+    target = out / "subdivided.obj"
+    target.unlink(missing_ok=True)
+    p, secs = run([str(binary), "subdivide", SAMPLE, "-o", str(target), "--levels", "1",
+                   "--method", "neural", "--json"])
+    if not check(p.returncode == 0, f"neural subdivision (torch, shipped weights) exits 0 "
+                 f"(got {p.returncode}, {secs:.1f} s){tail(p)}"):
+        return
+    report = json.loads(p.stdout)
+    V0, F0 = read_obj(ROOT / SAMPLE)
+    V1, F1 = read_obj(target)
+    check(len(F1) == 4 * len(F0) and bool(np.isfinite(V1).all()),
+          f"one level: {len(F0)} -> {len(F1)} faces, finite ({report.get('method')})")
+
+
 def screenshot(binary: Path, png: Path) -> tuple[subprocess.CompletedProcess, float]:
     png.unlink(missing_ok=True)
     return run(XVFB + [str(binary), SAMPLE, "--screenshot", str(png)], timeout=300)
@@ -222,6 +247,8 @@ def main(argv: list[str] | None = None) -> int:
     check_resources(binary)
     print("2. headless cubic stylization")
     check_cubic(binary, out)
+    print("2b. headless neural subdivision (torch and the shipped weights)")
+    check_subdivide(binary, out)
     print("3. GUI screenshot under Xvfb")
     reference = None
     if venv_bin is not None:
