@@ -22,7 +22,7 @@ from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QGridLayout, QGroupBox
 from algorithms.errors import Stylize3DError
 from algorithms.mesh.fields import FIELD_EXTENSIONS, field_file_filter, read_field, write_field
 from algorithms.multigrid import greedy_coloring, surface_multigrid
-from algorithms.multigrid.applications import DataSmoother
+from algorithms.multigrid.applications import DataSmoother, choose_solver
 from algorithms.multigrid.params import DataSmoothingParams
 from algorithms.smoothing import SmoothParams, noisy_test_field, smooth_iter, unit_area
 from algorithms.steps import Step, with_progress
@@ -37,6 +37,8 @@ RESULT_FIELD = "smoothed"
 SIGNALS = ("Noisy test field", "Vertex positions", "Loaded field")
 VIEWS = ("Result", "Input signal", "Coarse level mesh", "Fine triangles by coarse triangle")
 SOLVER_NAMES = {"multigrid": "multigrid", "direct": "direct (CHOLMOD)"}
+#: at most this many CG steps per multigrid solve (they also stop early on growth or a stall)
+MAX_ITERATIONS = 100
 
 
 class MultigridPanel(MethodPanel):
@@ -289,7 +291,10 @@ class MultigridPanel(MethodPanel):
 
     def build_steps(self, state, params):
         holder = self._holder
-        holder["solver"] = params.solver
+        solver, why = params.solver, None
+        if solver == "auto":
+            solver, why = choose_solver(len(state.V), params.energy)
+        holder["solver"], holder["auto"] = solver, why
         signal = holder["signal"]
         f_src = self._input_values(state, signal)
         if f_src is None:
@@ -300,16 +305,16 @@ class MultigridPanel(MethodPanel):
 
         def steps():
             mg = None
-            if params.solver == "multigrid":
+            if solver == "multigrid":
                 mg = yield from self._hierarchy_steps(V, F, holder)
-            key = (id(V), id(F), params.energy, params.solver)
+            key = (id(V), id(F), params.energy, solver)
             hit = self._smoothers.get(key)
             if hit is not None and hit[0] is V and hit[1] is F:
                 sm = hit[2]
             else:
                 yield Step(0, None, V, {}, "preparing the Galerkin matrices")
                 sm = DataSmoother(unit_area(V, F), F, energy=params.energy,
-                                  solver=params.solver, mg=mg)
+                                  solver=solver, mg=mg)
                 self._smoothers[key] = (V, F, sm)
             # a new α starts from the previous α's solution (same input, same operator): about
             # half the V-cycles while the slider moves
@@ -317,8 +322,11 @@ class MultigridPanel(MethodPanel):
             last = self._last_solution
             x0 = (last[1] if last is not None and last[0] == warm_key
                   and last[1].shape == f.shape else None)
-            u, info = sm.smooth(f, params.alpha, rtol=rtol, maxiter=200, x0=x0,
-                                accel="cg" if params.energy != "dirichlet" else None)
+            # an unconverged solve falls back to the direct solver when it fits in memory
+            # (info["fallback"] says so) or raises NotConvergedError: the job fails, the
+            # document stays as it was and the message is shown
+            u, info = sm.smooth_checked(f, params.alpha, rtol=rtol, maxiter=MAX_ITERATIONS,
+                                        x0=x0)
             self._last_solution = (warm_key, u)
             info["warm_start"] = x0 is not None
             res = np.asarray(info.get("residuals") or [], dtype=np.float64)
@@ -349,9 +357,14 @@ class MultigridPanel(MethodPanel):
         self.solve_times[name] = f"{info['seconds'] * 1000:.0f} ms{cyc}"
         self._show_times()
         self._show_hierarchy_info()
+        if info.get("fallback"):  # multigrid did not converge: the direct solver's result
+            name = "direct"
+            cyc = ""
+        pre = f"{info['fallback']} " if info.get("fallback") else (
+            f"{holder['auto'][0].upper()}{holder['auto'][1:]}. " if holder.get("auto") else "")
         self.status_label.setText(
-            f"Solved with {SOLVER_NAMES.get(name, name)} in {info['seconds'] * 1000:.0f} ms"
-            f"{cyc}. Undo with Ctrl+Z.")
+            f"{pre}Solved with {SOLVER_NAMES.get(name, name)} in "
+            f"{info['seconds'] * 1000:.0f} ms{cyc}. Undo with Ctrl+Z.")
         self.stop_button.setEnabled(False)
 
     def _on_committed(self, name: str, after) -> None:
@@ -391,8 +404,8 @@ class MultigridPanel(MethodPanel):
             for k, solver in enumerate(("multigrid", "direct")):
                 sm = DataSmoother(unit_area(V, F), F, energy=params.energy, solver=solver,
                                   mg=mg if solver == "multigrid" else None)
-                _u, info = sm.smooth(f, params.alpha, rtol=1e-5, maxiter=200,
-                                     accel="cg" if params.energy != "dirichlet" else None)
+                _u, info = sm.smooth_checked(f, params.alpha, rtol=1e-5,
+                                             maxiter=MAX_ITERATIONS)
                 times[solver] = info
                 yield Step(k + 1, 2, V, {}, f"{solver}: {info['seconds']:.3f} s")
             holder["times"] = times

@@ -16,10 +16,16 @@ def roughness(V, F, f):
     return float(f @ (-cotangent_laplacian(V, F) @ f))
 
 
-def open_panel(window):
+def open_panel(window, solver="multigrid"):
     assert window.open_path(SAMPLES / "blob.obj")
     panel = window.panels["Multigrid smoothing"]
     panel.raise_()
+    # the default "auto" picks the direct solver on this small mesh; these tests are about
+    # the multigrid solver
+    live = panel.live_box.isChecked()
+    panel.live_box.setChecked(False)  # changing the form must not start a live solve here
+    panel.form.set_value("solver", solver)
+    panel.live_box.setChecked(live)
     return panel
 
 
@@ -146,3 +152,56 @@ def test_bad_field_file_is_refused_and_nothing_changes(window, dialogs, qtbot, t
     dialogs.save_paths.append(str(out))
     assert panel.save_field_dialog()
     assert len(np.loadtxt(out)) == len(window.document.V)
+
+
+def test_unconverged_multigrid_leaves_the_shape_and_says_so(window, dialogs, qtbot, monkeypatch):
+    """Issue 10: a solve that stops before its tolerance never replaces the document. Here the
+    iterations are capped at 1 and the direct fallback is said not to fit in memory."""
+    import app.panels.multigrid as panel_module
+    from algorithms.multigrid import applications
+
+    monkeypatch.setattr(panel_module, "MAX_ITERATIONS", 1)
+    monkeypatch.setattr(applications, "direct_fits_in_memory", lambda n, e: (False, 1 << 40))
+    panel = open_panel(window)
+    panel.live_box.setChecked(False)
+    panel.signal_combo.setCurrentIndex(1)  # vertex positions
+    V0 = window.document.V.copy()
+    count = window.undo_stack.count()
+    with qtbot.waitSignal(window.runner.failed, timeout=120000):
+        panel.run_button.click()
+    qtbot.waitUntil(lambda: "Multigrid stopped" in panel.status_label.text(), timeout=10000)
+    assert "Nothing was changed" in panel.status_label.text()
+    np.testing.assert_array_equal(window.document.V, V0)
+    assert window.undo_stack.count() == count
+
+
+def test_unconverged_multigrid_falls_back_to_direct_saying_so(window, dialogs, qtbot,
+                                                              monkeypatch):
+    import app.panels.multigrid as panel_module
+
+    monkeypatch.setattr(panel_module, "MAX_ITERATIONS", 1)
+    panel = open_panel(window)
+    panel.live_box.setChecked(False)
+    panel.signal_combo.setCurrentIndex(1)
+    V0 = window.document.V.copy()
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    qtbot.waitUntil(lambda: "direct solver instead" in panel.status_label.text(), timeout=10000)
+    V1 = window.document.V
+    # the committed shape is the direct solve's (converged) result
+    from algorithms.multigrid.applications import DataSmoother
+    from algorithms.smoothing import unit_area
+
+    F = window.document.F
+    ref, _ = DataSmoother(unit_area(V0, F), F, energy=panel.form.params().energy,
+                          solver="direct").smooth(V0, panel.form.params().alpha)
+    np.testing.assert_allclose(V1, ref, rtol=1e-8, atol=1e-10)
+
+
+def test_auto_solver_says_which(window, dialogs, qtbot):
+    panel = open_panel(window, solver="auto")
+    panel.live_box.setChecked(False)
+    panel.signal_combo.setCurrentIndex(1)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    qtbot.waitUntil(lambda: "Auto: direct solver" in panel.status_label.text(), timeout=10000)
