@@ -197,27 +197,43 @@ def _cmd_data_smooth(args: argparse.Namespace) -> int:
         clean, f = noisy_test_field(V, F, args.noise, args.seed)
     else:
         f = read_field(signal, len(V))
+    from algorithms.multigrid.applications import choose_solver
+
     t0 = time.perf_counter()
+    solver, why = params.solver, None
+    if solver == "auto":
+        solver, why = choose_solver(len(V), params.energy)
+        if not (args.json or args.quiet):
+            print(f"stylize3d smooth: {why}.", file=sys.stderr)
     mg = None
-    if params.solver == "multigrid":
+    if solver == "multigrid":
         mg = surface_multigrid(V, F)
     t1 = time.perf_counter()
     # operators of the unit-area copy: one α does the same whatever the mesh's units
-    smoother = DataSmoother(unit_area(V, F), F, energy=params.energy, solver=params.solver, mg=mg)
+    smoother = DataSmoother(unit_area(V, F), F, energy=params.energy, solver=solver, mg=mg)
     t2 = time.perf_counter()
-    u, info = smoother.smooth(f, params.alpha, rtol=args.rtol, maxiter=args.max_cycles,
-                              accel="cg" if params.energy != "dirichlet" else None)
+    # never a silent wrong answer: an unconverged multigrid solve falls back to the direct
+    # solver when it fits in memory (saying so) or raises NotConvergedError (exit status 6,
+    # nothing written); --no-fallback always refuses
+    u, info = smoother.smooth_checked(f, params.alpha, rtol=args.rtol, maxiter=args.max_cycles,
+                                      fallback=args.fallback)
+    if info.get("fallback") and not args.json:
+        print(f"stylize3d smooth: {info['fallback']}", file=sys.stderr)
     if signal == "positions":
         write_mesh(args.output, u, F)
     else:
         write_field(args.output, u)
     out = {"input": args.mesh, "output": args.output, "signal": signal,
            "params": params_to_dict(params), "vertices": len(V),
+           "solver": info.get("solver", solver), "solver_choice": why,
+           "fallback": info.get("fallback"),
            "hierarchy_seconds": t1 - t0, "precompute_seconds": t2 - t1,
            "setup_seconds": info["setup_seconds"], "solve_seconds": info["solve_seconds"],
-           "cycles": info.get("cycles", 0), "converged": bool(info.get("converged", True)),
-           "levels": [len(Vh) for Vh, _ in mg.levels] if mg is not None else None}
-    res = list(info.get("residuals") or [])
+           "cycles": info.get("multigrid_cycles", info.get("cycles", 0)),
+           "converged": bool(info.get("converged", True)),
+           "levels": [len(Vh) for Vh, _ in mg.levels] if mg is not None else None,
+           "hierarchy_notes": list(mg.report.get("notes", [])) if mg is not None else []}
+    res = list(info.get("multigrid_residuals") or info.get("residuals") or [])
     if res:
         out["relative_residual"] = float(res[-1] / res[0]) if res[0] > 0 else 0.0
     if clean is not None:
@@ -228,12 +244,10 @@ def _cmd_data_smooth(args: argparse.Namespace) -> int:
     else:
         extra = (f"; RMS error to the clean signal {out['rms_error_before']:.4g} -> "
                  f"{out['rms_error_after']:.4g}" if clean is not None else "")
-        how = (f"{out['cycles']} V-cycles" if params.solver == "multigrid" else "direct solve")
+        how = (f"multigrid ({out['cycles']} CG steps, {len(out['levels'])} levels)"
+               if out["solver"] == "multigrid" else "the direct solver")
         print(f"Smoothed {signal} of {args.mesh} ({params.energy}, α {params.alpha:g}) with "
               f"{how} in {info['seconds']:.3f} s{extra}; wrote {args.output}.")
-    if not out["converged"]:
-        print(f"stylize3d smooth: warning: the V-cycles stopped at --max-cycles "
-              f"{args.max_cycles} before reaching --rtol {args.rtol:g}.", file=sys.stderr)
     return 0
 
 
@@ -865,12 +879,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="smoothness α in (0, 1), for the mesh scaled to unit area (so it does "
                         "not depend on units); larger is smoother. Typical: 1e-3 (dirichlet), "
                         "1e-6 (bilaplacian). Default: 1e-3.")
-    d.add_argument("--solver", choices=("multigrid", "direct"),
-                   help="multigrid V-cycles (default) or a direct Cholesky solve.")
+    d.add_argument("--solver", choices=("auto", "multigrid", "direct"),
+                   help="auto (default: direct for small and medium meshes, multigrid above; "
+                        "says which), multigrid (CG with surface-multigrid V-cycles) or direct "
+                        "(a Cholesky factorization).")
     d.add_argument("--rtol", type=float, default=1e-5,
-                   help="relative residual at which the V-cycles stop. Default: 1e-5.")
-    d.add_argument("--max-cycles", type=int, default=200,
-                   help="at most this many V-cycles. Default: 200.")
+                   help="relative residual at which the multigrid iterations stop. "
+                        "Default: 1e-5.")
+    d.add_argument("--max-cycles", type=int, default=100,
+                   help="at most this many multigrid iterations; they also stop early when "
+                        "the residual grows or stalls. Default: 100.")
+    d.add_argument("--fallback", action=argparse.BooleanOptionalAction, default=True,
+                   help="when multigrid does not converge, solve with the direct solver if it "
+                        "fits in memory (and say so). With --no-fallback the command fails "
+                        "(exit status 6) and writes nothing. Default: on.")
     d.add_argument("--noise", type=float, default=0.4,
                    help="noise of --signal noise, relative to the pattern's spread. Default: 0.4.")
     d.add_argument("--seed", type=int, default=0, help="random seed of --signal noise.")

@@ -1,0 +1,78 @@
+"""``stylize3d smooth`` data smoothing (issue 10): solver auto, never a silent wrong answer."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from algorithms.mesh import read_mesh, write_mesh
+from algorithms.mesh.primitives import icosphere
+from app.cli import main
+from tests.algorithms.multigrid.scan_meshes import scan_like
+
+
+def _mesh(tmp_path, subdivisions=4):
+    V, F = icosphere(subdivisions)
+    p = tmp_path / "sphere.obj"
+    write_mesh(p, V, F)
+    return p
+
+
+def _json(out: str) -> dict:
+    return json.loads(out[out.index("{"):out.rindex("}") + 1])
+
+
+def test_unconverged_multigrid_writes_nothing_and_exits_6(tmp_path, capsys):
+    src = _mesh(tmp_path)
+    out = tmp_path / "out.obj"
+    rc = main(["smooth", str(src), "-o", str(out), "--signal", "positions", "--energy",
+               "bilaplacian", "--solver", "multigrid", "--max-cycles", "2", "--no-fallback"])
+    err = capsys.readouterr().err
+    assert rc == 6
+    assert not out.exists()
+    assert "Multigrid stopped after 2 iterations" in err and "--solver direct" in err
+    assert "Traceback" not in err
+
+
+def test_unconverged_multigrid_falls_back_to_direct_and_says_so(tmp_path, capsys):
+    src = _mesh(tmp_path)
+    out = tmp_path / "out.obj"
+    ref = tmp_path / "ref.obj"
+    rc = main(["smooth", str(src), "-o", str(out), "--signal", "positions", "--energy",
+               "bilaplacian", "--solver", "multigrid", "--max-cycles", "2", "--json"])
+    res = _json(capsys.readouterr().out)
+    assert rc == 0 and out.exists()
+    assert res["solver"] == "direct" and "direct solver instead" in res["fallback"]
+    assert res["cycles"] == 2
+    assert main(["smooth", str(src), "-o", str(ref), "--signal", "positions", "--energy",
+                 "bilaplacian", "--solver", "direct"]) == 0
+    np.testing.assert_allclose(read_mesh(out).V, read_mesh(ref).V, atol=1e-9)
+
+
+def test_auto_is_the_default_and_says_which(tmp_path, capsys):
+    src = _mesh(tmp_path, 3)
+    out = tmp_path / "out.obj"
+    rc = main(["smooth", str(src), "-o", str(out), "--energy", "dirichlet"])
+    err = capsys.readouterr().err
+    assert rc == 0 and "auto: direct solver" in err
+    rc = main(["smooth", str(src), "-o", str(out), "--overwrite", "--energy", "dirichlet",
+               "--json"])
+    res = _json(capsys.readouterr().out)
+    assert rc == 0 and res["params"]["solver"] == "auto" and res["solver"] == "direct"
+    assert res["solver_choice"].startswith("auto: direct solver")
+
+
+def test_multigrid_converges_on_a_scan_with_holes_and_thin_triangles(tmp_path, capsys):
+    """The failure of issue 10 (residual growing for 200 cycles, mesh written anyway)."""
+    V, F = icosphere(5)
+    V, F = scan_like(V, F, holes=2, needles=150, caps=60, seed=3)
+    src = tmp_path / "scan.obj"
+    write_mesh(src, V, F)
+    for energy in ("bilaplacian", "dirichlet"):
+        out = tmp_path / f"{energy}.obj"
+        rc = main(["smooth", str(src), "-o", str(out), "--signal", "positions", "--energy",
+                   energy, "--solver", "multigrid", "--no-fallback", "--json"])
+        res = _json(capsys.readouterr().out)
+        assert rc == 0 and res["converged"] and res["fallback"] is None, res
+        assert res["cycles"] <= 30 and res["relative_residual"] <= 1e-5
