@@ -34,7 +34,7 @@ def main() -> int:
     self_parameterize(Vg, Fg, len(Fg) // 2)
     V4, F4 = icosphere(4)
     mg = surface_multigrid(V4, F4, min_vertices=100)
-    for smoother in ("gauss_seidel", "multicolor"):
+    for smoother in ("block_gauss_seidel", "gauss_seidel", "multicolor"):
         DataSmoother(V4, F4, mg=mg, smoother=smoother).smooth(V4[:, 0], 1e-3)
     from .render import look_at, rasterize
     for projection in ("orthographic", "perspective"):

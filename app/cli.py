@@ -1,7 +1,9 @@
 """Batch sub-commands of ``stylize3d``. Imports no Qt and no VTK.
 
 Every sub-command prints a plain message and exits non-zero on bad input (the exit status is the
-error's ``exit_code``: 2 unreadable file, 3 unwritable file, 4 invalid mesh, 5 bad parameter).
+error's ``exit_code``: 2 unreadable file, 3 unwritable file, 4 invalid mesh, 5 bad parameter,
+6 an iterative solve that did not converge; 70 an unexpected failure, whose traceback goes to a
+crash-log file, never to the screen).
 Method flags are generated from the methods' Params dataclasses (one definition per parameter).
 """
 
