@@ -10,7 +10,8 @@ Checks, with the built binary ``BUNDLE_DIR/stylize3d``:
    its JSON names the output, ran iterations and made the mesh more cubic (L1 norm of the normals
    went down), and OUT.obj has the input's vertex / face counts, finite coordinates, moved vertices;
    then ``stylize3d subdivide ... --method neural --levels 1`` (torch and the shipped weights in
-   resources/subdivision, when the tree has them) gives 4x the faces;
+   resources/subdivision, when the tree has them) gives 4x the faces; a second cubic run loads
+   the compiled kernels from a cache outside the source tree (NUMBA_DEBUG_CACHE);
 3. under Xvfb (``xvfb-run -a -s "-screen 0 1600x1000x24"``):
    ``stylize3d resources/samples/blob.obj --screenshot PNG`` exits 0 and the PNG is a window-sized,
    non-blank picture (grey-level standard deviation, share of mesh-coloured pixels); with --venv
@@ -133,6 +134,25 @@ def check_cubic(binary: Path, out: Path) -> None:
           f"({report.get('seconds', float('nan')):.1f} s in the method)")
 
 
+def check_kernel_cache(binary: Path, out: Path) -> None:
+    """The compiled (Numba) kernels are cached by absolute path, never into the current
+    directory's tree (the smoke test runs in the checkout), and a second run loads them."""
+    env = headless_env()
+    env["NUMBA_DEBUG_CACHE"] = "1"
+    p, secs = run([str(binary), "cubic", SAMPLE, "-o", str(out / "cubic2.obj"), "--overwrite",
+                   "--json"], env=env)
+    if not check(p.returncode == 0, f"second cubic run exits 0 ({secs:.1f} s){tail(p)}"):
+        return
+    lines = [ln for ln in (p.stdout + p.stderr).splitlines() if ln.startswith("[cache]")]
+    paths = [ln.split("'")[1] for ln in lines if ln.count("'") >= 2]
+    bad = [q for q in paths if not os.path.isabs(q) or Path(q).resolve().is_relative_to(ROOT)
+           and not Path(q).resolve().is_relative_to(binary.parent.resolve())]
+    check(bool(paths) and not bad, f"kernel cache outside the source tree ({len(paths)} cache "
+          f"operations{', e.g. ' + paths[0] if paths else ''}; bad: {bad[:2]})")
+    loads = sum("data loaded from" in ln for ln in lines)
+    check(loads > 0, f"second run loads compiled kernels from the cache ({loads} loaded)")
+
+
 def check_subdivide(binary: Path, out: Path) -> None:
     """Neural subdivision with the shipped weights: torch and resources/subdivision in the bundle."""
     if not (ROOT / "resources" / "subdivision").is_dir():
@@ -247,6 +267,7 @@ def main(argv: list[str] | None = None) -> int:
     check_resources(binary)
     print("2. headless cubic stylization")
     check_cubic(binary, out)
+    check_kernel_cache(binary, out)
     print("2b. headless neural subdivision (torch and the shipped weights)")
     check_subdivide(binary, out)
     print("3. GUI screenshot under Xvfb")
