@@ -35,6 +35,8 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--learn-loop", nargs=2, type=int, metavar=("N", "EPOCHS"))
+    ap.add_argument("--coarse", type=int, default=0,
+                    help="coarse meshes for the data-generation timing (default 2 quick, 8)")
     args = ap.parse_args()
     import torch
 
@@ -69,7 +71,7 @@ def main() -> int:
 
     # ---- data generation
     arm = read_mesh(mesh_path("armadillo.obj"))
-    k = 2 if args.quick else 4
+    k = args.coarse or (2 if args.quick else 8)
     p = DataParams(coarse_meshes=k, seed=12345)
     res = {}
     for w in (1, 2):
