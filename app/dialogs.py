@@ -53,3 +53,32 @@ def save_file(parent: QWidget | None, title: str, filter: str, directory: str = 
     path, _ = QFileDialog.getSaveFileName(parent, title, directory, filter,
                                           options=QFileDialog.Option.DontConfirmOverwrite)
     return path or None
+
+
+def ask_text(parent: QWidget | None, title: str, label: str, text: str = "") -> str | None:
+    """A line of text from the user (e.g. a preset name); None when cancelled or empty."""
+    from PySide6.QtWidgets import QInputDialog
+
+    value, ok = QInputDialog.getText(parent, title, label, text=text)
+    value = value.strip()
+    return value if ok and value else None
+
+
+def help_window(parent: QWidget | None, title: str, path):
+    """A non-modal window showing one docs/*.md page (with its pictures); ``.browser`` is the
+    text view."""
+    from PySide6.QtCore import QUrl
+    from PySide6.QtGui import QTextDocument
+    from PySide6.QtWidgets import QDialog, QTextBrowser, QVBoxLayout
+
+    dlg = QDialog(parent)
+    dlg.setWindowTitle(title)
+    dlg.resize(760, 720)
+    lay = QVBoxLayout(dlg)
+    view = QTextBrowser()
+    view.setOpenExternalLinks(True)
+    view.setSearchPaths([str(path.parent)])
+    view.setSource(QUrl.fromLocalFile(str(path)), QTextDocument.ResourceType.MarkdownResource)
+    lay.addWidget(view)
+    dlg.browser = view
+    return dlg

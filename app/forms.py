@@ -25,6 +25,61 @@ from app.widgets import CollapsibleSection
 
 SLIDER_STEPS = 1000
 
+#: thesis terms that appear in the GUI, in plain words: every form field whose label, tooltip or
+#: choices use one gets the explanation appended to its tooltip (drop-down items get their own)
+GLOSSARY: dict[str, str] = {
+    "ADMM": "ADMM: the small per-vertex solver inside each cubic step (it alternates between "
+            "two easier problems until they agree).",
+    "ρ₀": "ρ₀ (rho): how hard ADMM pushes its two halves to agree at the start; it adapts itself.",
+    "μ": "μ (mu): ADMM changes ρ when one of its two errors is μ times the other.",
+    "τ": "τ (tau): the factor ADMM multiplies or divides ρ by.",
+    "ε_abs": "ε_abs / ε_rel: how small ADMM's errors must get before it stops (absolute / "
+             "relative).",
+    "V-cycle": "V-cycle: one multigrid pass, from the fine mesh down through coarser copies and "
+               "back up, fixing errors of every size.",
+    "multigrid": "Multigrid: solves on a stack of ever coarser copies of the mesh; fast for big "
+                 "meshes, and reusable when a parameter changes.",
+    "dirichlet": "Dirichlet: penalizes how steep the signal is (its gradient); the plainest "
+                 "smoothing.",
+    "bilaplacian": "Bilaplacian: penalizes how curved the signal is; smoother, rounder results.",
+    "hessian": "Hessian: like bilaplacian, but does not pull values at open borders towards "
+               "flat.",
+    "arap": "ARAP (as-rigid-as-possible): each small piece may rotate but not stretch; keeps "
+            "details.",
+    "farap": "FARAP (face ARAP): ARAP per triangle; allows sharp creases between triangles.",
+    "acap": "ACAP (as-conformal-as-possible): pieces may also grow or shrink, angles are kept.",
+    "cmcf": "cMCF (conformalized mean curvature flow): rounds the shape without pinching thin "
+            "parts.",
+    "mcf": "MCF (mean curvature flow): moves the surface along its curvature; can pinch thin "
+           "parts.",
+    "laplacian": "Laplacian smoothing: each vertex moves towards the average of its neighbours.",
+    "NADAM": "NADAM: a gradient-descent optimizer with momentum (as used to train neural "
+             "networks).",
+    "Lloyd": "Lloyd iterations: alternately assign every vertex to its nearest centre and move "
+             "each centre to the middle of its group.",
+    "k-medoids": "k-medoids: grouping vertices into clusters around chosen centre vertices.",
+    "Tikhonov": "Tikhonov weight: a small pull towards the simplest answer where the data alone "
+                "do not decide.",
+    "qslim": "QSlim: simplification that removes the edges whose removal changes the shape least.",
+    "midpoint": "Midpoint: simplification that collapses the shortest edges to their middles.",
+    "PolyCube": "PolyCube: a shape made only of axis-aligned flat faces.",
+    "developable": "Developable: can be bent from a flat sheet of paper without stretching.",
+}
+
+
+def glossary_for(*texts: str) -> list[str]:
+    """The plain-words explanations of the glossary terms found in ``texts`` (each once)."""
+    import re
+
+    blob = " ".join(t for t in texts if t)
+    out = []
+    for term, plain in GLOSSARY.items():
+        pattern = (re.escape(term) if not term.isascii() or not term.isalnum()
+                   else r"(?<![A-Za-z])" + re.escape(term) + r"(?![A-Za-z])")
+        if re.search(pattern, blob, flags=0 if not term.islower() else re.IGNORECASE):
+            out.append(plain)
+    return out
+
 
 class _ScientificSpinBox(QDoubleSpinBox):
     """A float spin box that shows and accepts numbers like 1e-06 or 0.0025 (4 significant
@@ -226,6 +281,14 @@ class ParamsForm(QWidget):
             tip = spec.tooltip
             if spec.minimum is not None and spec.maximum is not None:
                 tip += f"\nRange {spec.minimum:g} to {spec.maximum:g}; default {spec.default}."
+            plain = glossary_for(spec.label, spec.tooltip, *(spec.choices or ()))
+            if plain:
+                tip += "\n\nIn plain words:\n" + "\n".join(f"• {t}" for t in plain)
+            if spec.type is str:
+                for i, choice in enumerate(spec.choices or ()):
+                    item_tip = glossary_for(choice)
+                    if item_tip:
+                        w.setItemData(i, item_tip[0], Qt.ItemDataRole.ToolTipRole)
             w.setToolTip(tip)
             label = QLabel(spec.label)
             label.setToolTip(tip)

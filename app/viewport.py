@@ -383,7 +383,9 @@ class Viewport(QWidget):
             if categorical and len(values) == self.poly.n_points and self._F is not None \
                     and len(self._F):
                 # region labels: each triangle takes its first corner's label, so regions are
-                # drawn in flat colours with sharp borders (no blended label colours)
+                # drawn in flat colours with sharp borders (no blended label colours); the
+                # per-vertex labels stay readable in point_data
+                self.poly.point_data.set_array(values, name)
                 values = values[self._F[:, 0]]
             if len(values) == self.poly.n_points:
                 self.poly.point_data[name] = values

@@ -112,6 +112,7 @@ class AnalogiesPanel(MethodPanel):
     plot_metrics = ("mean_angle_to_targets",)
     plot_title = "Mean angle to the target normals (°)"
     live_by_default = True
+    builtin_presets = {"subtle": {"lam": 0.3}, "strong": {"lam": 4.0}}
 
     def __init__(self, window):
         super().__init__(window)

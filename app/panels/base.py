@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Iterator
 
 from PySide6.QtCore import Qt, QTimer
-from PySide6.QtWidgets import (QCheckBox, QDockWidget, QFrame, QHBoxLayout, QLabel,
+from PySide6.QtWidgets import (QCheckBox, QComboBox, QDockWidget, QFrame, QHBoxLayout, QLabel,
                                QPushButton, QScrollArea, QVBoxLayout, QWidget)
 
 from algorithms.steps import Step
@@ -41,6 +41,10 @@ class MethodPanel(QDockWidget):
     param_enable_when: dict[str, str] = {}
     #: field -> f(params) -> text shown at the field's minimum ("auto (167)"), see ParamsForm
     param_auto_text: dict = {}
+    #: docs/<help_page>.md is the panel's page for users (default: the title, lower case, "_")
+    help_page = ""
+    #: built-in presets: name -> the fields that differ from the defaults
+    builtin_presets: dict[str, dict] = {}
     #: undo-merge id of live re-runs (one per panel class)
     _merge_ids: dict = {}
 
@@ -56,6 +60,17 @@ class MethodPanel(QDockWidget):
             desc.setWordWrap(True)
             desc.setStyleSheet("color: #444;")
             lay.addWidget(desc)
+        self.help_button = QPushButton("What does this do?")
+        self.help_button.setFlat(True)
+        self.help_button.setStyleSheet("QPushButton { color: #1d4ed8; text-decoration: underline;"
+                                       " text-align: left; border: none; padding: 0; }")
+        self.help_button.setToolTip("What this panel does, when to use it, every setting, its "
+                                    "limits, in plain words.")
+        self.help_button.setCursor(Qt.CursorShape.PointingHandCursor)
+        self.help_button.clicked.connect(self.show_help)
+        self.help_button.setVisible(self.help_path().exists())
+        lay.addWidget(self.help_button, 0, Qt.AlignmentFlag.AlignLeft)
+        self._build_presets_row(lay)
         self.form = ParamsForm(self.params_cls, groups=self.param_groups,
                                enable_when=self.param_enable_when,
                                auto_text=self.param_auto_text)
@@ -147,6 +162,127 @@ class MethodPanel(QDockWidget):
     def merge_id(self) -> int:
         return MethodPanel._merge_ids.setdefault(type(self).__name__,
                                                  1000 + len(MethodPanel._merge_ids))
+
+    # -- help ----------------------------------------------------------------------------------
+    def help_path(self):
+        """docs/<panel>.md: the page for users ("What does this do?")."""
+        from pathlib import Path
+
+        slug = self.help_page or self.title.lower().replace(" ", "_")
+        return Path(__file__).resolve().parents[2] / "docs" / f"{slug}.md"
+
+    def show_help(self):
+        from app.dialogs import help_window
+
+        page = getattr(self, "help_dialog", None)
+        if page is None:
+            page = self.help_dialog = help_window(self, f"{self.title}: what does this do?",
+                                                  self.help_path())
+        page.show()
+        page.raise_()
+        return page
+
+    # -- presets -------------------------------------------------------------------------------
+    def _build_presets_row(self, lay) -> None:
+        row = QHBoxLayout()
+        self.preset_combo = QComboBox()
+        self.preset_combo.setToolTip("Named settings of this panel: built-in ones, and yours "
+                                     "(Save…). Choosing one sets the form (Live re-runs).")
+        self.preset_save = QPushButton("Save…")
+        self.preset_save.setToolTip("Keep the current settings under a name (for this panel).")
+        self.preset_delete = QPushButton("Delete")
+        self.preset_delete.setToolTip("Forget the chosen preset of yours.")
+        row.addWidget(QLabel("Preset"))
+        row.addWidget(self.preset_combo, 1)
+        row.addWidget(self.preset_save)
+        row.addWidget(self.preset_delete)
+        lay.addLayout(row)
+        self.preset_combo.activated.connect(lambda i: self.apply_preset(
+            self.preset_combo.itemText(i)))
+        self.preset_save.clicked.connect(self.save_preset_dialog)
+        self.preset_delete.clicked.connect(
+            lambda: self.delete_preset(self.preset_combo.currentText()))
+        self._fill_presets()
+
+    def _preset_key(self) -> str:
+        return f"presets/{self.objectName()}"
+
+    def user_presets(self) -> dict[str, dict]:
+        import json
+
+        raw = self.window_.settings.value(self._preset_key(), "")
+        try:
+            data = json.loads(raw) if raw else {}
+        except (TypeError, ValueError):
+            data = {}
+        return data if isinstance(data, dict) else {}
+
+    def presets(self) -> dict[str, dict]:
+        """Every preset by name: "Defaults", the built-in ones, then the user's."""
+        return {"Defaults": {}, **self.builtin_presets, **self.user_presets()}
+
+    def _fill_presets(self, current: str = "") -> None:
+        self.preset_combo.blockSignals(True)
+        self.preset_combo.clear()
+        self.preset_combo.addItem("")  # the form as it is
+        for name in self.presets():
+            self.preset_combo.addItem(name)
+        self.preset_combo.setCurrentText(current)
+        self.preset_combo.blockSignals(False)
+        self.preset_delete.setEnabled(current in self.user_presets())
+
+    def apply_preset(self, name: str) -> bool:
+        from algorithms.errors import Stylize3DError
+        from algorithms.params import params_from_dict, params_to_dict
+
+        values = self.presets().get(name)
+        if values is None:
+            return False
+        try:
+            params = params_from_dict(self.params_cls,
+                                      {**params_to_dict(self.params_cls()), **values})
+        except Stylize3DError as e:  # a preset saved by another version of the app
+            self.status_label.setText(f"The preset {name!r} does not fit this version: {e}")
+            return False
+        self.form.set_params(params)
+        self.form.changed.emit(self.form.params())
+        self._fill_presets(name)
+        self.status_label.setText(f"Preset {name!r} applied.")
+        return True
+
+    def save_preset_dialog(self) -> bool:
+        from app import dialogs
+
+        name = dialogs.ask_text(self, "Save preset", "Name of these settings:")
+        return bool(name) and self.save_preset(name)
+
+    def save_preset(self, name: str) -> bool:
+        import json
+
+        from algorithms.params import params_to_dict
+
+        if name == "Defaults" or name in self.builtin_presets:
+            self.status_label.setText(f"{name!r} is a built-in preset: choose another name.")
+            return False
+        defaults = params_to_dict(self.params_cls())
+        values = {k: v for k, v in params_to_dict(self.form.params()).items() if defaults[k] != v}
+        user = self.user_presets()
+        user[name] = values
+        self.window_.settings.setValue(self._preset_key(), json.dumps(user))
+        self._fill_presets(name)
+        self.status_label.setText(f"Saved the preset {name!r}.")
+        return True
+
+    def delete_preset(self, name: str) -> bool:
+        import json
+
+        user = self.user_presets()
+        if name not in user:
+            return False
+        del user[name]
+        self.window_.settings.setValue(self._preset_key(), json.dumps(user))
+        self._fill_presets()
+        return True
 
     # -- on screen or not ----------------------------------------------------------------------
     def is_shown(self) -> bool:

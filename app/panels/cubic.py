@@ -44,6 +44,7 @@ class CubicPanel(MethodPanel):
     plot_metrics = ("energy",)
     plot_title = "Energy (ARAP + λ·L1) per iteration"
     live_by_default = True
+    builtin_presets = {"subtle": {"lam": 0.1}, "strong": {"lam": 0.6}}
     param_groups = {"Per-axis λ": ("per_axis", "axis_factor_x", "axis_factor_y", "axis_factor_z"),
                     "Cube orientation": ("rot_x", "rot_y", "rot_z")}
     param_enable_when = {f"axis_factor_{a}": "per_axis" for a in "xyz"}

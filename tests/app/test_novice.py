@@ -409,3 +409,77 @@ def test_welcome_opens_a_sample_from_its_thumbnail(window, dialogs, qtbot):
     dialogs.open_paths.append(str(SAMPLES / "blob.obj"))
     qtbot.mouseClick(dlg.open_button, Qt.MouseButton.LeftButton)
     assert window.document.path.name == "blob.obj" and not dlg.isVisible()
+
+
+# -- presets -------------------------------------------------------------------------------------------
+def test_presets_built_in_saved_loaded_and_applied(window, dialogs, qtbot, monkeypatch):
+    from app import dialogs as dialogs_mod
+
+    assert window.open_path(SAMPLES / "blob.obj")
+    cubic = window.panels["Cubic"]
+    cubic.live_box.setChecked(False)
+    combo = cubic.preset_combo
+    names = [combo.itemText(i) for i in range(combo.count())]
+    assert {"subtle", "strong", "Defaults"} <= set(names)
+    changed = []
+    cubic.form.changed.connect(changed.append)
+    combo.activated.emit(combo.findText("strong"))
+    assert cubic.form.params().lam == 0.6 and changed  # applied like an edit (Live re-runs)
+    combo.activated.emit(combo.findText("subtle"))
+    assert cubic.form.params().lam == 0.1
+    # save your own
+    cubic.form.set_value("lam", 0.42)
+    cubic.form.set_value("max_iterations", 77)
+    monkeypatch.setattr(dialogs_mod, "ask_text", lambda *a, **k: "my look")
+    qtbot.mouseClick(cubic.preset_save, Qt.MouseButton.LeftButton)
+    assert combo.currentText() == "my look"
+    qtbot.mouseClick(cubic.defaults_button, Qt.MouseButton.LeftButton)
+    assert cubic.form.params().lam == 0.2
+    combo.activated.emit(combo.findText("my look"))
+    p = cubic.form.params()
+    assert p.lam == 0.42 and p.max_iterations == 77
+    # kept in the settings (a new session finds it), per panel
+    assert "my look" in window.settings.value(cubic._preset_key())
+    assert "my look" not in window.panels["Analogies"].presets()
+    # built-in names are not overwritten; your own can be deleted
+    monkeypatch.setattr(dialogs_mod, "ask_text", lambda *a, **k: "strong")
+    assert not cubic.save_preset_dialog()
+    assert cubic.presets()["strong"] == {"lam": 0.6}
+    combo.setCurrentText("my look")
+    qtbot.mouseClick(cubic.preset_delete, Qt.MouseButton.LeftButton)
+    assert "my look" not in cubic.presets() and combo.findText("my look") < 0
+
+
+# -- help in plain words ------------------------------------------------------------------------------
+def test_what_does_this_do_opens_the_panels_page_and_terms_are_explained(window, dialogs, qtbot):
+    cubic = window.panels["Cubic"]
+    assert cubic.help_button.isVisible()
+    qtbot.mouseClick(cubic.help_button, Qt.MouseButton.LeftButton)
+    page = cubic.help_dialog
+    qtbot.waitExposed(page)
+    text = page.browser.toPlainText()
+    assert "What it does" in text and "When to use it" in text and "Limits" in text
+    for spec in cubic.form.specs:  # every setting of the form is on the page
+        if not spec.advanced and spec.name not in ("axis_factor_x", "axis_factor_y",
+                                                   "axis_factor_z", "rot_x", "rot_y", "rot_z"):
+            assert spec.label in text, spec.label
+    # the picture made by the app is on the page
+    assert "images/cubic.png" in cubic.help_path().read_text()
+    assert (cubic.help_path().parent / "images" / "cubic.png").exists()
+    # every panel of a method with a page links to it
+    from pathlib import Path
+
+    for panel in window.panels.values():
+        assert panel.help_button.isVisibleTo(panel) == Path(panel.help_path()).exists()
+    # thesis terms get a plain-words line in their tooltips (form fields and drop-down items)
+    mu = cubic.form.editors["mu"]
+    assert "In plain words" in mu.toolTip() and "μ (mu)" in mu.toolTip()
+    reg = window.panels["Analogies"].form.editors["regularizer"]
+    tips = {reg.itemText(i): reg.itemData(i, Qt.ItemDataRole.ToolTipRole)
+            for i in range(reg.count())}
+    assert "FARAP" in tips["farap"] and "ACAP" in tips["acap"] and "ARAP" in tips["arap"]
+    spectral = window.panels["Spectral coarsening"].form
+    assert "NADAM:" in spectral.editors["learning_rate"].toolTip()
+    assert "Lloyd iterations:" in spectral.editors["clustering_iterations"].toolTip()
+    energy = window.panels["Multigrid smoothing"].form.editors["energy"]
+    assert "Dirichlet:" in energy.toolTip() and "Hessian:" in energy.toolTip()

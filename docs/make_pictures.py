@@ -1,0 +1,107 @@
+"""Make the pictures of the panel help pages (docs/images/*.png) with the real app window.
+
+    xvfb-run -a -s "-screen 0 1920x1080x24" .venv/bin/python docs/make_pictures.py [NAME ...]
+
+Each picture is the 3D view after the panel's method ran on a bundled sample, as a user would
+see it (the same window, colours and legend).
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from PySide6.QtCore import QSettings  # noqa: E402
+from PySide6.QtWidgets import QApplication  # noqa: E402
+
+OUT = ROOT / "docs" / "images"
+
+
+def pump(app, seconds: float = 0.3) -> None:
+    end = time.perf_counter() + seconds
+    while time.perf_counter() < end:
+        app.processEvents()
+        time.sleep(0.01)
+
+
+def run_and_wait(app, win, start) -> None:
+    start()
+    pump(app, 0.2)
+    while win.runner.busy:
+        pump(app, 0.1)
+    pump(app, 0.5)
+
+
+def main(names: list[str]) -> None:
+    app = QApplication(sys.argv[:1])
+    from app.main_window import MainWindow
+
+    settings = QSettings(str(Path(tempfile.mkdtemp()) / "s.ini"), QSettings.Format.IniFormat)
+    win = MainWindow(settings=settings)
+    win.resize(1280, 800)
+    win.show()
+    pump(app, 1.0)
+    samples = ROOT / "resources" / "samples"
+    OUT.mkdir(parents=True, exist_ok=True)
+
+    def shot(name: str) -> None:
+        win.viewport.screenshot(str(OUT / f"{name}.png"))
+        print("wrote", OUT / f"{name}.png")
+        win.undo_stack.setClean()  # the next sample opens without asking to save
+        win.document.modified = False
+
+    for p in win.panels.values():
+        p.live_box.setChecked(False)
+    if not names or "cubic" in names:
+        win.open_path(samples / "blob.obj")
+        panel = win.panels["Cubic"]
+        panel.raise_()
+        panel.form.set_value("lam", 0.6)
+        run_and_wait(app, win, panel.run)
+        win.actions_by_name["ghost"].setChecked(True)
+        shot("cubic")
+        win.actions_by_name["ghost"].setChecked(False)
+    if not names or "analogies" in names:
+        win.open_path(samples / "pretzel.obj")
+        panel = win.panels["Analogies"]
+        panel.raise_()
+        pump(app)
+        item = next(panel.gallery.item(i) for i in range(panel.gallery.count())
+                    if panel.gallery.item(i).data(256) == "octahedron")
+        panel.gallery.setCurrentItem(item)
+        panel.form.set_value("lam", 4.0)
+        panel.form.set_value("max_iterations", 40)
+        run_and_wait(app, win, panel.run)
+        panel.view_combo.setCurrentText("Angle to targets")
+        pump(app)
+        shot("analogies")
+        panel.view_combo.setCurrentText("Shape only")
+    if not names or "smooth" in names:
+        win.open_path(samples / "bumpy.obj")
+        panel = win.panels["Smooth"]
+        panel.raise_()
+        panel.form.set_value("iterations", 3)
+        panel.form.set_value("step_size", 0.002)
+        run_and_wait(app, win, panel.run)
+        shot("smooth")
+    if not names or "multigrid_smoothing" in names:
+        win.open_path(samples / "blob.obj")
+        panel = win.panels["Multigrid smoothing"]
+        panel.raise_()
+        pump(app)
+        panel.form.set_value("alpha", 0.001)
+        run_and_wait(app, win, panel.run)
+        panel.view_combo.setCurrentIndex(0)
+        pump(app)
+        shot("multigrid_smoothing")
+    win.document.modified = False
+    win.close()
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
