@@ -37,13 +37,34 @@ Optimizer choices (thesis 7.3.2, DESIGN.md §5):
   them (e.g. fertility 4.5k -> 500, k 100: +16 % on the first ten eigenvalues, -4 % on the last
   ten). This is the thesis's objective and is kept.
 * ARPACK runs from a fixed start vector so that results are reproducible.
+* Beyond the thesis (issue 10): after NADAM, ``balance_iterations`` (200) L-BFGS iterations on
+  the *eigenvalue-balanced* energy, column i of A and B scaled by (lam_k / lam_i)^(balance/2)
+  (balance = 1), see :func:`_balance_stage`; ``balance_iterations=0`` is the thesis alone. Why
+  ours lost to QSlim on meshes with boundary was measured hypothesis by hypothesis (m 300,
+  k 60; camelhead, hand_lowres, armadillo / fertility with the base cut off, bob sliced open):
+  (1) boundary conditions: the fine and every coarse operator are Neumann, and the lowest
+  coarse eigenvalues are as stiff on the closed meshes (armadillo: 1.30-1.34 x, wingnut
+  1.16-1.37 x) as on the open ones (camelhead 1.21-1.34 x): not boundary-specific.
+  (2) the null space: G P 1 = 1 holds to 1e-13; on one part it is not the cause. With several
+  parts it was (roots by node count; PyAMG left parts unaggregated): see
+  :func:`_seeds_per_component`. (3) clustering near boundaries: Bell's centre (the node
+  farthest from the other clusters) puts roots on the mesh boundary 3-4x as often as its share
+  of nodes (camelhead 2.0 % against 0.5 %); exact medoids fix that (0.7 %) but not the scores
+  (C diag 0.79 -> 0.77, eigenvalue error 0.099 -> 0.111; fertility without its base
+  0.887 -> 0.912, 0.047 -> 0.048), so Bell's centre stays. (4) the stopping rule: patience 30 instead of 10
+  changes nothing on armadillo and camelhead (the fixed step oscillates), +0.03 in C on
+  wingnut and on fertility without its base; the authors' step halving (lr_decays 2-4) lowers the eigenvalue
+  error by 10-40 % at up to 10x the iterations, and moves C both ways (armadillo 0.75 -> 0.61).
+  (5) the initial G: "smoothed" helps at strong coarsening (armadillo cut: C 0.79 -> 0.88) and
+  ruins mild coarsening (hand 810 -> 300: 0.60 -> 0.26). The common cause is the energy's
+  weighting (the lowest modes weigh like lam_i^2), which the balancing stage addresses.
 
 :func:`coarsen_hierarchy` applies the method recursively (thesis Fig. 7.16). A coarse level has
 the cluster three-ring pattern of the level above, so after two levels L~ is nearly dense
 (~40 non-zeros per row at level 1, m_2 - 1 at level 2 for m_2 < 100): the thesis names the
 sparser patterns a deeper hierarchy would need as future work. Spectral errors compound: each
 level is fitted to the previous level's (slightly stiff) low spectrum (spot 829 -> 250 -> 80,
-k 30 / 15: mean error of the first ten eigenvalues 0.074, then 0.213).
+k 30 / 15, thesis optimizer alone: mean error of the first ten eigenvalues 0.074, then 0.213).
 """
 
 from __future__ import annotations

