@@ -89,7 +89,13 @@ class MainWindow(QMainWindow):
         self._ever_saved_here: set[str] = set()
 
         self.viewport = Viewport(self)
-        self.setCentralWidget(self.viewport)
+        # View > Before / After: the mesh as opened, side by side, through the same camera
+        from PySide6.QtWidgets import QSplitter
+
+        self.central_split = QSplitter(Qt.Orientation.Horizontal)
+        self.before_view: Viewport | None = None
+        self.central_split.addWidget(self.viewport)
+        self.setCentralWidget(self.central_split)
         self.setAcceptDrops(True)
         self.setDockOptions(QMainWindow.DockOption.AnimatedDocks | QMainWindow.DockOption.AllowTabbedDocks)
 
@@ -159,6 +165,8 @@ class MainWindow(QMainWindow):
           tip="Draw the triangle edges on the surface")
         A("flat", "&Flat Shading", self.viewport.set_flat_shading,
           checkable=True, tip="Shade each triangle with one colour (shows facets)")
+        A("before_after", "&Before / After", self.show_before_after, checkable=True,
+          tip="The mesh as it was opened next to the current one, seen through one camera")
         A("ghost", "Show &Original as Ghost", self._toggle_ghost,
           checkable=True, tip="Overlay the mesh as it was when opened, translucent")
         for key, text in (("front", "&Front View"), ("top", "&Top View"),
@@ -192,7 +200,7 @@ class MainWindow(QMainWindow):
         m.addAction(a["clean"])
         m = mb.addMenu("&View")
         for name in ("reset_camera", "view_front", "view_top", "view_side", "orthographic",
-                     "wireframe", "flat", "ghost"):
+                     "wireframe", "flat", "ghost", "before_after"):
             m.addAction(a[name])
         self.panels_menu = m.addMenu("&Panels")
         self.view_menu = m
@@ -219,10 +227,12 @@ class MainWindow(QMainWindow):
                  "screenshot": QStyle.StandardPixmap.SP_DesktopIcon,
                  "ghost": QStyle.StandardPixmap.SP_TitleBarShadeButton}
         labels = {"reset_camera": "Reset view", "screenshot": "Screenshot", "ghost": "Ghost",
+                  "before_after": "Before/After",
                   "view_front": "Front", "view_top": "Top", "view_side": "Side",
                   "orthographic": "Ortho"}
         groups = (("open", "save"), ("undo", "redo"), ("reset_camera", "view_front", "view_top",
-                                                      "view_side", "orthographic", "ghost"),
+                                                      "view_side", "orthographic", "ghost",
+                                                      "before_after"),
                   ("screenshot",))
         self.toolbar_buttons = {}
         for i, group in enumerate(groups):
@@ -624,6 +634,7 @@ class MainWindow(QMainWindow):
         if what == "mesh":
             self.viewport.set_mesh(doc.V, doc.F)
             self._refresh_ghost()
+            self._refresh_before()
             self._update_stats()
             self.mesh_shown.emit()
         elif what == "topology":
@@ -663,6 +674,32 @@ class MainWindow(QMainWindow):
 
     def _toggle_ghost(self, on: bool) -> None:
         self._refresh_ghost()
+
+    def show_before_after(self, on: bool) -> None:
+        """Split the view: left the mesh as it was opened ("before"), right the current one;
+        one camera for both."""
+        if on and self.before_view is None:
+            self.before_view = Viewport(self)
+            self.before_view.show_legend = False
+            self.central_split.insertWidget(0, self.before_view)
+        if self.before_view is None:
+            return
+        self.before_view.setVisible(on)
+        if on:
+            self._refresh_before()
+            self.before_view.link_camera(self.viewport)
+        else:
+            self.before_view.unlink_camera()
+
+    def _refresh_before(self) -> None:
+        bv = self.before_view
+        if bv is None or not bv.isVisible():
+            return
+        orig = self.document.original
+        if orig is None:
+            bv.clear()
+        else:
+            bv.set_mesh(orig.V, orig.F, reset_camera=False)
 
     def _refresh_ghost(self) -> None:
         if self.actions_by_name["ghost"].isChecked() and self.document.original is not None:

@@ -493,6 +493,31 @@ class Viewport(QWidget):
             self.plotter.disable_parallel_projection()
         self.render()
 
+    def link_camera(self, other: "Viewport") -> None:
+        """Look through ``other``'s camera: both views show the same angle, zoom and pan, and
+        moving one moves the other (before/after comparison)."""
+        self.plotter.renderer.SetActiveCamera(other.plotter.renderer.GetActiveCamera())
+        self.plotter.renderer.ResetCameraClippingRange()
+        cam = other.plotter.renderer.GetActiveCamera()
+        if getattr(self, "_link_observer", None) is None:
+            def moved(*_):
+                for vp in (self, other):
+                    if vp.isVisible():
+                        vp.render()
+            self._link_observer = (cam, cam.AddObserver("ModifiedEvent", moved))
+        self.render()
+
+    def unlink_camera(self) -> None:
+        link = getattr(self, "_link_observer", None)
+        if link is not None:
+            link[0].RemoveObserver(link[1])
+            self._link_observer = None
+            from vtkmodules.vtkRenderingCore import vtkCamera
+
+            cam = vtkCamera()
+            cam.DeepCopy(link[0])
+            self.plotter.renderer.SetActiveCamera(cam)
+
     @property
     def orthographic(self) -> bool:
         return bool(self.plotter.camera.GetParallelProjection())

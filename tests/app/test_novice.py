@@ -483,3 +483,35 @@ def test_what_does_this_do_opens_the_panels_page_and_terms_are_explained(window,
     assert "Lloyd iterations:" in spectral.editors["clustering_iterations"].toolTip()
     energy = window.panels["Multigrid smoothing"].form.editors["energy"]
     assert "Dirichlet:" in energy.toolTip() and "Hessian:" in energy.toolTip()
+
+
+# -- before / after ------------------------------------------------------------------------------------
+def test_before_after_shows_the_original_beside_the_result_through_one_camera(window, dialogs,
+                                                                              qtbot):
+    from app.commands import StateCommand
+
+    assert window.open_path(SAMPLES / "blob.obj")
+    doc = window.document
+    V0 = doc.V.copy()
+    window.undo_stack.push(StateCommand(doc, doc.state, doc.state.with_positions(doc.V * 1.3),
+                                        "Scale"))
+    qtbot.mouseClick(window.toolbar_buttons["before_after"], Qt.MouseButton.LeftButton)
+    before = window.before_view
+    qtbot.waitUntil(before.isVisible)
+    np.testing.assert_array_equal(before.points, V0)          # left: as opened
+    np.testing.assert_allclose(window.viewport.points, V0 * 1.3)  # right: now
+    assert before.geometry().right() < window.viewport.geometry().left() + 5
+    # one camera: a standard view in the main view turns the "before" view too
+    qtbot.mouseClick(window.toolbar_buttons["view_top"], Qt.MouseButton.LeftButton)
+    cam_b = before.plotter.renderer.GetActiveCamera()
+    cam_a = window.viewport.plotter.renderer.GetActiveCamera()
+    np.testing.assert_allclose(cam_b.GetPosition(), cam_a.GetPosition())
+    # a newly opened mesh is the new "before"
+    dialogs.answers.append("Discard changes")
+    assert window.open_path(SAMPLES / "bumpy.obj")
+    np.testing.assert_array_equal(before.points, window.document.V)
+    qtbot.mouseClick(window.toolbar_buttons["before_after"], Qt.MouseButton.LeftButton)
+    assert not before.isVisible()
+    qtbot.mouseClick(window.toolbar_buttons["view_front"], Qt.MouseButton.LeftButton)
+    assert before.plotter.renderer.GetActiveCamera() is not window.viewport.plotter.renderer \
+        .GetActiveCamera()
