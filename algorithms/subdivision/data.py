@@ -45,6 +45,7 @@ __all__ = ["DataParams", "CoarseSample", "normalization", "generate_coarse_sampl
            "subdivision_positions"]
 
 DATA_VERSION = 1
+SCHEDULER_TIMEOUT = 20  # seconds to reach a Dask scheduler
 
 
 @dataclass(frozen=True)
@@ -255,7 +256,7 @@ def _make_executor(workers: int | None, scheduler: str | None):
             raise ParameterError("A scheduler address needs Dask distributed "
                                  "(pip install 'dask[distributed]').") from None
         try:
-            client = Client(scheduler, timeout=20)
+            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
         except Exception as exc:  # noqa: BLE001 - a plain message
             raise ParameterError(f"Could not reach the Dask scheduler at {scheduler!r} "
                                  f"({exc}). Check the address (e.g. tcp://host:8786) and that "

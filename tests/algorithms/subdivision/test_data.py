@@ -93,7 +93,10 @@ def test_loop_targets_are_libigl_loop():
     assert cKDTree(L2).query(s.targets[2])[0].max() < 1e-12
 
 
-def test_plain_errors():
+def test_plain_errors(monkeypatch):
+    import algorithms.subdivision.data as data_mod
+
+    monkeypatch.setattr(data_mod, "SCHEDULER_TIMEOUT", 2)
     V, F, _ = _dense("spot_lowres.obj")
     from algorithms.mesh import icosahedron
 
