@@ -110,7 +110,11 @@ class SpectralPanel(MethodPanel):
             return
         n = len(doc.V)
         m = suggested_coarse_size(n, CoarsenParams().m)
-        if self.form.editors["m"].value() != m:
+        current = self.form.editors["m"].value()
+        # never override a size the user chose: only the default or our last suggestion
+        untouched = current in (CoarsenParams().m, getattr(self, "_suggested_m", None))
+        self._suggested_m = m
+        if untouched and current != m:
             self.form.set_value("m", m)
             self.form.set_value("k", 0)
             self.status_label.setText(

@@ -67,6 +67,11 @@ def test_opening_a_small_mesh_fits_the_coarse_size(window, dialogs, qtbot):
     assert window.open_path(SAMPLES / "blob.obj")          # 3,232 vertices
     assert panel.form.params().m == 404 and panel.form.params().k == 0
     assert "m = 404" in panel.status_label.text()
+    assert window.open_path(SAMPLES / "bumpy.obj")         # 4,932 vertices: n/8 > 500
+    assert panel.form.params().m == 500
+    panel.form.editors["m"].setValue(77)                    # the user's choice is kept
+    assert window.open_path(SAMPLES / "blob.obj")
+    assert panel.form.params().m == 77
 
 
 def test_failure_shows_a_plain_message_and_leaves_the_document(window, dialogs, qtbot,
