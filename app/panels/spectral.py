@@ -12,6 +12,7 @@ from PySide6.QtGui import QColor, QImage, QPixmap
 from PySide6.QtWidgets import (QComboBox, QGridLayout, QGroupBox, QHBoxLayout, QLabel,
                                QSpinBox, QVBoxLayout, QWidget)
 
+from algorithms.errors import Stylize3DError
 from algorithms.spectral.coarsen import CoarsenParams, generalized_eigs, suggested_coarse_size
 from algorithms.spectral.compare import compare_coarsenings_iter
 from algorithms.steps import Step
@@ -220,8 +221,13 @@ class SpectralPanel(MethodPanel):
                 f = phi_f[:, j]
             else:
                 if self._coarse_eigs is None:
-                    self._coarse_eigs = generalized_eigs(ours.L, ours.M,
-                                                         min(r.k + 1, r.m - 1))
+                    try:
+                        self._coarse_eigs = generalized_eigs(ours.L, ours.M,
+                                                             min(r.k + 1, r.m - 1))
+                    except Stylize3DError as e:   # a plain message, never a traceback
+                        self.status_label.setText(f"Cannot show the coarse eigenvectors: {e}")
+                        vp.show_field(None)
+                        return
                 phi_c = self._coarse_eigs[1]
                 f = ours.extra["G"] @ phi_c[:, min(j, phi_c.shape[1] - 1)]
                 if f @ phi_f[:, j] < 0:  # eigenvectors have arbitrary signs

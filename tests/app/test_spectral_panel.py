@@ -132,3 +132,22 @@ def test_non_orientable_parts_leave_qslim_out_and_say_so(window, dialogs, qtbot,
     assert set(panel.result.methods) == {"ours", "amg"}
     assert panel.scores["qslim"].text() == "left out"
     assert "QSlim" in panel.status_label.text() and "left out" in panel.status_label.text()
+
+
+def test_coarse_eigenvector_view_failure_is_a_plain_message(window, dialogs, qtbot,
+                                                           monkeypatch):
+    import app.panels.spectral as mod
+    from algorithms.errors import ParameterError
+    assert window.open_path(SAMPLES / "blob.obj")
+    panel = window.panels["Spectral coarsening"]
+    for name, v in (("m", 60), ("k", 15), ("max_iterations", 30), ("balance_iterations", 10)):
+        panel.form.editors[name].setValue(v)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.run_button.click()
+    qtbot.waitUntil(lambda: panel.result is not None, timeout=5000)
+
+    def boom(*a, **k):
+        raise ParameterError("the mass matrix has zero entries")
+    monkeypatch.setattr(mod, "generalized_eigs", boom)
+    panel.show_combo.setCurrentIndex(3)                  # prolonged coarse eigenvector
+    assert "Cannot show the coarse eigenvectors" in panel.status_label.text()
