@@ -11,11 +11,13 @@ from __future__ import annotations
 import ast
 import configparser
 import re
+import shutil
 import subprocess
 import sys
 import tomllib
 from pathlib import Path
 
+import pytest
 from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,6 +58,14 @@ def test_desktop_entry_is_well_formed():
         assert entry[key].endswith(";"), key
     assert entry["Terminal"] in ("true", "false")
     assert all(re.fullmatch(r"[A-Za-z0-9-]+(\[[^\]]+\])?", k) for k in entry)
+
+
+def test_desktop_entry_passes_desktop_file_validate():
+    if shutil.which("desktop-file-validate") is None:
+        pytest.skip("desktop-file-validate is not installed (Debian: desktop-file-utils)")
+    out = subprocess.run(["desktop-file-validate", str(PKG / "stylize3d.desktop")],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and "error" not in out.stdout, out.stdout + out.stderr
 
 
 def test_icon_is_a_square_png():
