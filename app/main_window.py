@@ -270,6 +270,14 @@ class MainWindow(QMainWindow):
         self.stats_label = QLabel()
         self.stats_label.setToolTip("Vertices, triangles, boundary loops and genus of the open mesh")
         sb.addPermanentWidget(self.stats_label)
+        self.job_label = QLabel()  # what the running job does now, and for how long
+        self.job_label.setVisible(False)
+        self.job_label.setToolTip("The running job's current stage and the time it has taken")
+        sb.addPermanentWidget(self.job_label)
+        self._job_stage = ""
+        self._job_clock = QTimer(self)
+        self._job_clock.setInterval(1000)
+        self._job_clock.timeout.connect(self._show_job_stage)
         self.progress_bar = QProgressBar()
         self.progress_bar.setMaximumWidth(220)
         self.progress_bar.setTextVisible(True)
@@ -290,8 +298,8 @@ class MainWindow(QMainWindow):
         "Details…"); its first line, shortened with "…" to the free width, to the status bar."""
         self.message_log.add(text, level)
         sb = self.statusBar()
-        used = sum(w.width() for w in (self.details_button, self.stats_label, self.progress_bar,
-                                       self.cancel_button) if w.isVisible())
+        used = sum(w.width() for w in (self.details_button, self.stats_label, self.job_label,
+                                       self.progress_bar, self.cancel_button) if w.isVisible())
         free = max(sb.width() - used - 40, 120)
         line = text.strip().splitlines()[0] if text.strip() else ""
         shown = sb.fontMetrics().elidedText(line, Qt.TextElideMode.ElideRight, free)
@@ -570,7 +578,18 @@ class MainWindow(QMainWindow):
         if self.document.state is not None and step.V.shape == self.document.V.shape:
             self.viewport.update_points(step.V)
 
+    def _show_job_stage(self) -> None:
+        import time
+
+        if not self.runner.busy:
+            return
+        seconds = time.perf_counter() - self.runner.started_at
+        stage = self._job_stage or "working"
+        self.job_label.setText(f"{stage[:60]} — {seconds:.0f} s")
+
     def _on_progress(self, it: int, total, message: str) -> None:
+        self._job_stage = message or ""
+        self._show_job_stage()
         if total:
             self.progress_bar.setRange(0, int(total))
             self.progress_bar.setValue(int(it))
@@ -581,6 +600,13 @@ class MainWindow(QMainWindow):
 
     def _on_busy_changed(self, busy: bool) -> None:
         self.viewport.set_streaming(busy)
+        self._job_stage = ""
+        self.job_label.setVisible(busy)
+        if busy:
+            self._show_job_stage()
+            self._job_clock.start()
+        else:
+            self._job_clock.stop()
         self.progress_bar.setVisible(busy)
         self.cancel_button.setVisible(busy)
         if busy:

@@ -99,6 +99,18 @@ def main(names: list[str]) -> None:
         panel.view_combo.setCurrentIndex(0)
         pump(app)
         shot("multigrid_smoothing")
+    if not names or "spectral_coarsening" in names:
+        win.open_path(samples / "blob.obj")
+        panel = win.panels["Spectral coarsening"]
+        panel.raise_()
+        pump(app)
+        panel.form.set_value("m", 120)
+        panel.form.set_value("k", 0)
+        panel.form.set_value("max_iterations", 40)
+        run_and_wait(app, win, panel.run)
+        panel.show_combo.setCurrentText("Clusters and roots")
+        pump(app)
+        shot("spectral_coarsening")
     win.document.modified = False
     win.close()
 

@@ -516,3 +516,27 @@ def test_before_after_shows_the_original_beside_the_result_through_one_camera(wi
     qtbot.mouseClick(window.toolbar_buttons["view_front"], Qt.MouseButton.LeftButton)
     assert before.plotter.renderer.GetActiveCamera() is not window.viewport.plotter.renderer \
         .GetActiveCamera()
+
+
+# -- long stages say what they do and for how long -------------------------------------------------
+def test_a_long_stage_shows_its_name_and_elapsed_time(window, dialogs, qtbot):
+    import time
+
+    from algorithms.steps import Step
+
+    assert window.open_path(SAMPLES / "blob.obj")
+    V = window.document.V
+
+    def steps():
+        yield Step(0, None, V, {}, "Eigenvectors of the fine operator")
+        time.sleep(2.5)  # one long stage without steps (a big eigen-solve)
+        yield Step(1, 1, V, {}, "done")
+
+    window.start_analysis_job("Long stage", steps)
+    qtbot.waitUntil(lambda: "Eigenvectors of the fine operator" in window.job_label.text(),
+                    timeout=5000)
+    assert window.job_label.isVisible()
+    qtbot.waitUntil(lambda: window.job_label.text().endswith(("2 s", "3 s", "4 s")),
+                    timeout=10000)  # the clock runs while no step arrives
+    qtbot.waitUntil(lambda: not window.runner.busy, timeout=10000)
+    assert not window.job_label.isVisible()
