@@ -3,8 +3,9 @@
 ``JobRunner.start(name, factory)`` calls ``factory()`` *on the worker thread* (so precomputation
 such as factorizations does not freeze the window) and iterates the :class:`~algorithms.steps.Step`
 generator it returns. The worker only stores the newest step; a GUI-thread timer publishes it at
-most ~30 times a second through :attr:`JobRunner.preview`, so a fast method never floods the event
-queue and only the GUI thread ever touches VTK. Cancelling sets a flag the worker checks before
+most ~30 times a second through :attr:`JobRunner.preview`, and less often when handling a
+publication costs the GUI thread much (see :data:`PREVIEW_SHARE`), so a fast method never floods
+the event queue, the window keeps answering, and only the GUI thread ever touches VTK. Cancelling sets a flag the worker checks before
 asking the generator for its next step; the job then ends with :attr:`cancelled`. Exceptions end
 it with :attr:`failed` and a plain message. A new ``start`` while a job runs cancels the old job and
 starts the new one as soon as the old thread has stopped (used by live sliders).
@@ -22,7 +23,12 @@ from PySide6.QtCore import QObject, QThread, QTimer, Signal
 from algorithms.errors import Stylize3DError
 from algorithms.steps import Step
 
-PREVIEW_INTERVAL_MS = 33  # ~30 Hz
+PREVIEW_INTERVAL_MS = 33  # ~30 Hz at most
+#: at most this share of the GUI thread's time goes to handling previews (labels, plots, progress
+#: and the repaint of the window they cause): after a publication that kept the GUI thread busy
+#: for t seconds, the next waits at least t · (1 − s) / s. The 3D view's own redraws are spaced
+#: the same way by the viewport (app/viewport.py).
+PREVIEW_SHARE = 0.4
 
 
 class _JobThread(QThread):
@@ -116,6 +122,8 @@ class JobRunner(QObject):
         self._timer.timeout.connect(self._publish)
         self.started_at = 0.0
         self.last_duration = 0.0
+        self.publish_seconds = 0.0   # GUI time one publication costs (moving average)
+        self._last_publish = 0.0
         self._closed = False
 
     @property
@@ -171,9 +179,17 @@ class JobRunner(QObject):
         t.start()
 
     def _publish(self, t: _JobThread | None = None) -> None:
+        final = t is not None
         t = t or self._thread
         if t is None:
             return
+        now = time.perf_counter()
+        idle = self.publish_seconds * (1.0 - PREVIEW_SHARE) / PREVIEW_SHARE
+        if not final and now - self._last_publish < idle:
+            return  # the window is still catching up: the newest step waits (none is lost)
+        self._last_publish = now
+        # two hops through the event loop: the handlers' repaints are done by the second
+        QTimer.singleShot(0, lambda: QTimer.singleShot(0, lambda: self._measured(now)))
         seq, step, hist = t.take_latest()
         if t.cancel_requested.is_set():
             return
@@ -183,6 +199,13 @@ class JobRunner(QObject):
             self._published_seq = seq
             self.progress.emit(step.iteration, step.total, step.message)
             self.preview.emit(step)
+
+    def _measured(self, t0: float) -> None:
+        """Zero-time timers fire once the events a publication caused (the handlers, the
+        repaints) are done: that is what it cost the GUI thread."""
+        cost = time.perf_counter() - t0
+        self.publish_seconds = cost if self.publish_seconds == 0.0 else (
+            0.7 * self.publish_seconds + 0.3 * cost)
 
     def _on_ended(self, last: Step | None, status: str, message: str) -> None:
         t = self._thread
