@@ -18,6 +18,8 @@ def run_app(mesh: str | None = None, screenshot: str | None = None,
     win = MainWindow()
     sys.excepthook = make_excepthook(win)
     win.show()
+    if not screenshot:
+        QTimer.singleShot(300, warm_up_in_background)
     status = {"code": 0}
     said: list[tuple[str, str]] = []
     if screenshot:  # nobody is there to answer: questions are declined, messages kept
@@ -50,6 +52,35 @@ def run_app(mesh: str | None = None, screenshot: str | None = None,
         QTimer.singleShot(1500, shoot)
     rc = app.exec()
     return status["code"] or rc
+
+
+def warm_up_in_background() -> "threading.Thread":
+    """Load the compiled kernels (Numba) and the solvers' modules on a background thread while
+    the user looks at the window, so the first Run does not pay for it. Loading holds Python's
+    interpreter lock in slices of up to a few hundred milliseconds: better at start-up than in
+    the middle of the first slider drag."""
+    import threading
+
+    def work():
+        try:
+            from algorithms.deform.arap import compiled_kernels
+            from algorithms.deform.cubic import CubicParams, CubicStylizer
+            from algorithms.mesh.primitives import icosphere
+            from algorithms.multigrid import surface_multigrid
+            from algorithms.steps import run_to_end
+
+            if compiled_kernels() is None:
+                return
+            V, F = icosphere(2)
+            run_to_end(CubicStylizer(V, F).steps(CubicParams(max_iterations=1)))
+            V, F = icosphere(3)
+            surface_multigrid(V, F, min_vertices=100)
+        except Exception:  # a warm-up never stops the app; the first run will say what is wrong
+            pass
+
+    t = threading.Thread(target=work, name="warm-up", daemon=True)
+    t.start()
+    return t
 
 
 def _unattended_dialogs(said: list) -> None:
