@@ -96,6 +96,9 @@ class MethodPanel(QDockWidget):
         fl.addLayout(row)
         self.status_label = QLabel("Ready.")
         self.status_label.setWordWrap(True)
+        # room for two lines: the dock's layout does not grow a wrapped label by itself
+        self.status_label.setMinimumHeight(2 * self.status_label.fontMetrics().lineSpacing() + 2)
+        self.status_label.setAlignment(Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignTop)
         fl.addWidget(self.status_label)
         self.footer = footer
         self.live_box = QCheckBox("Live: re-run when a parameter changes")
@@ -366,8 +369,8 @@ class MethodPanel(QDockWidget):
         self.live_box.setChecked(small)
         if not small:
             self.status_label.setText(
-                f"Live re-runs are off for this {n:,}-vertex mesh (each run takes a while): "
-                "press Run, or tick Live to re-run on every change.")
+                f"Live is off for this {n:,}-vertex mesh (a run takes a while): press Run, "
+                "or tick Live.")
 
     def _on_busy(self, *_):
         busy = self.window_.runner.busy

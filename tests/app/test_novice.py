@@ -297,7 +297,7 @@ def test_live_is_on_for_small_meshes_only_and_says_when_it_is_pending(window, di
     cubic = window.panels["Cubic"]
     assert window.open_path(shared_mesh("armadillo.obj"))  # 14,587 vertices
     assert not cubic.live_box.isChecked()
-    assert "Live re-runs are off" in cubic.status_label.text()
+    assert "Live is off" in cubic.status_label.text()
     assert window.panels["Multigrid smoothing"].live_box.isChecked()  # solves are fast
     assert window.open_path(SAMPLES / "blob.obj")  # 3,232 vertices
     assert cubic.live_box.isChecked()
