@@ -48,6 +48,30 @@ def direction_hue(T: np.ndarray) -> np.ndarray:
     return np.arctan2(T[:, 1], T[:, 0]) + 2.0 * T[:, 2]
 
 
+def _capture_icon(size: int = 56) -> QIcon:
+    """A sphere with painted patches: the gallery's picture of "paint your own"."""
+    from PySide6.QtCore import QRectF
+    from PySide6.QtGui import QBrush, QColor, QPainter, QPixmap, QRadialGradient
+
+    pix = QPixmap(size, size)
+    pix.fill(QColor(0, 0, 0, 0))
+    p = QPainter(pix)
+    p.setRenderHint(QPainter.RenderHint.Antialiasing)
+    g = QRadialGradient(size * 0.38, size * 0.35, size * 0.6)
+    g.setColorAt(0.0, QColor("#d8d8d8"))
+    g.setColorAt(1.0, QColor("#6e6e6e"))
+    r = QRectF(3, 3, size - 6, size - 6)
+    p.setBrush(QBrush(g))
+    p.setPen(QColor("#555"))
+    p.drawEllipse(r)
+    p.setPen(QColor(0, 0, 0, 0))
+    for color, start in (("#d64545", 20 * 16), ("#3f9b4f", 140 * 16), ("#3b6fd6", 260 * 16)):
+        p.setBrush(QColor(color))
+        p.drawPie(r.adjusted(8, 8, -8, -8), start, 50 * 16)
+    p.end()
+    return QIcon(pix)
+
+
 class _CaptureCommand(QUndoCommand):
     def __init__(self, panel: "AnalogiesPanel", before: dict, after: dict):
         super().__init__("Paint capture sphere")
@@ -132,13 +156,17 @@ class AnalogiesPanel(MethodPanel):
         self.gallery = QListWidget()
         self.gallery.setViewMode(QListWidget.ViewMode.IconMode)
         self.gallery.setIconSize(QSize(56, 56))
-        self.gallery.setFixedHeight(150)
+        self.gallery.setGridSize(QSize(104, 92))  # one cell per style: labels never run together
+        self.gallery.setWordWrap(True)
+        self.gallery.setFixedHeight(196)  # two rows of cells
         self.gallery.setResizeMode(QListWidget.ResizeMode.Adjust)
         self.gallery.setToolTip("Click a style: the surface is pulled towards its face "
                                 "directions.")
         for name in PRIMITIVES + (CAPTURE,):
             png = STYLE_DIR / f"{name}.png"
-            item = QListWidgetItem(QIcon(str(png)) if png.exists() else QIcon(),
+            icon = (QIcon(str(png)) if png.exists()
+                    else _capture_icon() if name == CAPTURE else QIcon())
+            item = QListWidgetItem(icon,
                                    name.replace("_", " "))
             item.setData(256, name)
             item.setToolTip("Paint your own targets on the sphere below" if name == CAPTURE
