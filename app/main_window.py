@@ -148,6 +148,8 @@ class MainWindow(QMainWindow):
           tip="Save the mesh under a new name or format (OBJ, PLY, STL, OFF, glTF .glb)")
         A("screenshot", "Export &Screenshot…", lambda: self.export_screenshot_dialog(),
           tip="Save the 3D view as a PNG image")
+        A("export_field", "Export Shown &Field…", lambda: self.export_field_dialog(),
+          tip="Save the values of the colour view shown now, one per vertex (.txt, .csv, .npy)")
         A("quit", "&Quit", self.close)
         undo = self.undo_stack.createUndoAction(self, "&Undo")
         undo.setShortcuts(shortcut_keys("undo"))
@@ -191,6 +193,7 @@ class MainWindow(QMainWindow):
         m.addAction(a["save"])
         m.addAction(a["save_as"])
         m.addAction(a["screenshot"])
+        m.addAction(a["export_field"])
         m.addSeparator()
         m.addAction(a["quit"])
         m = mb.addMenu("&Edit")
@@ -497,6 +500,43 @@ class MainWindow(QMainWindow):
             return False
         self._ever_saved_here.add(str(Path(path).resolve()))
         self.report(f"Screenshot saved to {path}", timeout_ms=5000)
+        return True
+
+    def export_field_dialog(self) -> bool:
+        """File > Export Shown Field: the per-vertex values behind the colours on screen."""
+        from algorithms.mesh.fields import FIELD_EXTENSIONS, field_file_filter
+
+        shown = None if self.document.is_empty else self.viewport.shown_field()
+        if shown is None:
+            dialogs.info(self, "Export field", "No per-vertex colour view is shown. Choose one "
+                         "in a panel first (for example Cubic > Show > λ scale, or Analogies > "
+                         "Colour by).")
+            return False
+        path = dialogs.save_file(self, "Export the shown field", field_file_filter(),
+                                 self._last_dir())
+        if not path:
+            return False
+        if Path(path).suffix.lower() not in FIELD_EXTENSIONS:
+            path += ".txt"
+        if not self._may_overwrite(path):
+            return False
+        return self.export_field(path)
+
+    def export_field(self, path: str) -> bool:
+        from algorithms.mesh.fields import write_field
+
+        shown = self.viewport.shown_field()
+        if shown is None:
+            return False
+        name, values = shown
+        try:
+            write_field(path, values)
+        except Stylize3DError as e:
+            self._error("Could not export the field", str(e))
+            return False
+        self._ever_saved_here.add(str(Path(path).resolve()))
+        self.report(f"Saved the field '{name}' ({len(values):,} values, one per vertex) to "
+                    f"{path}", timeout_ms=5000)
         return True
 
     def save_window_image(self, path: str) -> bool:

@@ -416,6 +416,16 @@ class Viewport(QWidget):
                              FIELD_TITLES.get(name, name.replace("_", " ")), (lo, hi))
         self.render()
 
+    def shown_field(self) -> tuple[str, np.ndarray] | None:
+        """(name, one value per vertex) of the colour view shown now; None when the mesh is
+        plain or coloured per triangle."""
+        name = self._field_name
+        if self.poly is None or name is None or name not in self.poly.point_data:
+            return None
+        if not self.mesh_actor.mapper.scalar_visibility:
+            return None
+        return name, np.array(self.poly.point_data[name], dtype=np.float64)
+
     def _set_legend(self, lut, title: str = "", rng: tuple[float, float] | None = None) -> None:
         """The colour bar of the shown field: its title (with units) and its range; one bar,
         made once, shown for every colour view of this viewport (None hides it)."""

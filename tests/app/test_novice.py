@@ -540,3 +540,28 @@ def test_a_long_stage_shows_its_name_and_elapsed_time(window, dialogs, qtbot):
                     timeout=10000)  # the clock runs while no step arrives
     qtbot.waitUntil(lambda: not window.runner.busy, timeout=10000)
     assert not window.job_label.isVisible()
+
+
+# -- export of the shown field ----------------------------------------------------------------------
+def test_shown_field_exports_and_reads_back(window, dialogs, qtbot, tmp_path):
+    from algorithms.mesh.fields import read_field
+    from app.commands import StateCommand
+
+    assert window.open_path(SAMPLES / "blob.obj")
+    dialogs.save_paths.append(str(tmp_path / "nothing.txt"))
+    window.actions_by_name["export_field"].trigger()
+    assert dialogs.infos and "No per-vertex colour view" in dialogs.infos[-1][1]
+    assert dialogs.save_paths  # nothing was asked: there is nothing to export
+    dialogs.save_paths.clear()
+    doc = window.document
+    lam = np.linspace(0.0, 2.0, len(doc.V))
+    window.undo_stack.push(StateCommand(doc, doc.state, doc.state.with_field("lambda_scale", lam),
+                                        "Paint λ"))
+    cubic = window.panels["Cubic"]
+    cubic.show_combo.setCurrentText("λ scale")
+    out = tmp_path / "lambda"
+    dialogs.save_paths.append(str(out))
+    window.actions_by_name["export_field"].trigger()
+    back = read_field(str(out) + ".txt", len(doc.V))
+    np.testing.assert_allclose(back, lam, rtol=1e-9, atol=1e-12)
+    assert "lambda_scale" in window.message_log.all_text()
