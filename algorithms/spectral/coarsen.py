@@ -532,7 +532,7 @@ def _cluster_blocks(G: sp.csr_matrix, labels: np.ndarray):
     return out
 
 
-def lbfgs_iter(fun, x0: np.ndarray, maxiter: int, *, memory: int = 20, ftol: float = 1e-7,
+def lbfgs_iter(fun, x0: np.ndarray, maxiter: int, *, memory: int = 10, ftol: float = 1e-7,
                patience: int = 10, project=None):
     """Minimize ``fun(x) -> (f, grad)`` with L-BFGS (two-loop recursion, Armijo backtracking);
     a generator yielding ``(iteration, f, x)`` after every accepted step, so that callers can
@@ -722,10 +722,12 @@ def coarsen_iter(L, M, m: int | None = None, k: int | None = None,
     nadam_its = it
     if params.balance_iterations > 0 and max_it > 0:
         t = time.perf_counter()
+        evals = [0]
         best_G, best_Lt, best_E, polished = yield from _balance_stage(
-            best_G, L, A, B, mt, lam, B0, Phi0, blocks, params, nadam_its, best_E)
+            best_G, L, A, B, mt, lam, B0, Phi0, blocks, params, nadam_its, best_E, evals)
         timings["balancing"] = time.perf_counter() - t
         timings["balancing_iterations"] = float(polished)
+        timings["balancing_evaluations"] = float(evals[0])
         it = nadam_its + polished
     Mt = sp.diags(mt).tocsr()
     yield CoarsenStep(it, params.max_iterations, best_E,
@@ -735,7 +737,8 @@ def coarsen_iter(L, M, m: int | None = None, k: int | None = None,
                       done=True, L=best_Lt.tocsr(), M=Mt, G=best_G, K=K, P=P, timings=timings)
 
 
-def _balance_stage(G, L, A, B, mt, lam, B0, Phi0, blocks, params, it0, E_thesis):
+def _balance_stage(G, L, A, B, mt, lam, B0, Phi0, blocks, params, it0, E_thesis,
+                   params_evals=None):
     """Stage 2 (beyond the thesis): L-BFGS on the eigenvalue-balanced energy from the NADAM
     result; yields a CoarsenStep per iteration (energy = the thesis energy, for the plot) and
     returns (G, L~, thesis energy, iterations).
@@ -753,6 +756,7 @@ def _balance_stage(G, L, A, B, mt, lam, B0, Phi0, blocks, params, it0, E_thesis)
     0.007; camelhead 0.79, 0.099 -> 0.86, 0.026; fertility 0.87, 0.058 -> 0.91, 0.017; wingnut
     0.65, 0.086 -> 0.75, 0.037.
     """
+    params_evals = params_evals if params_evals is not None else [0]
     w = float(params.balance)
     lam = np.asarray(lam, float)
     scale = max(np.abs(lam).max(), 1e-300)
@@ -770,6 +774,7 @@ def _balance_stage(G, L, A, B, mt, lam, B0, Phi0, blocks, params, it0, E_thesis)
     last = {}
 
     def fun(x):
+        last["evaluations"] = last.get("evaluations", 0) + 1
         G.data = x
         E, g, Lt = energy_and_gradient(G, L, Aw, Bw, mt, blocks=blocks)
         Gg = G.copy()
@@ -793,6 +798,7 @@ def _balance_stage(G, L, A, B, mt, lam, B0, Phi0, blocks, params, it0, E_thesis)
                           {"energy": E_t, "balanced_energy": f},
                           f"balancing {n_it}: thesis energy {E_t:.4g}, balanced "
                           f"{f:.3g} of its start")
+    params_evals[0] = last.get("evaluations", 0)
     if best[2] is None:
         return G, energy_and_gradient(G, L, A, B, mt, gradient=False)[2], E_thesis, 0
     G.data = best[1]
