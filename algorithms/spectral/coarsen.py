@@ -51,10 +51,11 @@ Optimizer choices (thesis 7.3.2, DESIGN.md §5):
   farthest from the other clusters) puts roots on the mesh boundary 3-4x as often as its share
   of nodes (camelhead 2.0 % against 0.5 %); exact medoids fix that (0.7 %) but not the scores
   (C diag 0.79 -> 0.77, eigenvalue error 0.099 -> 0.111; fertility without its base
-  0.887 -> 0.912, 0.047 -> 0.048), so Bell's centre stays. (4) the stopping rule: patience 30 instead of 10
-  changes nothing on armadillo and camelhead (the fixed step oscillates), +0.03 in C on
-  wingnut and on fertility without its base; the authors' step halving (lr_decays 2-4) lowers the eigenvalue
-  error by 10-40 % at up to 10x the iterations, and moves C both ways (armadillo 0.75 -> 0.61).
+  0.887 -> 0.912, 0.047 -> 0.048), so Bell's centre stays. (4) the stopping rule: patience
+  30 instead of 10 changes nothing on armadillo and camelhead (the fixed step oscillates),
+  +0.03 in C on wingnut and on fertility without its base; the authors' step halving
+  (lr_decays 2-4) lowers the eigenvalue error by 10-40 % at up to 10x the iterations, and
+  moves C both ways (armadillo 0.75 -> 0.61).
   (5) the initial G: "smoothed" helps at strong coarsening (armadillo cut: C 0.79 -> 0.88) and
   ruins mild coarsening (hand 810 -> 300: 0.60 -> 0.26). The common cause is the energy's
   weighting (the lowest modes weigh like lam_i^2), which the balancing stage addresses.

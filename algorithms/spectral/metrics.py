@@ -87,4 +87,5 @@ def spectral_metrics(L, M, L_coarse, M_coarse, P, k: int, *, fine_eigs=None) -> 
     kk = min(k, phi_c.shape[1])
     C = functional_map(phi_c[:, :kk], Mc, P, phi_f[:, :kk])
     mean, mx = eigenvalue_errors(lam_f, lam_c, k)
-    return SpectralMetrics(c_diag_score(C, lam_f[:kk]), mean, mx, C, np.asarray(lam_f), np.asarray(lam_c))
+    return SpectralMetrics(c_diag_score(C, lam_f[:kk]), mean, mx, C, np.asarray(lam_f),
+                           np.asarray(lam_c))
