@@ -51,7 +51,7 @@ ANGLE_TOL = 1e-6
 
 
 # ------------------------------------------------------------------------------ small helpers
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _corner(F, f, v):
     if F[f, 0] == v:
         return 0
@@ -60,7 +60,7 @@ def _corner(F, f, v):
     return 2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ring(v, F, FF, vf, faces, corners, verts, cap):
     """Ordered (counter-clockwise) faces and neighbours of ``v``.
 
@@ -107,13 +107,13 @@ def _ring(v, F, FF, vf, faces, corners, verts, cap):
     return nf, nv, boundary
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _quadric_err(q, x, y, z):
     return (q[0] * x * x + 2 * q[1] * x * y + 2 * q[2] * x * z + q[3] * y * y
             + 2 * q[4] * y * z + q[5] * z * z + 2 * (q[6] * x + q[7] * y + q[8] * z) + q[9])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def edge_cost(u, v, P, Q, bnd, protect, strategy, pos, qs):
     """Cost of collapsing (u, v), merged position into ``pos``; returns (cost, keep_u).
 
@@ -219,7 +219,7 @@ def edge_cost(u, v, P, Q, bnd, protect, strategy, pos, qs):
 _SMOD = 67108864  # 2**26: stamps are compared modulo this
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _hpush(hk, size, cost, u, v, su, sv):
     packed = float((su % _SMOD) * _SMOD + (sv % _SMOD))
     k = size
@@ -239,7 +239,7 @@ def _hpush(hk, size, cost, u, v, su, sv):
     return size + 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _hsift_down(hk, size, k):
     cost, u, v, pk = hk[k, 0], hk[k, 1], hk[k, 2], hk[k, 3]
     while True:
@@ -266,7 +266,7 @@ def _hsift_down(hk, size, k):
     hk[k, 3] = pk
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _hpop(hk, size):
     cost = hk[0, 0]
     u = int(hk[0, 1])
@@ -282,18 +282,18 @@ def _hpop(hk, size):
     return cost, u, v, pk // _SMOD, pk % _SMOD, size
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _hcurrent(u, v, su, sv, valive, stamp):
     return valive[u] and valive[v] and stamp[u] % _SMOD == su and stamp[v] % _SMOD == sv
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _hheapify(hk, size):
     for t in range((size - 2) // 4, -1, -1):
         _hsift_down(hk, size, t)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _hcompact(hk, size, valive, stamp):
     """Drop stale entries and re-heapify; returns the new size."""
     k = 0
@@ -310,7 +310,7 @@ def _hcompact(hk, size, valive, stamp):
 
 
 # ------------------------------------------------------------------------------ geometry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _quality3(ax, ay, az, bx, by, bz, cx, cy, cz):
     """4 sqrt(3) area / sum of squared edge lengths (1 equilateral, 0 degenerate)."""
     ux, uy, uz = bx - ax, by - ay, bz - az
@@ -326,7 +326,7 @@ def _quality3(ax, ay, az, bx, by, bz, cx, cy, cz):
     return 4.0 * math.sqrt(3.0) * area / s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _quality2(ax, ay, bx, by, cx, cy):
     """Signed 2D quality (negative for clockwise triangles)."""
     ux, uy = bx - ax, by - ay
@@ -339,7 +339,7 @@ def _quality2(ax, ay, bx, by, cx, cy):
     return 4.0 * math.sqrt(3.0) * area / s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _lscm_add(H, X, l0, l1, l2):
     """Add one triangle's LSCM (conformal) energy to the dense normal matrix ``H``.
 
@@ -389,7 +389,7 @@ def _lscm_add(H, X, l0, l1, l2):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def lscm_solve(H, ncomp, fixed, fixval, x, A, rhs, free):
     """Minimize x^T H x over the components not fixed; writes ``x``; returns (ok, energy).
 
@@ -446,7 +446,7 @@ def lscm_solve(H, ncomp, fixed, fixval, x, A, rhs, free):
     return True, e
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _tri_frame(X, G):
     """Gradients of the 3 hat functions in an orthonormal frame of triangle X (3, 3) -> G (2, 3);
     returns the area (0 for a degenerate triangle)."""
@@ -481,7 +481,7 @@ def _tri_frame(X, G):
     return area
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def arap_refine(U, nl, tl, tX, nt, fixed, fixval, iters, Hs, As, rhs, free, lin, Gs, At):
     """Local-global ARAP (Liu et al. 2008) on the joint patch, started from ``U`` (nl, 2).
 
@@ -597,7 +597,7 @@ def arap_refine(U, nl, tl, tX, nt, fixed, fixval, iters, Hs, As, rhs, free, lin,
     return True, energy
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _angle(ax, ay, bx, by, cx, cy):
     """Angle at a of triangle (a, b, c) in 2D (unsigned)."""
     ux, uy = bx - ax, by - ay
@@ -605,7 +605,7 @@ def _angle(ax, ay, bx, by, cx, cy):
     return math.atan2(abs(ux * vy - uy * vx), ux * vx + uy * vy)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def check_uv(U, nl, bl, nb, al, na, inb, ina, expect, min_q, sb, sa):
     """UV validity of a joint flattening; returns 0 (valid) or a rejection code.
 
@@ -648,7 +648,7 @@ def check_uv(U, nl, bl, nb, al, na, inb, ina, expect, min_q, sb, sa):
     return 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def fan_sizes(F, FF, vf, n):
     """Number of faces reached by walking around every vertex from ``vf[v]`` (-1 if unused).
 
@@ -692,7 +692,7 @@ def fan_sizes(F, FF, vf, n):
 
 
 # ------------------------------------------------------------------------------ relocation
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def relocate(b0, b1, b2, l0, l1, l2, U, al, aface, a0, a1, out):
     """Map a point (bary b in a before-face with locals l) through the shared UV domain.
 
@@ -758,7 +758,7 @@ def relocate(b0, b1, b2, l0, l1, l2, U, al, aface, a0, a1, out):
     out[3] = c2 / s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def replay(K, bptr, bface, bloc, aptr, aface, aloc, uptr, uv, m, pf, pb, backwards):
     """Carry points (face ``pf``, bary ``pb``; modified in place) through ``K`` collapses.
 
@@ -817,13 +817,13 @@ def replay(K, bptr, bface, bloc, aptr, aface, aloc, uptr, uv, m, pf, pb, backwar
 RANDOM_MAX_FAILS = 2000  # failed semi-random attempts in a row before giving up
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def seed_random(seed):
     """Seed the generator the semi-random collapses draw from (Numba's own, or NumPy's)."""
     np.random.seed(seed)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _random_edge(F, falive, alist, nlist, P, Q, bnd, protect, strategy, pos, qs, k):
     """The cheapest of ``k`` random edges of live faces (-1, -1 when none has a finite cost)."""
     best = np.inf
@@ -849,7 +849,7 @@ def _random_edge(F, falive, alist, nlist, P, Q, bnd, protect, strategy, pos, qs,
 
 
 # ------------------------------------------------------------------------------ main loop
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _push_vertex_edges(w, skip, P, Q, F, FF, vf, bnd, protect, stamp, strategy,
                        hk, size, faces, corners, verts, pos, qs):
     nf, nv, _ = _ring(w, F, FF, vf, faces, corners, verts, CAP)
@@ -865,7 +865,7 @@ def _push_vertex_edges(w, skip, P, Q, F, FF, vf, bnd, protect, stamp, strategy,
     return size
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rebuild_heap(P, Q, F, FF, falive, valive, bnd, protect, stamp, strategy, hk):
     pos = np.empty(3)
     qs = np.empty(10)
@@ -891,7 +891,7 @@ def rebuild_heap(P, Q, F, FF, falive, valive, bnd, protect, stamp, strategy, hk)
     return size
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def collapse_loop(P, Q, F, FF, FFi, vf, falive, valive, bnd, protect, stamp, rej, loc, mark,
                   hk, st, counts,
                   bptr, bface, bloc, aptr, aface, aloc, uptr, uv,

@@ -18,7 +18,7 @@ __all__ = ["gauss_seidel_sweeps", "greedy_coloring", "merge_strong_pairs",
            "block_gauss_seidel_sweeps"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def gauss_seidel_sweeps(indptr, indices, data, diag, x, b, sweeps, backward):
     """In place: ``sweeps`` Gauss-Seidel sweeps on ``A x = b`` (A in CSR, ``diag`` its diagonal).
 
@@ -57,7 +57,7 @@ def gauss_seidel_sweeps(indptr, indices, data, diag, x, b, sweeps, backward):
                 x[i, c] += acc[c] / a_ii
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def greedy_coloring(indptr, indices, order):
     """Alg. 10 (thesis App. 8.9.1): greedy colouring with a move-to-back palette.
 
@@ -94,7 +94,7 @@ def greedy_coloring(indptr, indices, order):
     return color
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def merge_strong_pairs(n, ri, rj, max_block):
     """Union-find over the strong couplings ``(ri[t], rj[t])``, strongest first, never letting a
     block grow past ``max_block`` vertices. Returns each vertex's block root."""
@@ -123,7 +123,7 @@ def merge_strong_pairs(n, ri, rj, max_block):
     return parent
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def block_gauss_seidel_sweeps(indptr, indices, data, bptr, bverts, iptr, inv, x, b, sweeps,
                               backward):
     """In place: block Gauss-Seidel sweeps; block ``c`` is ``bverts[bptr[c]:bptr[c+1]]`` and

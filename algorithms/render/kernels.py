@@ -18,7 +18,7 @@ from numba import njit
 __all__ = ["rasterize"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no cover - compiled
     """Z-buffer ``F`` with vertices ``P (n, 3)`` = (column, row, depth) into the output arrays
     (``face_id`` filled with -1, ``depth`` with inf beforehand)."""
