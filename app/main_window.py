@@ -150,6 +150,12 @@ class MainWindow(QMainWindow):
           tip="Save the 3D view as a PNG image")
         A("export_field", "Export Shown &Field…", lambda: self.export_field_dialog(),
           tip="Save the values of the colour view shown now, one per vertex (.txt, .csv, .npy)")
+        A("export_colored", "Export &Coloured Mesh…", lambda: self.export_colored_dialog(),
+          tip="Save the mesh with the colour view shown now as vertex colours (.ply, .obj), "
+              "to show it in another program")
+        A("study", "Start &Study Session…", lambda: self.start_study_dialog(),
+          tip="Run a user-study protocol (.json / .toml): tasks, locked panels, a log of every "
+              "action (docs/study.md)")
         A("quit", "&Quit", self.close)
         undo = self.undo_stack.createUndoAction(self, "&Undo")
         undo.setShortcuts(shortcut_keys("undo"))
@@ -194,6 +200,9 @@ class MainWindow(QMainWindow):
         m.addAction(a["save_as"])
         m.addAction(a["screenshot"])
         m.addAction(a["export_field"])
+        m.addAction(a["export_colored"])
+        m.addSeparator()
+        m.addAction(a["study"])
         m.addSeparator()
         m.addAction(a["quit"])
         m = mb.addMenu("&Edit")
@@ -521,6 +530,57 @@ class MainWindow(QMainWindow):
         if not self._may_overwrite(path):
             return False
         return self.export_field(path)
+
+    def start_study_dialog(self):
+        """File > Start Study Session: choose a protocol; the start dialog asks for the
+        participant and condition (app/study/session.py)."""
+        from app.study.session import start_study
+
+        if getattr(self, "study_session", None) is not None and not self.study_session.finished:
+            dialogs.info(self, "Study session", "A study session is already running.")
+            return None
+        path = dialogs.open_file(self, "Open a study protocol", "Study protocols (*.json *.toml)",
+                                 self._last_dir())
+        if not path:
+            return None
+        try:
+            return start_study(self, path)
+        except Stylize3DError as e:
+            self._error("Cannot start the study session", str(e))
+            return None
+
+    def export_colored_dialog(self) -> bool:
+        """File > Export Coloured Mesh: the mesh with the colour view on screen as vertex
+        colours (PLY or OBJ), to show the result in another program."""
+        if self.document.is_empty or self.viewport.shown_colors() is None:
+            dialogs.info(self, "Export coloured mesh", "No per-vertex colour view is shown. "
+                         "Choose one in a panel first (for example Analogies > Colour by).")
+            return False
+        path = dialogs.save_file(self, "Export the mesh with its colours",
+                                 "Coloured meshes (*.ply *.obj)", self._last_dir())
+        if not path:
+            return False
+        if Path(path).suffix.lower() not in (".ply", ".obj"):
+            path += ".ply"
+        if not self._may_overwrite(path):
+            return False
+        return self.export_colored(path)
+
+    def export_colored(self, path: str) -> bool:
+        from algorithms.mesh import write_mesh
+
+        colors = self.viewport.shown_colors()
+        if colors is None or self.document.is_empty:
+            return False
+        try:
+            write_mesh(path, self.document.V, self.document.F, vertex_colors=colors)
+        except Stylize3DError as e:
+            self._error("Could not export the coloured mesh", str(e))
+            return False
+        self._ever_saved_here.add(str(Path(path).resolve()))
+        self.report(f"Saved the mesh with its colours ({len(colors):,} vertices) to {path}",
+                    timeout_ms=5000)
+        return True
 
     def export_field(self, path: str) -> bool:
         from algorithms.mesh.fields import write_field

@@ -416,6 +416,18 @@ class Viewport(QWidget):
                              FIELD_TITLES.get(name, name.replace("_", " ")), (lo, hi))
         self.render()
 
+    def shown_colors(self) -> np.ndarray | None:
+        """(n, 3) uint8 RGB of each vertex as the colour view on screen paints it (the same
+        lookup table, range and NaN colour), or None when no per-vertex colour view is shown."""
+        shown = self.shown_field()
+        if shown is None:
+            return None
+        from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+
+        lut = self.mesh_actor.mapper.lookup_table
+        rgba = lut.MapScalars(numpy_to_vtk(np.ascontiguousarray(shown[1])), 0, -1)
+        return np.array(vtk_to_numpy(rgba)[:, :3], dtype=np.uint8)
+
     def shown_field(self) -> tuple[str, np.ndarray] | None:
         """(name, one value per vertex) of the colour view shown now; None when the mesh is
         plain or coloured per triangle."""

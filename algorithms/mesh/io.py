@@ -1,9 +1,12 @@
-"""Reading and writing triangle meshes (OBJ, OFF, PLY, STL; GLB export).
+"""Reading and writing triangle meshes (OBJ, OFF, PLY, STL, GLB).
 
 Formats
 -------
-Read (:data:`SUPPORTED_READ`): ``.obj``, ``.off``, ``.ply``, ``.stl``.
-Write (:data:`SUPPORTED_WRITE`): the same four plus ``.glb`` (glTF 2.0 binary, export only).
+Read (:data:`SUPPORTED_READ`) and write (:data:`SUPPORTED_WRITE`): ``.obj``, ``.off``, ``.ply``,
+``.stl``, ``.glb`` (binary glTF 2.0: every triangle primitive of the default scene, node
+transforms applied; sparse accessors, external buffers and compression extensions are refused
+with a plain message). ``write_mesh(..., vertex_colors=)`` stores per-vertex colours in PLY
+(``uchar red green blue``) and OBJ (``v x y z r g b``, the common extension).
 The extension decides the format; case does not matter (``.OBJ`` works).
 
 * **OBJ** -- ``v`` and ``f`` lines; face tokens ``1``, ``1/2``, ``1/2/3``, ``1//3``; negative
@@ -80,7 +83,7 @@ __all__ = [
 ]
 
 #: Extensions :func:`read_mesh` understands (lower case, with the dot).
-SUPPORTED_READ: tuple[str, ...] = (".obj", ".ply", ".stl", ".off")
+SUPPORTED_READ: tuple[str, ...] = (".obj", ".ply", ".stl", ".off", ".glb")
 #: Extensions :func:`write_mesh` understands (lower case, with the dot).
 SUPPORTED_WRITE: tuple[str, ...] = (".obj", ".ply", ".stl", ".off", ".glb")
 
@@ -102,12 +105,12 @@ def file_filter(mode: str = "read") -> str:
     Parameters
     ----------
     mode : {'read', 'write'}
-        ``'read'`` gives ``"Meshes (*.obj *.ply *.stl *.off)"``; ``'write'`` adds ``*.glb``.
+        Both give ``"Meshes (*.obj *.ply *.stl *.off *.glb)"`` today.
 
     Returns
     -------
     str
-        A filter such as ``"Meshes (*.obj *.ply *.stl *.off)"``.
+        A filter such as ``"Meshes (*.obj *.ply *.stl *.off *.glb)"``.
     """
     if mode == "read":
         exts = SUPPORTED_READ
@@ -930,16 +933,155 @@ def _stl_note(n_corners: int, n_vertices: int, kind: str) -> list[str]:
 # read_mesh
 # --------------------------------------------------------------------------------------------
 
+_GLB_COMPONENTS = {5120: "i1", 5121: "u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
+_GLB_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+
+
+def _glb_accessor(gltf: dict, binary: bytes, index: int) -> np.ndarray:
+    """One accessor of a binary glTF as an array (count, width)."""
+    try:
+        acc = gltf["accessors"][index]
+    except (KeyError, IndexError, TypeError):
+        raise _ParseError(f"it refers to data (accessor {index}) that is not in the file")
+    if "sparse" in acc:
+        raise _ParseError("it uses sparse accessors, which Stylize3D does not read")
+    dtype = _GLB_COMPONENTS.get(acc.get("componentType"))
+    width = _GLB_WIDTH.get(acc.get("type"))
+    if dtype is None or width is None:
+        raise _ParseError(f"accessor {index} has an unsupported data type")
+    count = int(acc.get("count", 0))
+    if "bufferView" not in acc:
+        return np.zeros((count, width), dtype=dtype)
+    view = gltf["bufferViews"][acc["bufferView"]]
+    if view.get("buffer", 0) != 0:
+        raise _ParseError("its data lies in an external file (only .glb with embedded data "
+                          "can be read)")
+    start = int(view.get("byteOffset", 0)) + int(acc.get("byteOffset", 0))
+    item = np.dtype(dtype).itemsize * width
+    stride = int(view.get("byteStride", 0)) or item
+    end = start + stride * (count - 1) + item if count else start
+    if end > len(binary) or end > int(view.get("byteOffset", 0)) + int(view["byteLength"]):
+        raise _ParseError("it is truncated (its data ends early)")
+    raw = np.frombuffer(binary, dtype=np.uint8, count=end - start, offset=start)
+    if stride == item:
+        return raw.view(dtype).reshape(count, width).copy()
+    rows = np.lib.stride_tricks.as_strided(raw, shape=(count, item), strides=(stride, 1))
+    return np.ascontiguousarray(rows).view(dtype).reshape(count, width)
+
+
+def _node_matrices(gltf: dict) -> list[tuple[int, np.ndarray]]:
+    """(mesh index, 4x4 world matrix) of every node that draws a mesh (scene 0, or all roots)."""
+    nodes = gltf.get("nodes", [])
+
+    def local(n: dict) -> np.ndarray:
+        if "matrix" in n:
+            return np.array(n["matrix"], dtype=np.float64).reshape(4, 4).T  # column-major
+        M = np.eye(4)
+        if "scale" in n:
+            M = np.diag(list(map(float, n["scale"])) + [1.0]) @ M
+        if "rotation" in n:
+            x, y, z, w = map(float, n["rotation"])
+            R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                          [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                          [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+            T = np.eye(4)
+            T[:3, :3] = R
+            M = T @ M
+        if "translation" in n:
+            T = np.eye(4)
+            T[:3, 3] = list(map(float, n["translation"]))
+            M = T @ M
+        return M
+
+    scenes = gltf.get("scenes")
+    roots = (scenes[gltf.get("scene", 0)].get("nodes", []) if scenes
+             else [i for i in range(len(nodes))
+                   if not any(i in n.get("children", []) for n in nodes)])
+    out, stack, seen = [], [(int(r), np.eye(4)) for r in reversed(roots)], set()
+    while stack:  # depth first, in the file's order
+        i, parent = stack.pop()
+        if i in seen or not 0 <= i < len(nodes):
+            continue
+        seen.add(i)
+        M = parent @ local(nodes[i])
+        if "mesh" in nodes[i]:
+            out.append((int(nodes[i]["mesh"]), M))
+        stack.extend((int(c), M) for c in reversed(nodes[i].get("children", [])))
+    return out
+
+
+def _parse_glb(data: bytes) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Binary glTF 2.0: the triangles of every mesh the default scene draws, node transforms
+    applied, all parts in one mesh (vertices of different primitives are not welded)."""
+    if len(data) < 20 or data[:4] != b"glTF":
+        raise _ParseError("it does not start with the binary glTF signature (a .gltf text "
+                          "file or another format renamed?)")
+    version, total = struct.unpack_from("<II", data, 4)
+    if version != 2:
+        raise _ParseError(f"it is glTF version {version}; only version 2 can be read")
+    if total > len(data):
+        raise _ParseError("it is truncated (shorter than its header says)")
+    pos, js, binary = 12, None, b""
+    while pos + 8 <= total:
+        length, kind = struct.unpack_from("<I4s", data, pos)
+        chunk = data[pos + 8:pos + 8 + length]
+        if len(chunk) < length:
+            raise _ParseError("it is truncated (a chunk ends early)")
+        if kind == b"JSON":
+            js = chunk
+        elif kind == b"BIN\x00" and not binary:
+            binary = chunk
+        pos += 8 + length + (-length % 4)
+    if js is None:
+        raise _ParseError("it has no JSON chunk")
+    try:
+        gltf = json.loads(js.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        raise _ParseError("its JSON chunk is damaged")
+    used = set(gltf.get("extensionsRequired", []))
+    if used:
+        raise _ParseError(f"it needs glTF extensions Stylize3D does not read "
+                          f"({', '.join(sorted(used))}; e.g. Draco compression)")
+    Vs, Fs, n, skipped = [], [], 0, 0
+    for mesh_index, M in _node_matrices(gltf):
+        for prim in gltf["meshes"][mesh_index].get("primitives", []):
+            if prim.get("mode", 4) != 4:
+                skipped += 1
+                continue
+            P = _glb_accessor(gltf, binary, prim["attributes"]["POSITION"]).astype(np.float64)
+            if "indices" in prim:
+                I = _glb_accessor(gltf, binary, prim["indices"]).astype(np.int64).reshape(-1)
+            else:
+                I = np.arange(len(P), dtype=np.int64)
+            if I.size % 3:
+                raise _ParseError("a triangle list has a number of corners that is not a "
+                                  "multiple of 3")
+            P = P @ M[:3, :3].T + M[:3, 3]
+            Vs.append(P)
+            Fs.append(I.reshape(-1, 3) + n)
+            n += len(P)
+    if not Vs:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), []
+    notes = []
+    if len(Vs) > 1:
+        notes.append(f"The file holds {len(Vs)} mesh parts; they were read as one mesh.")
+    if skipped:
+        notes.append(f"{_plural(skipped, 'part')} drawn as points or lines (not triangles) "
+                     "were skipped.")
+    return np.vstack(Vs), np.vstack(Fs), notes
+
+
 _READERS: dict[str, Callable[[bytes], tuple[np.ndarray, np.ndarray, list[str]]]] = {
     ".obj": _parse_obj,
     ".off": _parse_off,
     ".ply": _parse_ply,
     ".stl": _parse_stl,
+    ".glb": _parse_glb,
 }
 
 
 def read_mesh(path: str | os.PathLike) -> MeshData:
-    """Read a triangle mesh from an OBJ, OFF, PLY or STL file.
+    """Read a triangle mesh from an OBJ, OFF, PLY, STL or GLB (binary glTF 2.0) file.
 
     Parameters
     ----------
@@ -976,7 +1118,7 @@ def read_mesh(path: str | os.PathLike) -> MeshData:
             f"{supported}."
         )
     if ext not in _READERS:
-        hint = " GLB files can be written but not read." if ext == ".glb" else ""
+        hint = ""
         raise MeshReadError(
             f"'{p.name}' is a '{ext}' file, which Stylize3D cannot read. Supported formats: "
             f"{supported}.{hint}"
@@ -1030,10 +1172,13 @@ def _face_normals32(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return n
 
 
-def _write_obj(fh: BinaryIO, V: np.ndarray, F: np.ndarray) -> None:
+def _write_obj(fh: BinaryIO, V: np.ndarray, F: np.ndarray, colors=None) -> None:
     fh.write(b"# Written by Stylize3D\n")
     fh.write(f"# {V.shape[0]} vertices, {F.shape[0]} triangles\n".encode())
-    if V.shape[0]:
+    if V.shape[0] and colors is not None:
+        rows = np.column_stack([V, colors / 255.0]).ravel().tolist()
+        fh.write((("v %r %r %r %.6g %.6g %.6g\n" * V.shape[0]) % tuple(rows)).encode("ascii"))
+    elif V.shape[0]:
         fh.write((("v %r %r %r\n" * V.shape[0]) % tuple(V.ravel().tolist())).encode("ascii"))
     if F.shape[0]:
         fh.write((("f %d %d %d\n" * F.shape[0]) % tuple((F + 1).ravel().tolist())).encode("ascii"))
@@ -1047,15 +1192,24 @@ def _write_off(fh: BinaryIO, V: np.ndarray, F: np.ndarray) -> None:
         fh.write((("3 %d %d %d\n" * F.shape[0]) % tuple(F.ravel().tolist())).encode("ascii"))
 
 
-def _write_ply(fh: BinaryIO, V: np.ndarray, F: np.ndarray) -> None:
+def _write_ply(fh: BinaryIO, V: np.ndarray, F: np.ndarray, colors=None) -> None:
     index_type, index_dtype = ("int", "<i4") if V.shape[0] < 2**31 else ("uint", "<u4")
+    color_props = ("property uchar red\nproperty uchar green\nproperty uchar blue\n"
+                   if colors is not None else "")
     header = (
         "ply\nformat binary_little_endian 1.0\ncomment Written by Stylize3D\n"
         f"element vertex {V.shape[0]}\nproperty double x\nproperty double y\nproperty double z\n"
+        f"{color_props}"
         f"element face {F.shape[0]}\nproperty list uchar {index_type} vertex_indices\nend_header\n"
     )
     fh.write(header.encode("ascii"))
-    fh.write(np.ascontiguousarray(V, dtype="<f8").tobytes())
+    if colors is None:
+        fh.write(np.ascontiguousarray(V, dtype="<f8").tobytes())
+    else:
+        rec = np.empty(V.shape[0], dtype=np.dtype([("p", "<f8", (3,)), ("c", "u1", (3,))]))
+        rec["p"] = V
+        rec["c"] = colors
+        fh.write(rec.tobytes())
     rec = np.empty(F.shape[0], dtype=np.dtype([("c", "u1"), ("i", index_dtype, (3,))]))
     rec["c"] = 3
     rec["i"] = F
@@ -1183,8 +1337,28 @@ def _new_file_mode() -> int:
     return 0o644
 
 
-def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray) -> None:
-    """Write a triangle mesh atomically (OBJ, OFF, PLY, STL, or GLB export).
+def _check_colors(colors, n: int, name: str, ext: str) -> np.ndarray:
+    prefix = f"Cannot save '{name}' with vertex colours: "
+    if ext not in (".ply", ".obj"):
+        raise MeshWriteError(prefix + "use a .ply or .obj file (other formats store no "
+                             "per-vertex colours).")
+    c = np.asarray(colors)
+    if c.ndim != 2 or c.shape[0] != n or c.shape[1] not in (3, 4):
+        raise MeshWriteError(prefix + f"they must be one RGB colour per vertex ({n}, 3), "
+                             f"got {c.shape}.")
+    c = c[:, :3]
+    if c.dtype.kind == "f":
+        if not np.isfinite(c).all() or c.min() < 0 or c.max() > 1:
+            raise MeshWriteError(prefix + "float colours must lie in [0, 1].")
+        c = np.rint(c * 255.0)
+    elif c.min() < 0 or c.max() > 255:
+        raise MeshWriteError(prefix + "integer colours must lie in 0..255.")
+    return np.ascontiguousarray(c, dtype=np.uint8)
+
+
+def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray, *,
+               vertex_colors=None) -> None:
+    """Write a triangle mesh atomically (OBJ, OFF, PLY, STL or GLB).
 
     Parameters
     ----------
@@ -1195,6 +1369,9 @@ def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray) -> None:
         ``(n, 3)`` vertex positions (stored as float64; STL/GLB store float32).
     F : array_like
         ``(m, 3)`` 0-based triangle corner indices, all in ``[0, n)``.
+    vertex_colors : array_like, optional
+        ``(n, 3)`` (or ``(n, 4)``, alpha dropped) colours, ``uint8`` 0..255 or floats in
+        [0, 1]; PLY and OBJ only.
 
     Raises
     ------
@@ -1219,7 +1396,11 @@ def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray) -> None:
             f"write. Use one of {', '.join(SUPPORTED_WRITE)}."
         )
     V, F = _check_for_writing(V, F, p.name, ext)
-    atomic_write(p, lambda fh: _WRITERS[ext](fh, V, F))
+    if vertex_colors is None:
+        atomic_write(p, lambda fh: _WRITERS[ext](fh, V, F))
+    else:
+        colors = _check_colors(vertex_colors, V.shape[0], p.name, ext)
+        atomic_write(p, lambda fh: _WRITERS[ext](fh, V, F, colors))
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], None]) -> None:

@@ -631,9 +631,108 @@ def test_overwrite_replaces_content(tmp_path, ext):
 
 
 def test_formats_and_filter():
-    assert set(SUPPORTED_READ) == {".obj", ".off", ".ply", ".stl"}
-    assert set(SUPPORTED_WRITE) == set(SUPPORTED_READ) | {".glb"}
-    assert file_filter() == "Meshes (*.obj *.ply *.stl *.off)"
+    assert set(SUPPORTED_READ) == {".obj", ".off", ".ply", ".stl", ".glb"}
+    assert set(SUPPORTED_WRITE) == set(SUPPORTED_READ)
+    assert file_filter() == "Meshes (*.obj *.ply *.stl *.off *.glb)"
     assert file_filter("write") == "Meshes (*.obj *.ply *.stl *.off *.glb)"
     with pytest.raises(ValueError):
         file_filter("both")
+
+
+# ------------------------------------------------------------------------------ GLB reading, colours
+def test_glb_round_trip(tmp_path):
+    V, F = torus()
+    path = tmp_path / "t.glb"
+    write_mesh(path, V, F)
+    back = read_mesh(path)
+    assert np.array_equal(back.F, F)
+    assert np.allclose(back.V, V.astype(np.float32), atol=0, rtol=0)  # float32 in the file
+    assert back.notes == []
+
+
+def _glb(gltf: dict, binary: bytes) -> bytes:
+    js = json.dumps(gltf).encode()
+    js += b" " * (-len(js) % 4)
+    binary += b"\x00" * (-len(binary) % 4)
+    total = 12 + 8 + len(js) + 8 + len(binary)
+    return (struct.pack("<4sII", b"glTF", 2, total) + struct.pack("<I4s", len(js), b"JSON") + js
+            + struct.pack("<I4s", len(binary), b"BIN\x00") + binary)
+
+
+def test_glb_from_another_program_with_nodes_strides_and_two_parts(tmp_path):
+    """Interleaved positions (byteStride), uint16 indices, a translated and a scaled node."""
+    P = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    inter = np.zeros((3, 6), np.float32)
+    inter[:, :3] = P
+    inter[:, 3:] = 7.0  # another attribute interleaved
+    idx = np.array([0, 1, 2, 0], np.uint16)  # padded to 4 bytes; count says 3
+    binary = inter.tobytes() + idx.tobytes()
+    gltf = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0, 1]}],
+            "nodes": [{"mesh": 0, "translation": [0, 0, 5]},
+                      {"mesh": 0, "scale": [2, 2, 2]}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+            "buffers": [{"byteLength": len(binary)}],
+            "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 72, "byteStride": 24},
+                            {"buffer": 0, "byteOffset": 72, "byteLength": 8}],
+            "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"},
+                          {"bufferView": 1, "componentType": 5123, "count": 3,
+                           "type": "SCALAR"}]}
+    path = tmp_path / "other.glb"
+    path.write_bytes(_glb(gltf, binary))
+    m = read_mesh(path)
+    assert m.V.shape == (6, 3) and m.F.tolist() == [[0, 1, 2], [3, 4, 5]]
+    assert np.allclose(m.V[:3], P + [0, 0, 5]) and np.allclose(m.V[3:], 2 * P)
+    assert "2 mesh parts" in m.notes[0]
+
+
+@pytest.mark.parametrize("kind, says", [("signature", "signature"), ("cut", "truncated"),
+                                        ("draco", "extensions")])
+def test_bad_glb_is_a_plain_message(tmp_path, kind, says):
+    path = tmp_path / "t.glb"
+    write_mesh(path, *cube())
+    data = path.read_bytes()
+    if kind == "signature":
+        data = b"glTX" + data[4:]
+    elif kind == "cut":
+        data = data[:40]
+    else:  # a file that needs Draco decompression
+        jlen = struct.unpack_from("<I", data, 12)[0]
+        gltf = json.loads(data[20:20 + jlen])
+        gltf["extensionsRequired"] = ["KHR_draco_mesh_compression"]
+        data = _glb(gltf, data[20 + jlen + 8:])
+    path.write_bytes(data)
+    with pytest.raises(MeshReadError) as e:
+        read_mesh(path)
+    assert says in str(e.value)
+
+
+@pytest.mark.parametrize("ext", [".ply", ".obj"])
+def test_vertex_colours_written_and_geometry_reads_back(tmp_path, ext):
+    V, F = icosphere(1)
+    rgb = (np.arange(len(V) * 3).reshape(-1, 3) * 7 % 256).astype(np.uint8)
+    path = tmp_path / f"c{ext}"
+    write_mesh(path, V, F, vertex_colors=rgb)
+    back = read_mesh(path)
+    assert np.array_equal(back.F, F) and np.allclose(back.V, V)
+    if ext == ".ply":
+        raw = path.read_bytes()
+        head, body = raw.split(b"end_header\n", 1)
+        assert b"property uchar red" in head
+        rec = np.frombuffer(body[:len(V) * 27],
+                            dtype=np.dtype([("p", "<f8", (3,)), ("c", "u1", (3,))]))
+        assert np.array_equal(rec["c"], rgb)
+    else:
+        rows = [line.split()[4:] for line in path.read_text().splitlines()
+                if line.startswith("v ")]
+        assert np.allclose(np.array(rows, float) * 255, rgb, atol=1e-3)
+
+
+def test_vertex_colours_refused_plainly(tmp_path):
+    V, F = cube()
+    with pytest.raises(MeshWriteError, match="use a .ply or .obj"):
+        write_mesh(tmp_path / "c.stl", V, F, vertex_colors=np.zeros((len(V), 3)))
+    with pytest.raises(MeshWriteError, match="one RGB colour per vertex"):
+        write_mesh(tmp_path / "c.ply", V, F, vertex_colors=np.zeros((2, 3)))
+    with pytest.raises(MeshWriteError, match=r"\[0, 1\]"):
+        write_mesh(tmp_path / "c.ply", V, F, vertex_colors=np.full((len(V), 3), 2.0))
+    assert not (tmp_path / "c.ply").exists()
