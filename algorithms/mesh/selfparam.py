@@ -304,7 +304,9 @@ def _corner_table(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
             f"The edge between vertices {a} and {b} is used twice in the same direction: it is "
             f"shared by more than two triangles (non-manifold), or its two triangles are "
             f"oriented inconsistently ({dup.size} such edges). Self-parameterization needs a "
-            f"manifold, consistently oriented mesh; 'Clean' can fix both.")
+            f"manifold, consistently oriented mesh; 'Clean' can fix both, except on a "
+            f"one-sided part (like a Moebius strip), which must be deleted or cut in a mesh "
+            f"editor.")
     pos = np.searchsorted(sk, twin)
     pos = np.minimum(pos, len(sk) - 1)
     found = sk[pos] == twin
