@@ -55,6 +55,20 @@ def shared_mesh(name: str) -> Path:
     return p
 
 
+def mobius_strip(n: int = 16):
+    """An open Moebius strip (one-sided, non-orientable) of n quads: (V (2n, 3), F (2n, 3))."""
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    V = np.vstack([np.column_stack([(1 + w * np.cos(t / 2)) * np.cos(t),
+                                    (1 + w * np.cos(t / 2)) * np.sin(t), w * np.sin(t / 2)])
+                   for w in (-0.3, 0.3)])
+    F = []
+    for i in range(n):
+        a, b = i, n + i
+        c, d = (i + 1, n + i + 1) if i < n - 1 else (n, 0)  # the last quad closes with a twist
+        F += [[a, c, b], [b, c, d]]
+    return V, np.array(F, dtype=np.int64)
+
+
 @pytest.fixture
 def bad_files(tmp_path) -> dict[str, Path]:
     """The bad inputs every entry point must survive, as files."""

@@ -133,10 +133,11 @@ def normal_vjp(V, F, faces, grad_normals) -> np.ndarray:
     return out
 
 
-def image_vjp(V, F, rendering: Rendering, grad_image, *, return_albedo: bool = False):
-    """``dE/dV (n, 3)`` from ``dE/dR (H, W, C)`` for the image of :func:`render` (visibility
-    fixed). With ``return_albedo=True`` also ``dE/d(albedo) (m, C)`` (zero for unseen faces;
-    needs a rendering made with an albedo)."""
+def face_color_gradients(rendering: Rendering, grad_image) -> np.ndarray:
+    """``dE/d(face colour) (k, C)`` of the seen faces (``rendering.faces``) from ``dE/dR
+    (H, W, C)``: flat shading gives each pixel its face's colour, so this is the per-face sum of
+    the pixel gradients (one bincount per channel, O(pixels + faces)). Shared by every shading's
+    vector-Jacobian product."""
     G = np.asarray(grad_image, dtype=np.float64)
     if G.ndim == 2:
         G = G[..., None]
@@ -150,6 +151,15 @@ def image_vjp(V, F, rendering: Rendering, grad_image, *, return_albedo: bool = F
     gc = np.empty((k, C))
     for c in range(C):
         gc[:, c] = np.bincount(s, weights=Gm[:, c], minlength=k)
+    return gc
+
+
+def image_vjp(V, F, rendering: Rendering, grad_image, *, return_albedo: bool = False):
+    """``dE/dV (n, 3)`` from ``dE/dR (H, W, C)`` for the image of :func:`render` (visibility
+    fixed). With ``return_albedo=True`` also ``dE/d(albedo) (m, C)`` (zero for unseen faces;
+    needs a rendering made with an albedo)."""
+    gc = face_color_gradients(rendering, grad_image)
+    C = gc.shape[1]
     gN, gA = rendering.shading.face_colors_vjp(rendering.normals, rendering.camera, gc,
                                               rendering.albedo)
     dV = normal_vjp(V, F, rendering.faces, gN)

@@ -64,7 +64,7 @@ import numpy as np
 
 from ..errors import MeshReadError, ParameterError
 from .camera import Camera
-from .render import Rendering, normal_vjp, render
+from .render import Rendering, face_color_gradients, normal_vjp, render
 
 __all__ = ["SH_DEGREE", "n_coefficients", "sh_index", "clamped_cosine_coefficients",
            "convolution_weights", "sh_basis", "sh_basis_gradient", "sh_basis_vjp", "sh_basis_polar",
@@ -429,19 +429,8 @@ def sh_image_vjp(V, F, rendering: Rendering, grad_image, *, vertices: bool = Tru
     shading = rendering.shading
     if not isinstance(shading, SHShading):
         raise TypeError("sh_image_vjp needs a rendering made with SHShading")
-    G = np.asarray(grad_image, dtype=np.float64)
-    if G.ndim == 2:
-        G = G[..., None]
-    C = rendering.colors.shape[1]
-    if G.shape != rendering.image.shape[:2] + (C,):
-        raise ValueError(f"image gradient has shape {G.shape}, the image {rendering.image.shape}")
-    mask = rendering.slot >= 0
-    s = rendering.slot[mask]
-    Gm = G[mask]
-    k = len(rendering.faces)
-    gc = np.empty((k, C))
-    for c in range(C):
-        gc[:, c] = np.bincount(s, weights=Gm[:, c], minlength=k)
+    gc = face_color_gradients(rendering, grad_image)
+    C = gc.shape[1]
     N, alb = rendering.normals, rendering.albedo
     dV = dU = dA = None
     if vertices:

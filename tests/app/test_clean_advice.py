@@ -5,23 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from algorithms.mesh import write_mesh
-
-
-def _mobius(n=16):
-    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    V = np.vstack([np.column_stack([(1 + w * np.cos(t / 2)) * np.cos(t),
-                                    (1 + w * np.cos(t / 2)) * np.sin(t), w * np.sin(t / 2)])
-                   for w in (-0.3, 0.3)])
-    F = []
-    for i in range(n):
-        a, b = i, n + i
-        c, d = (i + 1, n + i + 1) if i < n - 1 else (n, 0)
-        F += [[a, c, b], [b, c, d]]
-    return V, np.array(F)
+from tests.conftest import mobius_strip
 
 
 def test_status_bar_advice_for_non_orientable_mesh(window, dialogs, tmp_path):
-    V, F = _mobius()
+    V, F = mobius_strip()
     path = tmp_path / "mobius.obj"
     write_mesh(path, V, F)
     assert window.open_path(path)  # only a warning Clean cannot fix: opens without a question
@@ -36,7 +24,7 @@ def test_status_bar_advice_for_non_orientable_mesh(window, dialogs, tmp_path):
 
 
 def test_status_bar_sends_to_clean_when_clean_can_fix(window, dialogs, tmp_path):
-    V, F = _mobius()
+    V, F = mobius_strip()
     path = tmp_path / "loose.obj"
     write_mesh(path, np.vstack([V, [[5.0, 5.0, 5.0]]]), F)
     dialogs.answers.append("Open as it is")

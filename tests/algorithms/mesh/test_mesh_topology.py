@@ -12,32 +12,13 @@ from algorithms.errors import InvalidMeshError
 from algorithms.mesh import topology as T
 from algorithms.mesh.io import read_mesh
 from algorithms.mesh.primitives import cube, grid, icosphere, organic_sample, torus
-from tests.conftest import shared_mesh
+from tests.conftest import mobius_strip, shared_mesh
 
 
 
 def shared(name):
     m = read_mesh(shared_mesh(name))
     return m.V, m.F
-
-
-def mobius(n=12):
-    """An open Moebius strip (non-orientable), n quads."""
-    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    V = []
-    for s in (-1, 1):
-        w = 0.3 * s
-        V.append(np.column_stack([(1 + w * np.cos(t / 2)) * np.cos(t), (1 + w * np.cos(t / 2)) * np.sin(t), w * np.sin(t / 2)]))
-    V = np.vstack(V)
-    F = []
-    for i in range(n):
-        a, b = i, n + i
-        if i < n - 1:
-            c, d = i + 1, n + i + 1
-        else:  # the twist: connect to the opposite side
-            c, d = n, 0
-        F += [[a, c, b], [b, c, d]]
-    return V, np.array(F)
 
 
 def two_cones_tip_to_tip():
@@ -315,7 +296,7 @@ def test_genus_rejects_bad_meshes():
     with pytest.raises(InvalidMeshError, match="join separate pieces"):
         T.genus(two_cones_tip_to_tip()[1])
     with pytest.raises(InvalidMeshError, match="not orientable"):
-        T.genus(mobius()[1])
+        T.genus(mobius_strip()[1])
     with pytest.raises(InvalidMeshError, match="empty"):
         T.genus(np.zeros((0, 3), int))
 
@@ -336,7 +317,7 @@ def test_orient_consistently_restores_orientation():
 
 
 def test_orient_consistently_mobius_and_nonmanifold():
-    V, F = mobius()
+    V, F = mobius_strip()
     _, _, orientable = T.orient_consistently(F)
     assert not orientable
     with pytest.raises(InvalidMeshError):

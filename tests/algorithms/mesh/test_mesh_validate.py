@@ -14,7 +14,7 @@ from algorithms.mesh.io import read_mesh
 from algorithms.mesh.operators import signed_volume
 from algorithms.mesh.primitives import cube, grid, icosphere, torus
 from algorithms.mesh.validate import CleanResult, MeshIssue, MeshReport, clean_mesh, validate_mesh
-from tests.conftest import shared_mesh
+from tests.conftest import mobius_strip, shared_mesh
 
 
 # name -> (V, F, genus, boundary loops) from SOURCES.md
@@ -499,22 +499,8 @@ def test_clean_fixes_random_corruption(case):
 
 
 # ------------------------------------------------------------------------------ advice (issue 10)
-def _mobius(n=16):
-    """An open Moebius strip (non-orientable): Clean cannot orient it."""
-    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    V = np.vstack([np.column_stack([(1 + w * np.cos(t / 2)) * np.cos(t),
-                                    (1 + w * np.cos(t / 2)) * np.sin(t), w * np.sin(t / 2)])
-                   for w in (-0.3, 0.3)])
-    F = []
-    for i in range(n):
-        a, b = i, n + i
-        c, d = (i + 1, n + i + 1) if i < n - 1 else (n, 0)
-        F += [[a, c, b], [b, c, d]]
-    return V, np.array(F)
-
-
 def test_advice_never_offers_clean_for_what_clean_cannot_fix():
-    V, F = _mobius()
+    V, F = mobius_strip()
     report = validate_mesh(V, F)
     issue = report.get("inconsistent_orientation")
     assert issue is not None and not issue.fixable and not report.needs_cleaning
@@ -528,7 +514,7 @@ def test_advice_never_offers_clean_for_what_clean_cannot_fix():
 
 
 def test_advice_splits_fixable_and_unfixable_problems():
-    V, F = _mobius()
+    V, F = mobius_strip()
     V2 = np.vstack([V, [[5.0, 5.0, 5.0]]])  # an unused vertex: Clean fixes that
     report = validate_mesh(V2, F)
     assert report.needs_cleaning
