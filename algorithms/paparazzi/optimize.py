@@ -46,6 +46,7 @@ from ..errors import InvalidMeshError, ParameterError, Stylize3DError
 from ..params import param, validate_params
 from ..render import image_vjp, render
 from ..steps import Step
+from ..optim import nadam_step
 from .filters import FilterContext, FilterSpec, front_camera, get_filter
 from .offset import OffsetSurface, offset_surface, sample_camera
 
@@ -104,19 +105,6 @@ class PaparazziStep(Step):
     image: np.ndarray | None = None
     filtered: np.ndarray | None = None
     seconds: dict = field(default_factory=dict)
-
-
-def nadam_step(g, m, v, t: int, lr: float, b1: float = 0.9, b2: float = 0.999,
-               eps: float = 1e-8) -> np.ndarray:
-    """One NAdam step (Dozat 2016, no momentum schedule): updates the moments ``m``, ``v`` in
-    place and returns the displacement to subtract. ``t`` is the 1-based step count."""
-    m *= b1
-    m += (1 - b1) * g
-    v *= b2
-    v += (1 - b2) * g * g
-    mhat = m / (1 - b1 ** t)
-    vhat = v / (1 - b2 ** t)
-    return lr * (b1 * mhat + (1 - b1) * g / (1 - b1 ** t)) / (np.sqrt(vhat) + eps)
 
 
 def count_self_intersections(V, F) -> int:

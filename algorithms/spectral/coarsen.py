@@ -81,6 +81,7 @@ from scipy.sparse.linalg import eigsh
 
 from ..errors import ParameterError
 from ..params import param
+from ..optim import nadam_step
 
 __all__ = ["CoarsenParams", "CoarsenStep", "Clustering", "edge_distances", "kmedoids_clustering",
            "cluster_sparsity", "null_space", "project_constraint", "energy_and_gradient",
@@ -694,11 +695,7 @@ def coarsen_iter(L, M, m: int | None = None, k: int | None = None,
         # the units of L and M (E scales like length^-2 for a surface Laplacian), so eps stays
         # negligible on small or large meshes alike
         gs = grad * gscale
-        mom = b1 * mom + (1 - b1) * gs
-        vel = b2 * vel + (1 - b2) * gs * gs
-        mhat = mom / (1 - b1 ** it)
-        vhat = vel / (1 - b2 ** it)
-        step = lr * (b1 * mhat + (1 - b1) * gs / (1 - b1 ** it)) / (np.sqrt(vhat) + eps)
+        step = nadam_step(gs, mom, vel, it, lr, b1, b2, eps)  # updates mom, vel in place
         G.data -= step
         G = project_constraint(G, B0, Phi0)
         E, grad, Lt = energy_and_gradient(G, L, A, B, mt, blocks=blocks)

@@ -158,7 +158,11 @@ def test_optimizer_is_independent_of_units():
     normalized NADAM takes the same steps, so G is the same."""
     V, F = primitives.icosphere(2)
     V = V * np.array([1.0, 1.2, 0.8])
-    for balance_iterations in (0, 200):   # the thesis's NADAM alone, then with balancing
+    # the thesis's NADAM alone, then with balancing. Every step of both stages is invariant to
+    # units, but L-BFGS on this non-convex energy amplifies round-off over its iterations
+    # (measured: G differs by 2e-9 after 20, 4e-7 after 50, 8e-4 after 100, 4e-3 after 200), so
+    # the balanced run is compared after 50 iterations, tightly
+    for balance_iterations in (0, 50):
         out = []
         for s in (1.0, 10.0):
             L = sp.csr_matrix(-cotangent_laplacian(V * s, F))
@@ -168,8 +172,7 @@ def test_optimizer_is_independent_of_units():
             out.append(r)
         a, b = out
         assert np.array_equal(a.P.indices, b.P.indices)
-        # L-BFGS amplifies round-off over its iterations a little more than NADAM does
-        tol = 1e-6 if balance_iterations == 0 else 1e-3
+        tol = 1e-6 if balance_iterations == 0 else 1e-5
         assert np.allclose(a.G.toarray(), b.G.toarray(), atol=tol)
         assert np.isclose(a.energy, b.energy * 1e4, rtol=tol)
 
