@@ -1,6 +1,6 @@
 """Surface multigrid vs direct (CHOLMOD) and algebraic multigrid (PyAMG), same run (thesis §8.6).
 
-For a Loop-upsampled mesh at each size (the base mesh from ../shared/meshes, subdivided 1, 2, 3
+For a Loop-upsampled mesh at each size (the base mesh from tests/data or $STYLIZE3D_MESHES, subdivided 1, 2, 3
 times: armadillo gives ~58k, 233k, 933k vertices), normalized to a unit bounding box:
 
   hierarchy     surface_multigrid(V, F) build time (geometry only, done once per mesh)
@@ -45,6 +45,7 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
+from _timing import mesh_path  # noqa: E402
 
 from algorithms.linalg import SPDSolver, cholmod_available  # noqa: E402
 from algorithms.mesh import read_mesh  # noqa: E402
@@ -54,7 +55,6 @@ from algorithms.mesh.subdivision import loop_subdivide  # noqa: E402
 from algorithms.multigrid import surface_multigrid  # noqa: E402
 from algorithms.multigrid.applications import DataSmoother  # noqa: E402
 
-SHARED = ROOT.parent / "shared" / "meshes"
 ERR = 1e-5  # relative error to the direct solution for the "mg@err" columns
 VARIANTS = {
     "dirichlet": [("V-cycles (thesis)", dict(accel=None)),
@@ -120,9 +120,9 @@ def main() -> None:
                     help="skip CHOLMOD on meshes with more vertices than this")
     args = ap.parse_args()
     sys.stdout.reconfigure(line_buffering=True)
-    path = SHARED / args.mesh
+    path = mesh_path(args.mesh)
     if not path.exists():
-        print(f"{args.mesh}: not in {SHARED}")
+        print(f"{args.mesh}: not found (tests/data or $STYLIZE3D_MESHES)")
         return
     base = read_mesh(path)
     backend = "cholmod" if cholmod_available() else "superlu"

@@ -23,14 +23,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from _timing import median_seconds  # noqa: E402
+from _timing import median_seconds, mesh_path  # noqa: E402
 
 from algorithms.linalg import SPDSolver  # noqa: E402
 from algorithms.mesh import read_mesh  # noqa: E402
 from algorithms.mesh.operators import cotangent_laplacian, face_areas, mass_matrix  # noqa: E402
 from algorithms.smoothing import SmoothParams, smooth  # noqa: E402
 
-SHARED = ROOT.parent / "shared" / "meshes"
 DEFAULT = ["spot_lowres.obj", "armadillo.obj", "koala.obj", "igea.ply"]
 
 
@@ -42,9 +41,9 @@ def main() -> None:
     print(f"{'mesh':18s} {'V':>7s} {'factor s':>9s} {'solve s':>8s} {'spsolve s':>9s} "
           f"{'solve/peer':>10s} {'10 steps s':>10s} {'10 steps/10 peer':>16s}")
     for name in args.meshes:
-        path = SHARED / name
+        path = mesh_path(name)
         if not path.exists():
-            print(f"{name}: not in {SHARED}, skipped")
+            print(f"{name}: not found (tests/data or $STYLIZE3D_MESHES), skipped")
             continue
         m = read_mesh(path)
         V, F = m.V, m.F

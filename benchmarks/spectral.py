@@ -33,6 +33,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from _timing import mesh_path  # noqa: E402
 
 from algorithms.mesh.io import read_mesh  # noqa: E402
 from algorithms.spectral import CoarsenParams  # noqa: E402
@@ -56,7 +58,7 @@ def _decimate(V, F, n_target: int):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--mesh", default=str(ROOT.parent / "shared" / "meshes" / "koala.obj"))
+    ap.add_argument("--mesh", default=str(mesh_path("koala.obj")))
     ap.add_argument("--n", type=int, default=30000, help="decimate to about n vertices first")
     ap.add_argument("--m", type=int, default=500)
     ap.add_argument("--k", type=int, default=100)
@@ -120,7 +122,6 @@ def main(argv=None) -> int:
 
 
 # ------------------------------------------------------------------------------ issue-10 table
-SHARED = ROOT.parent / "shared" / "meshes"
 
 
 def _largest_part(V, F):
@@ -169,15 +170,15 @@ def clip_below(V, F, axis, c):
 def _load(name):
     from algorithms.mesh import primitives
     if name == "armadillo, base cut":
-        md = read_mesh(SHARED / "armadillo.obj")
+        md = read_mesh(mesh_path("armadillo.obj"))
         y = md.V[:, 1]
         return clip_below(md.V, md.F, 1, y.min() + 0.13 * (y.max() - y.min()))
     if name == "fertility, base cut":
-        md = read_mesh(SHARED / "fertility.off")
+        md = read_mesh(mesh_path("fertility.off"))
         y = md.V[:, 1]
         return clip_below(md.V, md.F, 1, y.min() + 0.07 * (y.max() - y.min()))
     if name == "bob, top sliced off":
-        md = read_mesh(SHARED / "bob.obj")
+        md = read_mesh(mesh_path("bob.obj"))
         z = md.V[md.F].mean(1)[:, 1]
         return _largest_part(md.V, md.F[z < z.max() - 0.2 * (z.max() - z.min())])
     if name == "CAD-like, 12 parts":
@@ -190,7 +191,7 @@ def _load(name):
             Fl.append(Fs + off)
             off += len(Vs)
         return np.vstack(Vl), np.vstack(Fl)
-    md = read_mesh(SHARED / name)
+    md = read_mesh(mesh_path(name))
     return md.V, md.F
 
 
