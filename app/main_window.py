@@ -20,7 +20,7 @@ from algorithms.errors import Stylize3DError
 from algorithms.mesh import (SUPPORTED_READ, SUPPORTED_WRITE, clean_mesh, file_filter, read_mesh,
                              validate_mesh, write_mesh)
 from algorithms.steps import Step
-from app import dialogs
+from app import __version__, dialogs
 from app.commands import StateCommand
 from app.document import Document
 from app.jobs import JobRunner
@@ -837,9 +837,12 @@ class MainWindow(QMainWindow):
     def show_about(self) -> None:
         dialogs.info(self, "About Stylize3D",
                      "Stylize3D — stylize and process 3D surface meshes.\n\n"
-                     "Cubic stylization, shape analogies, Paparazzi, neural subdivision, spectral "
-                     "coarsening and surface multigrid, after one PhD thesis on data-driven "
-                     "geometric stylization and scalable geometry processing.")
+                     "In this app: cubic stylization, shape analogies, neural subdivision, "
+                     "smoothing, surface multigrid and spectral coarsening; Paparazzi image "
+                     "filters and parametric adversaries run from the command line "
+                     "(stylize3d paparazzi / adversary). After one PhD thesis on data-driven "
+                     "geometric stylization and scalable geometry processing.\n\n"
+                     f"Version {__version__}.")
 
     def show_welcome(self):
         """Help > Welcome (and the first start): samples with thumbnails, or open a file."""
