@@ -332,9 +332,6 @@ def _progressive_choice(args: argparse.Namespace, n_faces: int, command: str, *,
                  f"meshes: on a {faces:,}-triangle copy, then the details are put back. Pass "
                  f"--no-progressive to work on every triangle directly (slower), or "
                  f"--progressive-faces M to choose the copy's size.")
-    if faces >= n_faces:
-        raise ParameterError(f"--progressive-faces must be below the mesh's own triangle count "
-                             f"({n_faces:,}).")
     return params_from_dict(ProgressiveParams, {"target_faces": faces, "preview_every": 0})
 
 
