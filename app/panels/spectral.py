@@ -70,15 +70,28 @@ class SpectralPanel(MethodPanel):
         grid = QGridLayout()
         self.heatmaps: dict[str, QLabel] = {}
         self.scores: dict[str, QLabel] = {}
+        method_tips = {
+            "ours": "Ours: spectral coarsening (this panel's method), which optimizes the coarse "
+                    "operator so its low eigenvectors match the fine mesh's.",
+            "qslim": "QSlim: the usual way to make a coarse mesh (simplify the shape by "
+                     "collapsing edges), then build its operator; shown for comparison.",
+            "amg": "AMG: algebraic multigrid's coarsening of the matrix, which ignores the "
+                   "shape; shown for comparison.",
+        }
+        score_tip = ("C diag: how well the coarse eigenvectors match the fine ones (1 = "
+                     "perfectly, 0 = not at all). Eig err: mean relative error of the first k "
+                     "eigenvalues (0 = exact). Higher C diag and lower eig err are better.")
         for j, name in enumerate(METHODS):
             t = QLabel(name)
             t.setAlignment(Qt.AlignmentFlag.AlignCenter)
+            t.setToolTip(method_tips[name])
             img = QLabel()
             img.setFixedSize(110, 110)
             img.setToolTip(f"|C| of {name}: a clean diagonal means the coarse eigenvectors match "
                            "the fine ones (thesis Fig. 7.1).")
             sc = QLabel("")
             sc.setAlignment(Qt.AlignmentFlag.AlignCenter)
+            sc.setToolTip(score_tip)
             grid.addWidget(t, 0, j)
             grid.addWidget(img, 1, j)
             grid.addWidget(sc, 2, j)

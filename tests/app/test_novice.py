@@ -482,6 +482,14 @@ def test_what_does_this_do_opens_the_panels_page_and_terms_are_explained(window,
     spectral = window.panels["Spectral coarsening"].form
     assert "NADAM:" in spectral.editors["learning_rate"].toolTip()
     assert "Lloyd iterations:" in spectral.editors["clustering_iterations"].toolTip()
+    # and the panel's own result labels: "ours", "C diag"
+    from PySide6.QtWidgets import QLabel
+
+    panel = window.panels["Spectral coarsening"]
+    assert "C diag: how well" in panel.scores["ours"].toolTip()
+    heads = {w.text(): w.toolTip() for w in panel.findChildren(QLabel)
+             if w.text() in ("ours", "qslim", "amg")}
+    assert heads["ours"].startswith("Ours: spectral coarsening") and "QSlim:" in heads["qslim"]
     energy = window.panels["Multigrid smoothing"].form.editors["energy"]
     assert "Dirichlet:" in energy.toolTip() and "Hessian:" in energy.toolTip()
 
