@@ -73,8 +73,12 @@ def warm_up_in_background() -> "threading.Thread":
                 return
             V, F = icosphere(2)
             run_to_end(CubicStylizer(V, F).steps(CubicParams(max_iterations=1)))
+            from algorithms.multigrid.applications import DataSmoother
+
             V, F = icosphere(3)
-            surface_multigrid(V, F, min_vertices=100)
+            mg = surface_multigrid(V, F, min_vertices=100)
+            for energy in ("dirichlet", "bilaplacian"):
+                DataSmoother(V, F, mg=mg, energy=energy).smooth(V[:, 0], 1e-3)
         except Exception:  # a warm-up never stops the app; the first run will say what is wrong
             pass
 

@@ -149,6 +149,11 @@ def test_gui_thread_stays_responsive_during_jobs_on_armadillo(window, dialogs, q
 
     from tests.conftest import shared_mesh
 
+    from app.gui import warm_up_in_background
+
+    # as the app does at start (run_app): modules and kernels load on a background thread while
+    # the window shows, so a first job does not import them while it runs
+    warm_up_in_background().join()
     assert window.open_path(shared_mesh("armadillo.obj"))
     qtbot.wait(300)
     cubic = window.panels["Cubic"]
