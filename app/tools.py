@@ -84,8 +84,12 @@ class FieldBrush(QObject):
         if old is not None and np.array_equal(old, values):
             return
         after = before.with_field(self.field, values)
-        self.window_.undo_stack.push(StateCommand(self.window_.document, before, after,
-                                                  f"Paint {self.label}"))
+        cmd = StateCommand(self.window_.document, before, after, f"Paint {self.label}")
+        # what a study log records with the stroke (app/study/session.py)
+        cmd.log_details = {"tool": "brush", "field": self.field,
+                           "radius": self.settings.radius, "strength": self.settings.strength,
+                           "erase": self.settings.erase}
+        self.window_.undo_stack.push(cmd)
 
     def weights(self, hit: PickResult) -> tuple[np.ndarray, np.ndarray]:
         """Vertices touched by a dab at ``hit`` and their falloff weights in (0, 1]."""

@@ -45,6 +45,33 @@ def _state_hash(state) -> str:
     return state_hash(state.V, state.F, state.fields, state.handles)
 
 
+def _edit_details(cmd) -> dict:
+    """What an undoable edit changed, from its before/after states: per field the vertices whose
+    value changed and their new values, moved vertices, handles; plus ``log_details`` a tool put
+    on its command (brush radius, strength, ...)."""
+    out = dict(getattr(cmd, "log_details", None) or {})
+    before, after = getattr(cmd, "before", None), getattr(cmd, "after", None)
+    if before is None or after is None or before.V.shape != after.V.shape:
+        return out
+    fields = {}
+    for name in sorted(set(before.fields) | set(after.fields)):
+        a, b = before.fields.get(name), after.fields.get(name)
+        if a is None or b is None:
+            fields[name] = {"added" if a is None else "removed": True}
+            continue
+        changed = np.flatnonzero(~((a == b) | (np.isnan(a) & np.isnan(b))))
+        if changed.size:
+            fields[name] = {"vertices": changed, "values": b[changed]}
+    if fields:
+        out["fields"] = fields
+    moved = np.flatnonzero((before.V != after.V).any(axis=1))
+    if moved.size:
+        out["moved_vertices"] = moved
+    if before.handles != after.handles:
+        out["handles"] = [[int(v), list(p)] for v, p in after.handles]
+    return out
+
+
 # ------------------------------------------------------------------------------ dialogs
 class StartDialog(QDialog):
     """Participant code and condition; says when a session for that code can be resumed."""
@@ -516,8 +543,10 @@ class StudySession(QObject):
                 if redo:
                     self._log("redo", text=cmds[i][1], result_hash=h)
                 elif not now[i].text().startswith(tuple(self.window.panels)):
-                    # runs are logged as run/result; every other undoable change is an edit
-                    self._log("edit", text=now[i].text(), after_hash=h)
+                    # runs are logged as run/result; every other undoable change is an edit,
+                    # with the vertices it changed (brush strokes: also the brush's settings)
+                    self._log("edit", text=now[i].text(), after_hash=h,
+                              **_edit_details(now[i]))
         self._snapshot_undo()
 
     def _poll_camera(self) -> None:

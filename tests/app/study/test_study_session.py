@@ -12,6 +12,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from app.study.log import read_log
@@ -76,6 +77,20 @@ def test_session_locks_logs_asks_and_replays(window, dialogs, qtbot, tmp_path):
         smooth.run()
     window.undo_stack.undo()
     window.undo_stack.redo()
+    # an edit that is not a run (what a brush stroke pushes): logged with what it changed
+    from app.commands import StateCommand
+
+    st = window.document.state
+    lam = np.ones(len(st.V))
+    lam[[3, 5]] = (0.5, np.nan)
+    cmd = StateCommand(window.document, st, st.with_field("lambda_scale", lam), "Paint λ scale")
+    cmd.log_details = {"tool": "brush", "radius": 0.06}
+    window.undo_stack.push(cmd)
+    lam2 = lam * 2  # every vertex changes, but vertex 5 stays NaN; vertex 5 -> 7, 7 -> NaN
+    lam2[5], lam2[7] = 7.0, np.nan
+    cmd2 = StateCommand(window.document, window.document.state,
+                        window.document.state.with_field("lambda_scale", lam2), "Paint λ")
+    window.undo_stack.push(cmd2)
     session.end_task("done")
     dlg = session.questionnaire_dialog
     assert dlg is not None and not dlg.buttons.buttons()[0].isEnabled()  # Likert unanswered
@@ -95,6 +110,14 @@ def test_session_locks_logs_asks_and_replays(window, dialogs, qtbot, tmp_path):
     run = next(e for e in ev if e["action"] == "run")
     assert run["method"] == "Smooth" and run["params"]["iterations"] == 2
     assert run["task"] == "smooth-it" and len(run["input_hash"]) == 64
+    edits = [e for e in ev if e["action"] == "edit"]
+    assert [e["text"] for e in edits] == ["Paint λ scale", "Paint λ"]
+    assert edits[0]["tool"] == "brush" and edits[0]["radius"] == 0.06
+    assert edits[0]["fields"]["lambda_scale"] == {"added": True}
+    changed = edits[1]["fields"]["lambda_scale"]
+    assert changed["vertices"] == list(range(len(lam)))
+    assert changed["values"][3] == 1.0 and changed["values"][5] == 7.0
+    assert changed["values"][7] == "nan"  # JSON has no NaN
     q = next(e for e in ev if e["action"] == "questionnaire")
     assert q["answers"] == {"ease": 4, "comment": "the slider was nice"}
     files = session.log.results_dir
