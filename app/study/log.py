@@ -18,8 +18,9 @@ resume it continues from the last logged value. Actions written by the app:
 ``open`` (``path``, ``mesh_hash``), ``run`` (``method``, ``params``, ``options``,
 ``input_hash``, ``input_file``: the saved input state for replay), ``result`` (``method``,
 ``status``: done, cancelled, failed; ``result_hash``, ``seconds``, ``message``),
-``edit`` (an undoable change that is not a run: ``text``, e.g. a brush stroke, with
-``before_hash`` / ``after_hash``), ``stroke`` (``tool``, ``field``, ``params``, ``vertices``),
+``edit`` (an undoable change that is not a run, e.g. a brush stroke: ``text``, ``after_hash``,
+``fields`` {name: {vertices, values}} of what changed, ``moved_vertices``, ``handles``; brush
+strokes add ``tool``, ``field``, ``radius``, ``strength``, ``erase``),
 ``undo`` / ``redo`` (``text``, ``result_hash``), ``camera`` (throttled: ``position``,
 ``focal_point``, ``up``), ``panel`` (``title`` of the panel brought forward),
 ``questionnaire`` (``answers``: {item id: value}), ``resume``, ``session_end``.
