@@ -35,7 +35,7 @@ from algorithms.adversarial import (DEFAULT_RADIUS, AdversaryParams, attack,  # 
                                     find_recognized_views, orbit_cameras, prepare_scene,
                                     random_perturbation, resolve_label, short_name)
 from algorithms.adversarial.shapes import SUBJECTS, _sphere  # noqa: E402
-from algorithms.render.sh import (SHShading, _tables, convolution_weights,  # noqa: E402
+from algorithms.render.sh import (SHShading, convolution_weights, sh_face_colors_torch,  # noqa: E402
                                   environment, sh_image_vjp, sh_render)
 
 
@@ -49,21 +49,7 @@ def median_time(fn, repeat=7):
 
 
 def torch_image(Vt, Ut, F_seen, rho_seen, slot_seen):
-    X = Vt[F_seen]
-    n = torch.linalg.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0])
-    n = n / n.norm(dim=1, keepdim=True)
-    x, y, z = n[:, 0], n[:, 1], n[:, 2]
-    Pz, _, order, is_sin = _tables(6)
-    Z = torch.stack([z ** p for p in range(7)], 1)
-    Cs, Ss = [torch.ones_like(x)], [torch.zeros_like(x)]
-    for _ in range(1, 7):
-        Cs.append(Cs[-1] * x - Ss[-1] * y)
-        Ss.append(Cs[-2] * y + Ss[-1] * x)
-    XY = torch.stack([(Ss if s else Cs)[o] for o, s in zip(order, is_sin)], 1)
-    Y = (Z @ torch.as_tensor(Pz)) * XY
-    A = torch.as_tensor(convolution_weights(6))
-    col = (Y @ (A[:, None] * Ut)) * rho_seen
-    return col[slot_seen]
+    return sh_face_colors_torch(Vt, Ut, F_seen, rho_seen)[slot_seen]
 
 
 def speed():

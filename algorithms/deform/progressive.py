@@ -559,6 +559,12 @@ class AffineProgressiveMesh:
                            cnt / np.maximum(size, 1))
         return out
 
+    def coarse_ids(self, ids) -> np.ndarray | None:
+        """Input vertex ids (kept by the decimation, e.g. constraints) as coarse vertex ids."""
+        if ids is None:
+            return None
+        return self.decimation.fine_to_coarse[np.asarray(ids, dtype=np.int64).reshape(-1)]
+
     def prolong(self, coarse_positions) -> np.ndarray:
         """Affine vertex splits (Alg. 4 line 7): coarse positions (nc, 3) -> input ones (n, 3)."""
         return self.splits.apply(coarse_positions)
@@ -623,18 +629,14 @@ class ProgressiveCubic(AffineProgressiveMesh):
                          keep=keep, what="Cubic stylization")
         dec = self.decimation
         t2 = time.perf_counter()
-        f2c = dec.fine_to_coarse
-        c_fixed = None if fixed is None else f2c[np.asarray(fixed, dtype=np.int64).reshape(-1)]
-        c_handles = None
-        if handles is not None:
-            idx, tgt = handles
-            c_handles = (f2c[np.asarray(idx, dtype=np.int64).reshape(-1)], tgt)
+        c_handles = None if handles is None else (self.coarse_ids(handles[0]), handles[1])
         c_coord = None
         if coord_constraints is not None:
             ci, ca, cv = coord_constraints
-            c_coord = (f2c[np.asarray(ci, dtype=np.int64).reshape(-1)], ca, cv)
-        self.stylizer = CubicStylizer(dec.V, dec.F, fixed=c_fixed, handles=c_handles,
-                                      coord_constraints=c_coord, normalize=normalize,
+            c_coord = (self.coarse_ids(ci), ca, cv)
+        self.stylizer = CubicStylizer(dec.V, dec.F, fixed=self.coarse_ids(fixed),
+                                      handles=c_handles, coord_constraints=c_coord,
+                                      normalize=normalize,
                                       pin_one_vertex=pin_one_vertex, backend=backend)
         self.timings["stylizer"] = time.perf_counter() - t2
         self.timings["total"] += self.timings["stylizer"]
@@ -768,12 +770,8 @@ def progressive_analogy_iter(V, F, target_map, params=None,
     apm = AffineProgressiveMesh(V, F, target_faces=progressive.target_faces,
                                 strategy=progressive.strategy, tikhonov=progressive.tikhonov,
                                 keep=keep, what="Shape analogies")
-    f2c = apm.decimation.fine_to_coarse
-    c_fixed = None if fixed is None else f2c[np.asarray(fixed, dtype=np.int64).reshape(-1)]
-    c_handles = None
-    if handles is not None:
-        c_handles = (f2c[np.asarray(handles[0], dtype=np.int64).reshape(-1)], handles[1])
-    analogy = ShapeAnalogy(apm.V_coarse, apm.F_coarse, target_map, fixed=c_fixed,
+    c_handles = None if handles is None else (apm.coarse_ids(handles[0]), handles[1])
+    analogy = ShapeAnalogy(apm.V_coarse, apm.F_coarse, target_map, fixed=apm.coarse_ids(fixed),
                            handles=c_handles)
     seconds = time.perf_counter() - t0
     msg = (f"pre-processing done in {seconds:.1f} s: {len(apm.F):,} -> "

@@ -70,7 +70,7 @@ __all__ = ["SH_DEGREE", "n_coefficients", "sh_index", "clamped_cosine_coefficien
            "convolution_weights", "sh_basis", "sh_basis_gradient", "sh_basis_vjp", "sh_basis_polar",
            "sh_basis_gradient_polar", "ENVIRONMENTS", "ENVIRONMENT_SOURCE", "environment",
            "SHShading", "SHGradients", "sh_render", "sh_image_vjp", "face_albedo",
-           "read_mesh_colors"]
+           "read_mesh_colors", "sh_face_colors_torch"]
 
 SH_DEGREE = 6
 
@@ -540,3 +540,26 @@ def read_mesh_colors(path, n_vertices: int, n_faces: int):
                 return (name, np.clip(C, 0.0, 1.0))
         return None
     return None
+
+
+def sh_face_colors_torch(Vt, Ut, F, albedo, degree: int = SH_DEGREE):
+    """The same image formation in PyTorch (Eq. 3.24-3.25 on flat face normals), for autograd
+    peers in tests and benchmarks: per-face colours ``(k, C)`` of faces ``F (k, 3)`` from vertex
+    positions ``Vt (n, 3)`` and lighting ``Ut (n_coefficients, C)`` (torch tensors, float64),
+    ``albedo (k, C)``. The basis is evaluated by the polynomial tables this module uses."""
+    import torch
+
+    X = Vt[torch.as_tensor(F)]
+    n = torch.linalg.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0])
+    n = n / n.norm(dim=1, keepdim=True)
+    x, y, z = n[:, 0], n[:, 1], n[:, 2]
+    Pz, _, order, is_sin = _tables(degree)
+    Z = torch.stack([z ** p for p in range(degree + 1)], 1)
+    Cs, Ss = [torch.ones_like(x)], [torch.zeros_like(x)]
+    for _ in range(1, degree + 1):  # cos(m φ) sin^m θ, sin(m φ) sin^m θ as polynomials in x, y
+        Cs.append(Cs[-1] * x - Ss[-1] * y)
+        Ss.append(Cs[-2] * y + Ss[-1] * x)
+    XY = torch.stack([(Ss if s else Cs)[o] for o, s in zip(order, is_sin)], 1)
+    Y = (Z @ torch.as_tensor(Pz)) * XY
+    A = torch.as_tensor(convolution_weights(degree))
+    return (Y @ (A[:, None] * Ut)) * torch.as_tensor(albedo)

@@ -76,3 +76,25 @@ def window(qtbot, tmp_path, dialogs, needs_display):
     win.document.modified = False
     win.close()
     win.deleteLater()
+
+
+def front_vertex(window) -> int:
+    """A vertex facing the camera, near the middle of the view."""
+    import numpy as np
+
+    cam = np.array(window.viewport.plotter.camera.position)
+    V = window.document.V
+    return int(np.argmin(((V - cam) ** 2).sum(axis=1)))
+
+
+def drag(qtbot, window, points, modifier=None):
+    """A left-button drag on the 3D view through the pixel ``points`` (press, moves, release)."""
+    from PySide6.QtCore import QPoint, Qt
+
+    modifier = Qt.KeyboardModifier.NoModifier if modifier is None else modifier
+    w = window.viewport.plotter.interactor
+    pts = [QPoint(int(round(x)), int(round(y))) for x, y in points]
+    qtbot.mousePress(w, Qt.MouseButton.LeftButton, modifier, pts[0])
+    for p in pts[1:]:
+        qtbot.mouseMove(w, p)
+    qtbot.mouseRelease(w, Qt.MouseButton.LeftButton, modifier, pts[-1])

@@ -7,6 +7,7 @@ from PySide6.QtCore import QPoint, Qt
 
 from algorithms.deform.cubic import mean_l1_of_normals as l1_of_normals
 from algorithms.mesh.operators import vertex_normals
+from tests.app.conftest import drag, front_vertex
 from tests.conftest import SAMPLES
 
 
@@ -100,15 +101,9 @@ def test_lambda_brush_from_the_panel_paints_near_the_stroke_only(window, dialogs
     assert window.viewport.handler is panel.lambda_brush
     assert panel.show_combo.currentText() == "λ scale"
     V = window.document.V
-    cam = np.array(window.viewport.plotter.camera.position)
-    v = int(np.argmin(((V - cam) ** 2).sum(axis=1)))
+    v = front_vertex(window)
     x, y = window.viewport.project(V[[v]])[0]
-    w = window.viewport.plotter.interactor
-    qtbot.mousePress(w, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
-                     QPoint(int(x), int(y)))
-    qtbot.mouseMove(w, QPoint(int(x) + 10, int(y)))
-    qtbot.mouseRelease(w, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
-                       QPoint(int(x) + 10, int(y)))
+    drag(qtbot, window, [(x, y), (x + 10, y)])
     lam = window.document.state.fields["lambda_scale"]
     changed = np.flatnonzero(lam != 1.0)
     diag = np.linalg.norm(np.ptp(V, axis=0))
@@ -150,14 +145,9 @@ def test_frame_brush_paints_a_local_cube_frame(window, dialogs, qtbot):
     panel.form.set_value("rot_y", 45.0)
     panel.tool_buttons["frame"].click()
     V = window.document.V
-    cam = np.array(window.viewport.plotter.camera.position)
-    v = int(np.argmin(((V - cam) ** 2).sum(axis=1)))
+    v = front_vertex(window)
     x, y = window.viewport.project(V[[v]])[0]
-    w = window.viewport.plotter.interactor
-    qtbot.mousePress(w, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
-                     QPoint(int(x), int(y)))
-    qtbot.mouseRelease(w, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
-                       QPoint(int(x), int(y)))
+    drag(qtbot, window, [(x, y)])  # a click: press and release in place
     st = window.document.state
     ry = st.fields["frame_ry"]
     assert ry[v] == 45.0 and np.isnan(ry).sum() > 0.5 * len(V)

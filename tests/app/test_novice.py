@@ -4,23 +4,16 @@ messages, layout, wording, live mode). Real widgets, real viewport, keys and mou
 from __future__ import annotations
 
 import numpy as np
-from PySide6.QtCore import QPoint, Qt
+from PySide6.QtCore import Qt
 
+from tests.app.conftest import drag, front_vertex
 from tests.conftest import SAMPLES
 
 
 def _paint_stroke(qtbot, window):
     """A short left-button drag over the vertex nearest the camera."""
-    V = window.document.V
-    cam = np.array(window.viewport.plotter.camera.position)
-    v = int(np.argmin(((V - cam) ** 2).sum(axis=1)))
-    x, y = window.viewport.project(V[[v]])[0]
-    w = window.viewport.plotter.interactor
-    qtbot.mousePress(w, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
-                     QPoint(int(x), int(y)))
-    qtbot.mouseMove(w, QPoint(int(x) + 8, int(y)))
-    qtbot.mouseRelease(w, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier,
-                       QPoint(int(x) + 8, int(y)))
+    x, y = window.viewport.project(window.document.V[[front_vertex(window)]])[0]
+    drag(qtbot, window, [(x, y), (x + 8, y)])
 
 
 def _shown_field(window):

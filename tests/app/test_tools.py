@@ -3,25 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-from PySide6.QtCore import QPoint, Qt
+from PySide6.QtCore import Qt
 
+from tests.app.conftest import drag, front_vertex
 from tests.conftest import SAMPLES
-
-
-def front_vertex(window) -> int:
-    """A vertex facing the camera, near the middle of the view."""
-    cam = np.array(window.viewport.plotter.camera.position)
-    V = window.document.V
-    return int(np.argmin(((V - cam) ** 2).sum(axis=1)))
-
-
-def drag(qtbot, window, points, modifier=Qt.KeyboardModifier.NoModifier):
-    w = window.viewport.plotter.interactor
-    pts = [QPoint(int(round(x)), int(round(y))) for x, y in points]
-    qtbot.mousePress(w, Qt.MouseButton.LeftButton, modifier, pts[0])
-    for p in pts[1:]:
-        qtbot.mouseMove(w, p)
-    qtbot.mouseRelease(w, Qt.MouseButton.LeftButton, modifier, pts[-1])
 
 
 def test_pick_returns_the_face_under_the_cursor(window, dialogs):

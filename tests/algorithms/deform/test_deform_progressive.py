@@ -221,6 +221,37 @@ def test_constraints_hold_exactly():
     assert np.allclose(out[hidx], htgt, atol=1e-12)
 
 
+def test_progressive_analogy_follows_its_style_and_keeps_constraints():
+    from algorithms.deform.analogies import AnalogyParams, ShapeAnalogy, angles_to_targets
+    from algorithms.deform.progressive import progressive_analogy_iter
+    from algorithms.deform.targets import ClosestNormals
+    from algorithms.mesh.operators import mass_matrix
+
+    V, F = load("bob.obj")
+    cube = ClosestNormals.primitive("cube")
+    fixed = np.array([10, 400])
+    hidx = np.array([1000])
+    htgt = V[hidx] + np.array([[0.0, 0.0, 0.02]])
+    steps = list(progressive_analogy_iter(V, F, cube, AnalogyParams(lam=1.0),
+                                          ProgressiveParams(target_faces=3000, preview_every=0),
+                                          fixed=fixed, handles=(hidx, htgt)))
+    assert steps[0].iteration == 0 and "3,000" in steps[0].message
+    out = steps[-1].V
+    assert out.shape == V.shape and np.isfinite(out).all()
+    assert np.array_equal(out[fixed], V[fixed]) and np.allclose(out[hidx], htgt, atol=1e-12)
+
+    def mean_angle(X):
+        N = vertex_normals(X, F)
+        return angles_to_targets(N, cube(N), mass_matrix(X, F, "voronoi").diagonal())[0]
+
+    # the full mesh took the coarse style: at least 3/4 of the direct run's reduction of the
+    # mean angle to the targets (measured: input 29.4°, direct 15.6°, progressive 18.1°)
+    direct = run_to_end(ShapeAnalogy(V, F, cube, fixed=fixed, handles=(hidx, htgt))
+                        .steps(AnalogyParams(lam=1.0))).V
+    before, full = mean_angle(V), mean_angle(direct)
+    assert mean_angle(out) < before - 0.75 * (before - full)
+
+
 def test_painted_lambda_goes_to_the_coarse_mesh_by_area():
     V, F = load("spot_lowres.obj")
     pc = ProgressiveCubic(V, F, target_faces=400)

@@ -17,7 +17,8 @@ from algorithms.render.sh import (ENVIRONMENTS, SHShading, clamped_cosine_coeffi
                                   convolution_weights, environment, face_albedo,
                                   n_coefficients, read_mesh_colors, sh_basis, sh_basis_gradient,
                                   sh_basis_gradient_polar, sh_basis_polar, sh_image_vjp,
-                                  sh_index, sh_render)
+                                  sh_face_colors_torch, sh_index, sh_render)
+from tests.algorithms.render._helpers import interior_pixels
 
 
 def _directions(k, seed=0):
@@ -113,16 +114,6 @@ def test_published_environments_round_to_the_paper_table():
         environment("Moon")
 
 
-def _interior(face_id):
-    H, W = face_id.shape
-    ok = face_id >= 0
-    pad = np.pad(face_id, 1, constant_values=-2)
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            ok &= pad[1 + di:1 + di + H, 1 + dj:1 + dj + W] == face_id
-    return ok
-
-
 def _bumpy(seed=0, level=3):
     V, F = icosphere(level)
     rng = np.random.default_rng(seed)
@@ -144,7 +135,7 @@ def test_all_three_vjps_match_central_differences_away_from_silhouettes():
     U = _random_lighting()
     rho = 0.3 + 0.7 * rng.random((len(F), 3))
     r0 = sh_render(V, F, CAM, U, albedo=rho)
-    mask = _interior(r0.raster.face_id)
+    mask = interior_pixels(r0.raster.face_id)
     assert mask.sum() > 500
     W = rng.standard_normal(r0.image.shape) * mask[..., None]
 
@@ -235,23 +226,7 @@ def test_matches_pytorch_autograd_through_the_same_image_formation():
     g = sh_image_vjp(V, F, r, W)
     Vt = torch.tensor(V, requires_grad=True)
     Ut = torch.tensor(U, requires_grad=True)
-    Ft = torch.tensor(F[r.faces])
-    X = Vt[Ft]
-    n = torch.linalg.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0])
-    n = n / n.norm(dim=1, keepdim=True)
-    x, y, z = n[:, 0], n[:, 1], n[:, 2]
-    # the basis by its polynomial form (the tables of sh.py) evaluated in torch
-    from algorithms.render.sh import _tables
-    Pz, _, order, is_sin = _tables(6)
-    Z = torch.stack([z ** p for p in range(7)], 1)
-    Cs, Ss = [torch.ones_like(x)], [torch.zeros_like(x)]
-    for m in range(1, 7):
-        Cs.append(Cs[-1] * x - Ss[-1] * y)
-        Ss.append(Cs[-2] * y + Ss[-1] * x)
-    XY = torch.stack([(Ss if s else Cs)[o] for o, s in zip(order, is_sin)], 1)
-    Y = (Z @ torch.tensor(Pz)) * XY
-    A = torch.tensor(convolution_weights(6))
-    col = (Y @ (A[:, None] * Ut)) * torch.tensor(rho[r.faces])
+    col = sh_face_colors_torch(Vt, Ut, F[r.faces], rho[r.faces])
     img = col[torch.tensor(r.slot[r.slot >= 0])]
     loss = (img * torch.tensor(W[r.slot >= 0])).sum()
     loss.backward()

@@ -10,23 +10,13 @@ import pytest
 from algorithms.mesh import icosphere
 from algorithms.render import (Camera, LambertianShading, face_unit_normals, image_vjp,
                                light_frame, look_at, normal_vjp, render)
+from tests.algorithms.render._helpers import interior_pixels
 
 
 def _bumpy(seed=0, level=3):
     V, F = icosphere(level)
     rng = np.random.default_rng(seed)
     return V * (1 + 0.08 * rng.random((len(V), 1))), F
-
-
-def _interior(face_id):
-    """Pixels whose 3x3 neighbourhood sees the same face: away from face edges and silhouettes."""
-    H, W = face_id.shape
-    ok = face_id >= 0
-    pad = np.pad(face_id, 1, constant_values=-2)
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            ok &= pad[1 + di:1 + di + H, 1 + dj:1 + dj + W] == face_id
-    return ok
 
 
 CAMERAS = {
@@ -47,7 +37,7 @@ def test_vjp_matches_central_differences_of_a_masked_loss(name, shading):
     V, F = _bumpy()
     cam = CAMERAS[name]
     r0 = render(V, F, cam, shading)
-    mask = _interior(r0.raster.face_id)
+    mask = interior_pixels(r0.raster.face_id)
     assert mask.sum() > 500
     rng = np.random.default_rng(1)
     W = rng.standard_normal(r0.image.shape) * mask[..., None]
