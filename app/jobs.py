@@ -9,6 +9,11 @@ the event queue, the window keeps answering, and only the GUI thread ever touche
 asking the generator for its next step; the job then ends with :attr:`cancelled`. Exceptions end
 it with :attr:`failed` and a plain message. A new ``start`` while a job runs cancels the old job and
 starts the new one as soon as the old thread has stopped (used by live sliders).
+
+A step may carry new faces (remeshing, subdivision): a ``Step`` with an ``F`` attribute that is
+not None, such as :class:`MeshStep` or Paparazzi's ``PaparazziStep``; :func:`step_faces` reads it.
+The panels stream such steps as whole meshes and commit the last one as the new mesh
+(:class:`app.panels.base.MethodPanel`, ``changes_faces``).
 """
 
 from __future__ import annotations
@@ -16,7 +21,10 @@ from __future__ import annotations
 import threading
 import time
 import traceback
+from dataclasses import dataclass
 from typing import Callable, Iterator
+
+import numpy as np
 
 from PySide6.QtCore import QObject, QThread, QTimer, Signal
 
@@ -29,6 +37,20 @@ PREVIEW_INTERVAL_MS = 33  # ~30 Hz at most
 #: for t seconds, the next waits at least t · (1 − s) / s. The 3D view's own redraws are spaced
 #: the same way by the viewport (app/viewport.py).
 PREVIEW_SHARE = 0.4
+
+
+@dataclass
+class MeshStep(Step):
+    """A :class:`Step` whose mesh has other faces than the input: ``F`` (m, 3) int64 goes with
+    ``V`` (n, 3), whose size may differ from the input's too."""
+
+    F: np.ndarray | None = None
+
+
+def step_faces(step: Step) -> np.ndarray | None:
+    """The faces a step carries (``step.F``), or None for a step that only moves vertices."""
+    F = getattr(step, "F", None)
+    return None if F is None else np.asarray(F)
 
 
 class _JobThread(QThread):

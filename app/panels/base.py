@@ -4,17 +4,27 @@ a metrics plot, and the finished result as one undoable command.
 A subclass sets ``title``, ``params_cls``, ``description``, ``plot_metrics`` and implements
 :meth:`build_steps`, which receives an immutable snapshot of the document and returns the method's
 Step generator. It runs on the worker thread, so it must not touch widgets.
+
+Methods that change the connectivity (remeshing, subdivision) set ``changes_faces = True`` and
+yield steps that carry their faces (``step.F``, see :func:`app.jobs.step_faces`): the 3D view
+then shows each streamed step's V and F, Stop / a failure put the document's mesh back on the
+view, and the finished result becomes ONE undoable command whose state has the new V and F
+(per-vertex fields and handles are kept only when the faces did not change). This is the one
+place that commits such results (the window's positions jobs commit vertex arrays of the
+input's size).
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Iterator
 
+import numpy as np
 from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import (QCheckBox, QComboBox, QDockWidget, QFrame, QHBoxLayout, QLabel,
                                QPushButton, QScrollArea, QVBoxLayout, QWidget)
 
 from algorithms.steps import Step
+from app.commands import StateCommand
 from app.document import MeshState
 from app.forms import ParamsForm
 from app.widgets import LinePlot, plural
@@ -45,6 +55,9 @@ class MethodPanel(QDockWidget):
     help_page = ""
     #: built-in presets: name -> the fields that differ from the defaults
     builtin_presets: dict[str, dict] = {}
+    #: the steps may carry new faces (``step.F``): streamed and committed as whole meshes
+    #: (see the module docstring)
+    changes_faces = False
     #: undo-merge id of live re-runs (one per panel class)
     _merge_ids: dict = {}
 
@@ -125,6 +138,8 @@ class MethodPanel(QDockWidget):
 
         self._last: tuple[MeshState, MeshState] | None = None  # (input, result) of last run
         self._pending_input: MeshState | None = None
+        self._mesh_job: dict | None = None  # the running changes_faces job (see run)
+        self._shown_F: np.ndarray | None = None  # faces a mesh job put on the 3D view
         window.job_committed.connect(self._on_committed)
         self._debounce = QTimer(self)
         self._debounce.setSingleShot(True)
@@ -138,6 +153,12 @@ class MethodPanel(QDockWidget):
         self.defaults_button.clicked.connect(self.form.reset_defaults)
         self.form.changed.connect(self._on_params_changed)
         runner = window.runner
+        # mesh jobs first: the view must show the document's faces again before the window's
+        # own handlers (connected after the panels) move its points back
+        runner.started.connect(self._on_mesh_job_started)
+        runner.finished.connect(self._on_mesh_job_finished)
+        runner.cancelled.connect(lambda _m: self._on_mesh_job_stopped())
+        runner.failed.connect(lambda _m, _d: self._on_mesh_job_stopped())
         runner.preview.connect(self._on_preview)
         runner.metrics.connect(self._on_metrics)
         runner.started.connect(self._on_busy)
@@ -155,6 +176,12 @@ class MethodPanel(QDockWidget):
 
     def build_steps(self, state: MeshState, params: Any) -> Iterator[Step]:
         raise NotImplementedError
+
+    def job_factory(self, state: MeshState, params: Any):
+        """The job's factory (called on the worker thread) for one run. The default calls
+        :meth:`build_steps`; override it to snapshot, here on the GUI thread, other widgets'
+        settings the run needs, so a later click cannot change a queued run."""
+        return lambda: self.build_steps(state, params)
 
     def commit_function(self):
         """``commit(before, last_step) -> MeshState`` for the job being started, or None to
@@ -328,7 +355,9 @@ class MethodPanel(QDockWidget):
         # as it is (run again to apply the method again).
         if (live and self._last is not None and state.V is self._last[1].V
                 and self._last[0].V is not self._last[1].V):  # (a field result keeps V)
-            start = state.with_positions(self._last[0].V)
+            prev = self._last[0]
+            # (a result with new faces starts again from the whole previous input)
+            start = state.with_positions(prev.V) if prev.F is state.F else prev
         self._pending_input = start
         # what this run asks for, read by the study log (app/study/session.py) when it starts
         self.last_request = {"params": params, "options": self.job_options(), "input": start}
@@ -336,9 +365,90 @@ class MethodPanel(QDockWidget):
         self.show_live_state("running" if live else None)
         self.plot.clear()
         self.status_label.setText("Starting…")
-        self.window_.start_positions_job(self.title, lambda: self.build_steps(start, params),
-                                         merge_id=self.merge_id if live else -1,
-                                         commit=self.commit_function())
+        merge_id = self.merge_id if live else -1
+        if self.changes_faces:
+            # the window only runs it; this panel shows its meshes and commits the result
+            self._mesh_job = {"before": state, "merge_id": merge_id, "active": False}
+            self.window_.start_analysis_job(self.title, self.job_factory(start, params))
+            return
+        self.window_.start_positions_job(self.title, self.job_factory(start, params),
+                                         merge_id=merge_id, commit=self.commit_function())
+
+    # -- jobs whose steps carry new faces (changes_faces) ---------------------------------------
+    def show_step_mesh(self, step: Step) -> None:
+        """Put a streamed step of a mesh job on the 3D view: its V and F (just its points when
+        the faces are those already shown)."""
+        vp = self.window_.viewport
+        if vp.poly is None:
+            return
+        from app.jobs import step_faces
+
+        V = np.asarray(step.V, dtype=np.float64)
+        F = step_faces(step)
+        shown = self._shown_F if self._shown_F is not None else self.window_.document.F
+        if F is None or (F is shown or (F.shape == shown.shape and len(V) == vp.poly.n_points
+                                        and np.array_equal(F, shown))):
+            if len(V) == vp.poly.n_points:
+                vp.update_points(V)
+            return
+        if not (V.ndim == 2 and V.shape[1] == 3 and F.size and F.min() >= 0
+                and F.max() < len(V) and np.isfinite(V).all()):
+            return  # a broken step is not drawn; the commit refuses it
+        vp.set_mesh(V, F, reset_camera=False)
+        self._shown_F = F
+
+    def restore_mesh_view(self) -> None:
+        """Show the document's own mesh again after a mesh job put other faces on the view."""
+        doc = self.window_.document
+        if self._shown_F is not None and doc.state is not None:
+            self.window_.viewport.set_mesh(doc.V, doc.F, reset_camera=False)
+        self._shown_F = None
+
+    def _on_mesh_job_started(self, name: str) -> None:
+        if self._mesh_job is not None and name == self.title:
+            self._mesh_job["active"] = True
+            self._shown_F = None
+
+    def _on_mesh_job_stopped(self) -> None:
+        # any job that ends without a result (ours, or one a newer run replaced) leaves the
+        # document as it was: show its faces again
+        self.restore_mesh_view()
+        if self._mesh_job is not None and self._mesh_job["active"]:
+            self._mesh_job = None
+
+    def _on_mesh_job_finished(self, step: Step) -> None:
+        job = self._mesh_job
+        if job is None or not job["active"] or self.window_.last_job_name != self.title:
+            return
+        self._mesh_job = None
+        from app import dialogs
+        from app.jobs import step_faces
+
+        win = self.window_
+        doc = win.document
+        before = job["before"]
+        if doc.state is not before:  # the document changed meanwhile: the result is stale
+            self.restore_mesh_view()
+            return
+        V = np.asarray(step.V, dtype=np.float64)
+        F = step_faces(step)
+        F = before.F if F is None else np.asarray(F, dtype=np.int64)
+        ok = (V.ndim == 2 and V.shape[1] == 3 and len(V) > 0 and np.isfinite(V).all()
+              and F.ndim == 2 and F.shape[1] == 3 and len(F) > 0 and F.min() >= 0
+              and F.max() < len(V))
+        if not ok:
+            self.restore_mesh_view()
+            text = "The method returned an invalid result; your mesh was not changed."
+            win.report(f"{self.title} failed: {text}", "error")
+            dialogs.error(win, f"{self.title} failed", text)
+            return
+        same_faces = F is before.F or (F.shape == before.F.shape and V.shape == before.V.shape
+                                       and np.array_equal(F, before.F))
+        after = before.with_positions(V) if same_faces else MeshState.make(V, F)
+        self._shown_F = None  # the document's change redraws the view with the new faces
+        win.undo_stack.push(StateCommand(doc, before, after, self.title,
+                                         merge_id=job["merge_id"]))
+        win.job_committed.emit(self.title, after)
 
     def shutdown(self) -> None:
         """Stop pending live re-runs (window closing)."""
@@ -389,6 +499,8 @@ class MethodPanel(QDockWidget):
     def _on_preview(self, step: Step) -> None:
         if not self._mine():
             return
+        if self._mesh_job is not None and self._mesh_job["active"]:
+            self.show_step_mesh(step)
         total = f"/{step.total}" if step.total else ""
         self.status_label.setText(f"Iteration {step.iteration}{total}")
 

@@ -8,9 +8,9 @@
   validation losses streamed to the plot; Stop keeps the best weights so far; "Save weights…"
   writes them.
 
-The subdivided mesh has other vertices than the input, while the job runner commits positions of
-the same size: the worker keeps the result on the panel and the job's commit function turns it
-into the new document state (the last Step carries the input positions, unchanged).
+The subdivided mesh has other vertices and faces than the input: the last step is a
+:class:`~app.jobs.MeshStep` carrying them, committed as the new mesh by the shared mechanism of
+:class:`~app.panels.base.MethodPanel` (``changes_faces``).
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QSpin
 from algorithms.steps import Step, with_progress
 from algorithms.subdivision.model import SubdivideParams
 from app.document import MeshState
+from app.jobs import MeshStep
 from app.panels.base import MethodPanel
 
 
@@ -35,13 +36,13 @@ class SubdivisionPanel(MethodPanel):
     plot_metrics = ("loss", "validation_loss")
     plot_title = "Training loss (ℓ2), validation loss"
     plot_log_y = True
+    changes_faces = True
 
     def __init__(self, window):
         super().__init__(window)
         self.trained_net = None
         self.weights_file: str | None = None
         self.workers = 2
-        self._result: tuple[np.ndarray, np.ndarray] | None = None
         self._trainer = None
         lay = self.body_layout
         row = QHBoxLayout()
@@ -96,7 +97,6 @@ class SubdivisionPanel(MethodPanel):
 
     def build_steps(self, state: MeshState, params: Any) -> Iterator[Step]:
         net = self._network() if params.method == "neural" else None
-        self._result = None
 
         def work(progress):
             from algorithms.subdivision.baselines import subdivide_baseline
@@ -115,17 +115,9 @@ class SubdivisionPanel(MethodPanel):
         box: dict = {}
         yield from with_progress(work, state.V, box)
         if "value" in box:
-            self._result = box["value"]
-            yield Step(1, 1, state.V, {}, f"{len(self._result[1]):,} triangles")
-
-    def commit_function(self):
-        def commit(before: MeshState, step: Step) -> MeshState:
-            if self._result is None:  # pragma: no cover - a finished job has a result
-                return before
-            V, F = self._result
-            return MeshState.make(V, F)
-
-        return commit
+            V, F = box["value"]
+            yield MeshStep(1, 1, np.asarray(V, dtype=np.float64), {}, f"{len(F):,} triangles",
+                           F=np.asarray(F, dtype=np.int64))
 
     # -- training -------------------------------------------------------------------------------
     def train(self) -> None:
