@@ -114,19 +114,36 @@ class Camera:
         return self.projection == "perspective"
 
     def to_camera(self, P) -> np.ndarray:
-        """Camera coordinates ``(k, 3)`` of world points ``P (k, 3)``."""
-        return (np.asarray(P, dtype=np.float64) - self.position) @ self._basis.T
+        """Camera coordinates ``(k, 3)`` of world points ``P (k, 3)``.
+
+        Written out per coordinate (not a BLAS product) so that the compiled projection of the
+        rasterizer (:func:`algorithms.render.kernels.project`) is bit-identical to it."""
+        D = np.asarray(P, dtype=np.float64).reshape(-1, 3) - self.position
+        b = self._basis
+        x, y, z = D[:, 0], D[:, 1], D[:, 2]
+        out = np.empty_like(D)
+        for r in range(3):
+            out[:, r] = x * b[r, 0] + y * b[r, 1] + z * b[r, 2]
+        return out
+
+    @property
+    def projection_scale(self) -> float:
+        """``tan(fov / 2)`` (perspective) or ``width / 2`` (orthographic): screen coordinates in
+        ``[-1, 1]`` are camera ``x / (z scale)`` or ``x / scale``."""
+        if self.perspective:
+            return float(np.tan(np.radians(self.fov) / 2.0))
+        return self.width / 2.0
 
     def to_pixels(self, P) -> np.ndarray:
         """``(k, 3)``: column, row (continuous; pixel centres at integers) and depth of points."""
         C = self.to_camera(P)
         res = self.resolution
+        t = self.projection_scale
         if self.perspective:
-            t = np.tan(np.radians(self.fov) / 2.0)
             with np.errstate(divide="ignore", invalid="ignore"):
                 sx, sy = C[:, 0] / (C[:, 2] * t), C[:, 1] / (C[:, 2] * t)
         else:
-            sx, sy = C[:, 0] / (self.width / 2.0), C[:, 1] / (self.width / 2.0)
+            sx, sy = C[:, 0] / t, C[:, 1] / t
         out = np.empty_like(C)
         out[:, 0] = (sx + 1.0) * 0.5 * res - 0.5
         out[:, 1] = (1.0 - sy) * 0.5 * res - 0.5

@@ -1,11 +1,15 @@
-"""Compiled (Numba) kernel of the rasterizer.
+"""Compiled (Numba) kernels of the renderer: projection, rasterizer, seen faces, painting, the
+per-face pixel sums and the normal derivative of :mod:`algorithms.render.render`, and the
+spherical-harmonics shading and its derivatives of :mod:`algorithms.render.sh`.
 
 Importing this module imports :mod:`numba`; :mod:`algorithms.render.raster` loads it lazily
-through :class:`algorithms.compiled.KernelModule` and falls back to its NumPy rasterizer when it
-is unavailable or switched off (``STYLIZE3D_NUMBA=0``). ``@njit(cache=True)``, one thread,
-``fastmath`` off. Same rules as the NumPy code (see :mod:`algorithms.render.raster`): pixel centres
-at integer coordinates, a pixel is covered when its three barycentric coordinates are ``>= 0``,
-the nearest depth ``> near`` wins, ties go to the lower face index.
+through :class:`algorithms.compiled.KernelModule` and falls back to its NumPy code when it
+is unavailable or switched off (``STYLIZE3D_NUMBA=0``). ``@njit(cache=True, nogil=True)``, one
+thread, ``fastmath`` off (no FMA contraction, so the projection is bit-identical to
+:meth:`Camera.to_pixels`). Same rules as the NumPy code (see :mod:`algorithms.render.raster`):
+pixel centres at integer coordinates, a pixel is covered when its three barycentric coordinates are
+``>= 0``, the nearest depth ``> near`` wins, ties go to the lower face index. Each kernel's
+formulas are derived in the docstring of the module whose NumPy code it replaces.
 """
 
 from __future__ import annotations
@@ -15,18 +19,74 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["rasterize"]
+__all__ = ["project", "rasterize", "seen_faces", "face_normals", "paint", "face_sums",
+           "normal_vjp", "sh_shade", "sh_lighting_vjp", "sh_normal_vjp"]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def project(V, position, basis, perspective, scale, res, out):  # pragma: no cover - compiled
+    """:meth:`Camera.to_pixels` of ``V (n, 3)`` into ``out (n, 3)`` (same operations in the same
+    order: bit-identical). ``scale``: ``tan(fov / 2)`` (perspective) or ``width / 2``."""
+    px = position[0]
+    py = position[1]
+    pz = position[2]
+    r00 = basis[0, 0]
+    r01 = basis[0, 1]
+    r02 = basis[0, 2]
+    r10 = basis[1, 0]
+    r11 = basis[1, 1]
+    r12 = basis[1, 2]
+    r20 = basis[2, 0]
+    r21 = basis[2, 1]
+    r22 = basis[2, 2]
+    for i in range(V.shape[0]):
+        dx = V[i, 0] - px
+        dy = V[i, 1] - py
+        dz = V[i, 2] - pz
+        cx = dx * r00 + dy * r01 + dz * r02
+        cy = dx * r10 + dy * r11 + dz * r12
+        cz = dx * r20 + dy * r21 + dz * r22
+        if perspective:
+            sx = cx / (cz * scale)
+            sy = cy / (cz * scale)
+        else:
+            sx = cx / scale
+            sy = cy / scale
+        out[i, 0] = (sx + 1.0) * 0.5 * res - 0.5
+        out[i, 1] = (1.0 - sy) * 0.5 * res - 0.5
+        out[i, 2] = cz
 
 
 @njit(cache=True, nogil=True)
 def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no cover - compiled
     """Z-buffer ``F`` with vertices ``P (n, 3)`` = (column, row, depth) into the output arrays
     (``face_id`` filled with -1, ``depth`` with inf beforehand)."""
+    # Outcodes (Cohen-Sutherland): a face whose three corners are all left of, right of, above
+    # or below the pixel centres is skipped after reading three bytes; the same faces are
+    # rejected by the bounding-box test below, so the result does not change (NaN -> code 0).
+    n = P.shape[0]
+    code = np.empty(n, np.uint8)
+    hi = res - 1.0
+    for v in range(n):
+        x = P[v, 0]
+        y = P[v, 1]
+        k = 0
+        if x < 0.0:
+            k |= 1
+        if x > hi:
+            k |= 2
+        if y < 0.0:
+            k |= 4
+        if y > hi:
+            k |= 8
+        code[v] = k
     m = F.shape[0]
     for f in range(m):
         a = F[f, 0]
         b = F[f, 1]
         c = F[f, 2]
+        if code[a] & code[b] & code[c]:
+            continue
         x0 = P[a, 0]
         y0 = P[a, 1]
         z0 = P[a, 2]
@@ -123,3 +183,262 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
                 bary[i, j, 0] = b0
                 bary[i, j, 1] = b1
                 bary[i, j, 2] = b2
+
+
+@njit(cache=True, nogil=True)
+def seen_faces(face_id, m, slot):  # pragma: no cover - compiled
+    """Sorted ids of the faces seen in ``face_id (H, W)`` (of ``m`` faces); fills ``slot (H, W)``
+    with each pixel's index into them (-1 for background). O(pixels + m)."""
+    H, W = face_id.shape
+    mark = np.zeros(m, np.int64)
+    for i in range(H):
+        for j in range(W):
+            f = face_id[i, j]
+            if f >= 0:
+                mark[f] = 1
+    faces = np.empty(m, np.int64)
+    k = 0
+    for f in range(m):
+        if mark[f] != 0:
+            faces[k] = f
+            mark[f] = k
+            k += 1
+    for i in range(H):
+        for j in range(W):
+            f = face_id[i, j]
+            slot[i, j] = mark[f] if f >= 0 else -1
+    return faces[:k].copy()
+
+
+@njit(cache=True, nogil=True)
+def face_normals(V, F, faces, out):  # pragma: no cover - compiled
+    """Unit normals ``out (k, 3)`` of the faces ``F[faces]`` (zero for degenerate faces), as
+    :func:`algorithms.render.render.face_unit_normals`."""
+    for q in range(faces.shape[0]):
+        f = faces[q]
+        a = F[f, 0]
+        b = F[f, 1]
+        c = F[f, 2]
+        ux = V[b, 0] - V[a, 0]
+        uy = V[b, 1] - V[a, 1]
+        uz = V[b, 2] - V[a, 2]
+        vx = V[c, 0] - V[a, 0]
+        vy = V[c, 1] - V[a, 1]
+        vz = V[c, 2] - V[a, 2]
+        nx = uy * vz - uz * vy
+        ny = uz * vx - ux * vz
+        nz = ux * vy - uy * vx
+        nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nrm > 0.0:
+            out[q, 0] = nx / nrm
+            out[q, 1] = ny / nrm
+            out[q, 2] = nz / nrm
+        else:
+            out[q, 0] = 0.0
+            out[q, 1] = 0.0
+            out[q, 2] = 0.0
+
+
+@njit(cache=True, nogil=True)
+def paint(slot, colors, background, image):  # pragma: no cover - compiled
+    """``image (H, W, C)``: each pixel the colour of its face, ``background`` elsewhere."""
+    H, W = slot.shape
+    C = colors.shape[1]
+    for i in range(H):
+        for j in range(W):
+            s = slot[i, j]
+            if s >= 0:
+                for c in range(C):
+                    image[i, j, c] = colors[s, c]
+            else:
+                for c in range(C):
+                    image[i, j, c] = background
+
+
+@njit(cache=True, nogil=True)
+def face_sums(slot, G, out):  # pragma: no cover - compiled
+    """``out (k, C)`` (zeroed beforehand) += the pixel gradients ``G (H, W, C)`` of each face,
+    summed in pixel order (as ``np.bincount``)."""
+    H, W = slot.shape
+    C = out.shape[1]
+    for i in range(H):
+        for j in range(W):
+            s = slot[i, j]
+            if s >= 0:
+                for c in range(C):
+                    out[s, c] += G[i, j, c]
+
+
+@njit(cache=True, nogil=True)
+def normal_vjp(V, F, faces, g, out):  # pragma: no cover - compiled
+    """``out (n, 3)`` (zeroed beforehand) += ``sum_j sum_k -n_j (h_jk . g_j) / |h_jk|^2`` at the
+    corners ``v_k`` of the faces ``faces`` (see :mod:`algorithms.render.render`)."""
+    X = np.empty((3, 3))
+    for q in range(faces.shape[0]):
+        f = faces[q]
+        for k in range(3):
+            for d in range(3):
+                X[k, d] = V[F[f, k], d]
+        ux = X[1, 0] - X[0, 0]
+        uy = X[1, 1] - X[0, 1]
+        uz = X[1, 2] - X[0, 2]
+        vx = X[2, 0] - X[0, 0]
+        vy = X[2, 1] - X[0, 1]
+        vz = X[2, 2] - X[0, 2]
+        nx = uy * vz - uz * vy
+        ny = uz * vx - ux * vz
+        nz = ux * vy - uy * vx
+        nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if not nrm > 0.0:
+            continue
+        nx /= nrm
+        ny /= nrm
+        nz /= nrm
+        gx = g[q, 0]
+        gy = g[q, 1]
+        gz = g[q, 2]
+        for k in range(3):
+            ka = (k + 1) % 3
+            kb = (k + 2) % 3
+            ex = X[kb, 0] - X[ka, 0]
+            ey = X[kb, 1] - X[ka, 1]
+            ez = X[kb, 2] - X[ka, 2]
+            wx = X[k, 0] - X[ka, 0]
+            wy = X[k, 1] - X[ka, 1]
+            wz = X[k, 2] - X[ka, 2]
+            ee = ex * ex + ey * ey + ez * ez
+            t = (wx * ex + wy * ey + wz * ez) / (ee if ee > 0.0 else 1.0)
+            hx = wx - t * ex
+            hy = wy - t * ey
+            hz = wz - t * ez
+            hh = hx * hx + hy * hy + hz * hz
+            if not hh > 0.0:
+                continue
+            s = -(hx * gx + hy * gy + hz * gz) / hh
+            v = F[f, k]
+            out[v, 0] += nx * s
+            out[v, 1] += ny * s
+            out[v, 2] += nz * s
+
+
+# --------------------------------------------------------------------------------------------
+# spherical harmonics (algorithms.render.sh): Y_j(n) = Kf_j Q_l^|m|(z) {Re, Im}((x + i y)^|m|)
+# with Q_l^m = d^m P_l / dz^m by the associated-Legendre recurrence (without the (1 - z^2)^(m/2)
+# factor, which is in |x + i y|^m), so dQ_l^m/dz = Q_l^(m+1).
+# --------------------------------------------------------------------------------------------
+
+
+@njit(cache=True, nogil=True)
+def _sh_parts(x, y, z, d, Q, Cm, Sm):  # pragma: no cover - compiled
+    """``Cm[m] + i Sm[m] = (x + i y)^m`` and ``Q[l, m] = d^m P_l/dz^m (z)`` for ``m <= l <= d``
+    (``Q[l, l + 1]`` stays 0)."""
+    Cm[0] = 1.0
+    Sm[0] = 0.0
+    for m in range(1, d + 1):
+        Cm[m] = Cm[m - 1] * x - Sm[m - 1] * y
+        Sm[m] = Cm[m - 1] * y + Sm[m - 1] * x
+    dfact = 1.0                                  # (2m - 1)!!
+    for m in range(d + 1):
+        Q[m, m] = dfact
+        if m + 1 <= d:
+            Q[m + 1, m] = (2 * m + 1) * z * dfact
+        for l in range(m + 2, d + 1):
+            Q[l, m] = ((2 * l - 1) * z * Q[l - 1, m] - (l + m - 1) * Q[l - 2, m]) / (l - m)
+        dfact *= 2 * m + 1
+
+
+@njit(cache=True, nogil=True)
+def _sh_values(d, Kf, Q, Cm, Sm, Y):  # pragma: no cover - compiled
+    for l in range(d + 1):
+        base = l * l + l
+        Y[base] = Kf[base] * Q[l, 0]
+        for m in range(1, l + 1):
+            Y[base + m] = Kf[base + m] * Q[l, m] * Cm[m]
+            Y[base - m] = Kf[base - m] * Q[l, m] * Sm[m]
+
+
+@njit(cache=True, nogil=True)
+def _unit(N, f):  # pragma: no cover - compiled
+    x = N[f, 0]
+    y = N[f, 1]
+    z = N[f, 2]
+    r = math.sqrt(x * x + y * y + z * z)
+    if r > 0.0:
+        return x / r, y / r, z / r
+    return x, y, z
+
+
+@njit(cache=True, nogil=True)
+def sh_shade(N, W, Kf, out):  # pragma: no cover - compiled
+    """``out (k, C) = sum_j W_jc Y_j(n_k / |n_k|)`` (the irradiance with ``W = A U``)."""
+    nc, C = W.shape
+    d = int(round(math.sqrt(nc))) - 1
+    Q = np.zeros((d + 2, d + 2))
+    Cm = np.empty(d + 1)
+    Sm = np.empty(d + 1)
+    Y = np.empty(nc)
+    for f in range(N.shape[0]):
+        x, y, z = _unit(N, f)
+        _sh_parts(x, y, z, d, Q, Cm, Sm)
+        _sh_values(d, Kf, Q, Cm, Sm, Y)
+        for c in range(C):
+            acc = 0.0
+            for j in range(nc):
+                acc += Y[j] * W[j, c]
+            out[f, c] = acc
+
+
+@njit(cache=True, nogil=True)
+def sh_lighting_vjp(N, Gc, Kf, out):  # pragma: no cover - compiled
+    """``out (nc, C)`` (zeroed beforehand) += ``sum_k Y_j(n_k) Gc_kc``."""
+    nc, C = out.shape
+    d = int(round(math.sqrt(nc))) - 1
+    Q = np.zeros((d + 2, d + 2))
+    Cm = np.empty(d + 1)
+    Sm = np.empty(d + 1)
+    Y = np.empty(nc)
+    for f in range(N.shape[0]):
+        x, y, z = _unit(N, f)
+        _sh_parts(x, y, z, d, Q, Cm, Sm)
+        _sh_values(d, Kf, Q, Cm, Sm, Y)
+        for j in range(nc):
+            for c in range(C):
+                out[j, c] += Y[j] * Gc[f, c]
+
+
+@njit(cache=True, nogil=True)
+def sh_normal_vjp(N, Gc, W, Kf, out):  # pragma: no cover - compiled
+    """``out (k, 3) = P_n sum_j w_kj grad Y_j(n_k)`` with ``w_kj = sum_c Gc_kc W_jc`` and ``P_n``
+    the projection onto the tangent plane of the unit normal (the gradient of ``Y(n/|n|)``)."""
+    nc, C = W.shape
+    d = int(round(math.sqrt(nc))) - 1
+    Q = np.zeros((d + 2, d + 2))
+    Cm = np.empty(d + 1)
+    Sm = np.empty(d + 1)
+    w = np.empty(nc)
+    for f in range(N.shape[0]):
+        x, y, z = _unit(N, f)
+        _sh_parts(x, y, z, d, Q, Cm, Sm)
+        for j in range(nc):
+            acc = 0.0
+            for c in range(C):
+                acc += Gc[f, c] * W[j, c]
+            w[j] = acc
+        gx = 0.0
+        gy = 0.0
+        gz = 0.0
+        for l in range(d + 1):
+            base = l * l + l
+            gz += w[base] * Kf[base] * Q[l, 1]
+            for m in range(1, l + 1):
+                kc = w[base + m] * Kf[base + m]
+                ks = w[base - m] * Kf[base - m]
+                q = Q[l, m] * m
+                # d/dx (x + i y)^m = m (x + i y)^(m-1), d/dy = i m (x + i y)^(m-1)
+                gx += q * (kc * Cm[m - 1] + ks * Sm[m - 1])
+                gy += q * (-kc * Sm[m - 1] + ks * Cm[m - 1])
+                gz += Q[l, m + 1] * (kc * Cm[m] + ks * Sm[m])
+        r = gx * x + gy * y + gz * z
+        out[f, 0] = gx - r * x
+        out[f, 1] = gy - r * y
+        out[f, 2] = gz - r * z

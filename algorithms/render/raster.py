@@ -79,7 +79,6 @@ def rasterize(V, F, camera: Camera, *, backend: str = "auto") -> Raster:
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     res = camera.resolution
-    P = camera.to_pixels(V)
     face_id = np.full((res, res), -1, dtype=np.int64)
     depth = np.full((res, res), np.inf)
     bary = np.zeros((res, res, 3))
@@ -87,9 +86,14 @@ def rasterize(V, F, camera: Camera, *, backend: str = "auto") -> Raster:
     if backend == "compiled" and kern is None:
         raise RuntimeError("the compiled rasterizer is not available (Numba missing or switched off)")
     if kern is not None:
-        kern.rasterize(np.ascontiguousarray(P), np.ascontiguousarray(F), res, camera.perspective,
+        V = np.ascontiguousarray(V).reshape(-1, 3)
+        P = np.empty_like(V)
+        kern.project(V, camera.position, camera._basis, camera.perspective,
+                     camera.projection_scale, res, P)
+        kern.rasterize(P, np.ascontiguousarray(F).reshape(-1, 3), res, camera.perspective,
                        camera.near, face_id, depth, bary)
     else:
+        P = camera.to_pixels(V)
         _rasterize_numpy(P, F, res, camera.perspective, camera.near, face_id, depth, bary)
     return Raster(face_id, depth, bary, camera)
 
