@@ -1,0 +1,188 @@
+"""The Adversarial lighting panel with real widgets (pytest-qt): the classified image and its
+top-5, SH sliders re-classifying, lighting and geometry attacks on the worker thread, Stop, undo,
+lighting files, and plain messages for bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+
+from algorithms.adversarial.shapes import SUBJECTS  # noqa: E402
+from algorithms.mesh import write_mesh  # noqa: E402
+
+TITLE = "Adversarial lighting"
+
+
+@pytest.fixture(scope="module")
+def mug_path(tmp_path_factory):
+    V, F, _ = SUBJECTS["coffee mug"]()
+    path = tmp_path_factory.mktemp("adv_panel") / "mug.obj"
+    write_mesh(path, V, F)
+    return path
+
+
+def open_panel(window, qtbot, path):
+    panel = window.panels[TITLE]
+    panel.raise_()
+    with qtbot.waitSignal(panel.classified, timeout=60000):
+        assert window.open_path(path)
+    return panel
+
+
+def reclassified(panel, qtbot, action, timeout=30000):
+    with qtbot.waitSignal(panel.classified, timeout=timeout):
+        action()
+
+
+def test_image_top5_and_sh_slider_reclassifies(window, qtbot, mug_path):
+    panel = open_panel(window, qtbot, mug_path)
+    entries = panel.top5_view.entries
+    assert len(entries) == 5
+    probs = [p for _n, p in entries]
+    assert all(a >= b for a, b in zip(probs, probs[1:])) and 0 < sum(probs) <= 1 + 1e-6
+    assert entries[0][0] == "coffee mug" and probs[0] > 0.5       # a grey mug from the front
+    assert panel.true_edit.text() == "coffee mug"                  # the true label's default
+    assert panel.shown_image.shape == (224, 224, 3)
+    assert panel.image_label.pixmap().width() == 224
+    assert [b.format() for b in panel.top5_view.bars][0] == f"{100 * probs[0]:.1f} %"
+    image0, probs0 = panel.shown_image.copy(), panel.probs.copy()
+    # a strong red light from above: another image, other probabilities
+    reclassified(panel, qtbot, lambda: panel.set_sh_coefficient(1, 0, 1.5))
+    assert panel.lighting[1, 0] == pytest.approx(1.5)
+    assert panel.env_combo.currentText() == "Custom"
+    assert np.abs(panel.shown_image - image0).max() > 0.1
+    assert np.abs(panel.probs - probs0).max() > 1e-3
+    assert panel.true_edit.text() == "coffee mug"                  # the true label stays
+    # linked channels move together; a preset restores the published lighting exactly
+    panel.link_box.setChecked(True)
+    before = panel.lighting[0].copy()
+    reclassified(panel, qtbot, lambda: panel.set_sh_coefficient(0, 1, before[1] + 0.2))
+    np.testing.assert_allclose(panel.lighting[0] - before, 0.2, atol=0.006)
+    from algorithms.render.sh import environment
+
+    reclassified(panel, qtbot, lambda: panel.set_environment("Grace Cathedral"))
+    np.testing.assert_array_equal(panel.lighting, environment("Grace Cathedral"))
+    np.testing.assert_allclose(panel.shown_image, image0, atol=1e-6)
+
+
+def test_lighting_attack_streams_then_stop_restores(window, qtbot, mug_path, tmp_path):
+    panel = open_panel(window, qtbot, mug_path)
+    U0 = panel.lighting.copy()
+    image0 = panel.shown_image.copy()
+    V0 = np.array(window.document.V)
+    panel.form.set_value("iterations", 3)
+    seen = []
+    window.runner.preview.connect(lambda s: seen.append(s.iteration))
+    with qtbot.waitSignal(window.runner.finished, timeout=60000):
+        assert panel.attack("lighting")
+        assert window.runner.busy and window.runner.name == TITLE   # on the worker thread
+    res = panel.last_result
+    assert 1 <= res.iterations <= 3
+    assert panel.streamed_images >= 2 and panel.streamed_images == len(seen)
+    assert seen[-1] == res.iterations
+    dU = np.abs(panel.lighting - U0).max()
+    assert 0 < dU <= 0.1 + 1e-12 and dU == pytest.approx(res.norm)
+    assert panel.before_after_box.isVisible()
+    assert panel.before_caption.text().startswith("Before: coffee mug")
+    assert window.undo_stack.count() == 0
+    np.testing.assert_array_equal(window.document.V, V0)
+    assert panel.revert_button.isEnabled()
+    # the attacked lighting is saved in the CLI's format and read back exactly
+    out = tmp_path / "adv.json"
+    assert panel.save_lighting(str(out))
+    doc = json.loads(out.read_text())
+    assert doc["format"] == "stylize3d spherical-harmonics lighting"
+    np.testing.assert_array_equal(np.array(doc["coefficients"]), panel.lighting)
+    reclassified(panel, qtbot, panel.revert_lighting)
+    np.testing.assert_array_equal(panel.lighting, U0)
+    reclassified(panel, qtbot, lambda: panel.load_lighting(str(out)))
+    np.testing.assert_array_equal(panel.lighting, np.array(doc["coefficients"]))
+    reclassified(panel, qtbot, panel.revert_lighting)
+
+    # a long targeted attack, stopped after the first streamed image: all as it was
+    panel.form.set_value("iterations", 30)
+    panel.target_edit.setText("tench")
+    n = panel.streamed_images = 0
+    assert panel.attack("lighting")
+    qtbot.waitUntil(lambda: panel.streamed_images > n, timeout=60000)
+    with qtbot.waitSignal(panel.classified, timeout=60000):
+        with qtbot.waitSignal(window.runner.cancelled, timeout=60000):
+            panel.stop_button.click()
+    np.testing.assert_array_equal(panel.lighting, U0)
+    np.testing.assert_allclose(panel.shown_image, image0, atol=1e-6)
+    assert "cancelled" in panel.status_label.text()
+
+
+def test_geometry_attack_is_one_undo_step(window, qtbot, mug_path):
+    panel = open_panel(window, qtbot, mug_path)
+    doc = window.document
+    V0 = np.array(doc.V)
+    size = (V0.max(0) - V0.min(0)).max()
+    panel.form.set_value("iterations", 2)
+    with qtbot.waitSignal(window.job_committed, timeout=60000):
+        assert panel.attack("geometry")
+    assert window.undo_stack.count() == 1
+    d = np.abs(doc.V - V0).max()
+    assert 0 < d <= 0.002 * size * (1 + 1e-9)
+    assert panel.streamed_images >= 2
+    np.testing.assert_array_equal(doc.F, np.array(doc.F))
+    window.undo_stack.undo()
+    np.testing.assert_array_equal(doc.V, V0)
+
+
+def test_bad_inputs_give_plain_messages(window, qtbot, mug_path, tmp_path):
+    import torch
+
+    panel = open_panel(window, qtbot, mug_path)
+    n0 = window.undo_stack.count()
+    # a weights file that is not a model: refused unexecuted, the classifier stays
+    class Boom:
+        def __reduce__(self):
+            return (print, ("executed!",))
+
+    bad = tmp_path / "evil.pt"
+    torch.save({"x": Boom()}, bad)
+    text = tmp_path / "notes.pt"
+    text.write_text("hello")
+    for path in (bad, text):
+        assert not panel.load_classifier(str(path))
+        msg = panel.status_label.text()
+        assert "not a model file" in msg and "not changed" in msg and "Traceback" not in msg
+        assert panel.classifier is None and "default" in panel.classifier_label.text()
+    # an unknown label: close names suggested, no job
+    panel.target_edit.setText("cofee mug")
+    assert not panel.attack("lighting")
+    assert not window.runner.busy
+    msg = panel.status_label.text()
+    assert "Did you mean" in msg and "coffee mug" in msg
+    panel.target_edit.clear()
+    # a lighting file that is not one
+    junk = tmp_path / "junk.json"
+    junk.write_text('{"coefficients": [[1, 2]]}')
+    U = panel.lighting.copy()
+    assert not panel.load_lighting(str(junk))
+    assert "does not hold spherical-harmonics lighting" in panel.status_label.text()
+    np.testing.assert_array_equal(panel.lighting, U)
+    # a flat mesh seen edge-on is not visible: said so, and the attack refuses
+    g = np.linspace(-1, 1, 6)
+    X, Z = np.meshgrid(g, g)
+    V = np.stack([X.ravel(), np.zeros(X.size), Z.ravel()], 1)
+    F = []
+    for i in range(5):
+        for j in range(5):
+            a = i * 6 + j
+            F += [[a, a + 6, a + 1], [a + 1, a + 6, a + 7]]
+    flat = tmp_path / "flat.obj"
+    write_mesh(flat, V, np.array(F))
+    panel.form.set_value("elevation", 0.0)
+    with qtbot.waitSignal(panel.classified, timeout=30000):
+        assert window.open_path(flat)
+    assert panel.visible_error and "not visible" in panel.visible_error
+    assert "not visible" in panel.image_label.text()
+    assert not panel.attack("geometry")
+    assert "not visible" in panel.status_label.text()
+    assert window.undo_stack.count() == n0 and not window.runner.busy
