@@ -1,0 +1,498 @@
+"""Panel "Paparazzi": image filters applied to a shape through its renderings (thesis ch. 2).
+
+* A filter from the registry (:func:`algorithms.paparazzi.filter_names`: the built-in ones and
+  any registered later, e.g. by a plug-in) with a form generated from its Params dataclass; the
+  form is rebuilt when the filter changes and each filter keeps its own settings. Text fields
+  without choices are files (a target image, a target mesh): they get a "Choose…" button, and
+  a file that cannot be used is refused with a plain message before anything runs.
+* The run's settings (:class:`~algorithms.paparazzi.PaparazziParams`: iterations, learning rate,
+  σ, resolution, ...), with a shorter default run than the command line's (see
+  :data:`GUI_ITERATIONS`).
+* While the loop runs on the worker thread the shape updates in the 3D view (remeshing changes
+  its triangles: the panel is a ``changes_faces`` panel, see :mod:`app.panels.base`), a pair of
+  small images shows the current iteration's rendering and its filtered version, and the plot
+  shows the energy of the fixed monitor view (thesis 353-356).
+* Stop puts the mesh back; the finished result (new vertices and triangles) is one undoable
+  command.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+from PySide6.QtCore import Qt
+from PySide6.QtGui import QImage, QPixmap
+from PySide6.QtWidgets import (QComboBox, QFormLayout, QGridLayout, QGroupBox, QHBoxLayout,
+                               QLabel, QLineEdit, QPushButton, QVBoxLayout, QWidget)
+
+from algorithms.errors import Stylize3DError
+from algorithms.params import describe, param, params_to_dict
+from algorithms.paparazzi import (ImageReadError, PaparazziParams, filter_names, get_filter,
+                                  read_image)
+from algorithms.steps import Step
+from app.document import MeshState
+from app.forms import ParamsForm
+from app.panels.base import MethodPanel
+from app.widgets import article, plural
+
+#: the panel's default number of iterations: a 3,000-vertex mesh takes about 10-20 s at the
+#: filter's resolution (the command line and the thesis use 1000 or more)
+GUI_ITERATIONS = 300
+#: side of the two live images, in pixels
+THUMB = 132
+
+
+@dataclass(frozen=True)
+class PaparazziPanelParams(PaparazziParams):
+    """:class:`PaparazziParams` with the panel's shorter default run (all other fields alike)."""
+
+    iterations: int = param(
+        GUI_ITERATIONS, label="Iterations", minimum=1, maximum=100000, step=50,
+        tooltip=f"How many views to render and filter. {GUI_ITERATIONS} shows the effect in "
+                "seconds to a minute; the thesis uses 1000-3000 views (the command line's "
+                "default is 1000) for a strong effect.")
+
+
+#: plain words appended to the tooltips of the run's settings
+PLAIN = {
+    "learning_rate": "NAdam: the optimizer that moves the vertices, a gradient descent with "
+                     "momentum (as used to train neural networks). The learning rate is its "
+                     "step size; it is divided by 5 for the last 10 % of the views.",
+    "sigma": "σ (sigma) = camera offset: the cameras sit on a cage this far outside the shape "
+             "and look at it from all around. Small σ shows small details; large σ whole parts.",
+    "resolution": "The filter sees images this many pixels wide; details smaller than a pixel "
+                  "are not changed. Higher is slower.",
+    "view_width": "How wide a piece of the shape one picture shows (orthographic camera).",
+    "remesh_every": "Remeshing: the triangles are made even again so that they do not get "
+                    "thin while the shape moves. If the steps made the surface cross itself, "
+                    "they are undone and the step size is halved instead.",
+    "monitor_every": "Monitor view: one fixed camera whose picture is filtered now and then; "
+                     "its energy (plotted below) says how far the shape still is from what the "
+                     "filter wants.",
+    "upsample_vertices": "More vertices let the shape take on finer features of the filter.",
+}
+
+
+def _image_to_qimage(img: np.ndarray, size: int = THUMB) -> QImage:
+    """An (H, W, C) float image in [0, 1] (C = 1 or 3) as a size × size QImage (nearest pixels,
+    so a 64-pixel rendering stays readable)."""
+    a = np.asarray(img, dtype=np.float64)
+    if a.ndim == 2:
+        a = a[..., None]
+    if a.shape[2] == 1:
+        a = np.repeat(a, 3, axis=2)
+    a = np.nan_to_num(a[..., :3], nan=0.0)
+    rgb = np.ascontiguousarray((np.clip(a, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
+    h, w = rgb.shape[:2]
+    qimg = QImage(rgb.data, w, h, 3 * w, QImage.Format.Format_RGB888).copy()
+    return qimg.scaled(size, size, Qt.AspectRatioMode.KeepAspectRatio,
+                       Qt.TransformationMode.FastTransformation)
+
+
+def _file_kind(spec) -> str:
+    """'image', 'mesh' or 'file': what a text field of a filter's Params holds."""
+    words = f"{spec.name} {spec.label}".lower()
+    if "image" in words:
+        return "image"
+    if "mesh" in words or spec.name == "target":
+        return "mesh"
+    return "file"
+
+
+class _FilterCombo(QComboBox):
+    """The filter drop-down; re-reads the registry each time it opens."""
+
+    def __init__(self, refresh, parent=None):
+        super().__init__(parent)
+        self._refresh = refresh
+
+    def showPopup(self) -> None:  # noqa: N802 (Qt API)
+        self._refresh()
+        super().showPopup()
+
+
+class PaparazziPanel(MethodPanel):
+    title = "Paparazzi"
+    description = ("Changes the shape so that its pictures look as if an image filter had been "
+                   "applied to them (Paparazzi, thesis ch. 2): it renders the shape from many "
+                   "cameras, filters each picture, and moves the surface towards the filtered "
+                   "look. A run takes a while, so Live is off: choose a filter, press Run, and "
+                   "watch the shape change.")
+    params_cls = PaparazziPanelParams
+    plot_metrics = ("monitor_energy",)
+    plot_title = "Monitor view energy (fixed camera; lower = closer to the filter's look)"
+    changes_faces = True
+    live_by_default = False
+    param_groups = {"Cameras and remeshing": ("view_width", "remesh_every", "seed")}
+    builtin_presets = {"quick look": {"iterations": 100, "resolution": 64},
+                       "thesis length": {"iterations": 1000}}
+
+    def __init__(self, window):
+        super().__init__(window)
+        self._filter_values: dict[str, Any] = {}   # filter name -> its last Params
+        self._paths: dict[tuple[str, str], str] = {}  # (filter, field) -> chosen file
+        self._path_edits: dict[str, QLineEdit] = {}
+        self._path_buttons: dict[str, QPushButton] = {}
+        self._path_kinds: dict[str, str] = {}
+        self.filter_form: ParamsForm | None = None
+        self._monitor_every = 0
+        self._first_monitor = None
+        self._add_plain_words()
+        self._build_filter_box()
+        self._build_views_box()
+        self._rebuild_filter_form()
+
+    # -- widgets -------------------------------------------------------------------------------
+    def _add_plain_words(self) -> None:
+        for name, text in PLAIN.items():
+            if name in self.form.editors:
+                for w in (self.form.editors[name], self.form.labels[name]):
+                    w.setToolTip(w.toolTip() + "\n\nIn plain words:\n• " + text)
+
+    def _build_filter_box(self) -> None:
+        lay: QVBoxLayout = self.body_layout
+        box = QGroupBox("Image filter")
+        v = QVBoxLayout(box)
+        row = QHBoxLayout()
+        self.filter_combo = _FilterCombo(self.refresh_filters)
+        self.filter_combo.setToolTip("What the pictures of the shape should look like. Energy "
+                                     "filters (target image / mesh) pull the pictures towards a "
+                                     "target; the other filters are applied to each picture.")
+        row.addWidget(QLabel("Filter"))
+        row.addWidget(self.filter_combo, 1)
+        v.addLayout(row)
+        self.filter_about = QLabel("")
+        self.filter_about.setWordWrap(True)
+        self.filter_about.setStyleSheet("color: #555;")
+        v.addWidget(self.filter_about)
+        self.filter_form_holder = QVBoxLayout()
+        self.filter_form_holder.setContentsMargins(0, 0, 0, 0)
+        v.addLayout(self.filter_form_holder)
+        self.filter_box = box
+        lay.insertWidget(lay.indexOf(self.form), box)
+        self.refresh_filters()
+        i = self.filter_combo.findText("guided")
+        self.filter_combo.setCurrentIndex(max(i, 0))
+        self.filter_combo.currentTextChanged.connect(lambda _t: self._rebuild_filter_form())
+
+    def _build_views_box(self) -> None:
+        lay: QVBoxLayout = self.body_layout
+        box = QGroupBox("This iteration's view")
+        box.setToolTip("Left: the shape as this iteration's camera sees it (its colours are the "
+                       "lighting the filter works on). Right: that picture after the filter, "
+                       "i.e. what the step moves the shape towards.")
+        g = QGridLayout(box)
+        self.render_label = QLabel("no run yet")
+        self.filtered_label = QLabel("")
+        for col, (lab, cap) in enumerate(((self.render_label, "Rendered"),
+                                          (self.filtered_label, "Filtered"))):
+            lab.setFixedSize(THUMB, THUMB)
+            lab.setAlignment(Qt.AlignmentFlag.AlignCenter)
+            lab.setStyleSheet("background: #ececec; color: #777; border: 1px solid #bbb;")
+            g.addWidget(lab, 0, col, Qt.AlignmentFlag.AlignHCenter)
+            c = QLabel(cap)
+            c.setAlignment(Qt.AlignmentFlag.AlignHCenter)
+            g.addWidget(c, 1, col)
+        self.views_box = box
+        lay.insertWidget(lay.indexOf(self.plot), box)
+
+    def refresh_filters(self) -> None:
+        """List the registered filters (a filter registered later appears by itself)."""
+        names = filter_names()
+        current = self.filter_combo.currentText()
+        have = [self.filter_combo.itemText(i) for i in range(self.filter_combo.count())]
+        if names == have:
+            return
+        self.filter_combo.blockSignals(True)
+        self.filter_combo.clear()
+        for i, name in enumerate(names):
+            self.filter_combo.addItem(name)
+            spec = get_filter(name)
+            if spec.description:
+                self.filter_combo.setItemData(i, spec.description, Qt.ItemDataRole.ToolTipRole)
+        if current in names:
+            self.filter_combo.setCurrentText(current)
+        self.filter_combo.blockSignals(False)
+        if current and current not in names and names:
+            self._rebuild_filter_form()
+
+    def filter_name(self) -> str:
+        return self.filter_combo.currentText()
+
+    def set_filter(self, name: str) -> None:
+        """Choose a filter by name (re-reading the registry first)."""
+        self.refresh_filters()
+        self.filter_combo.setCurrentText(name)
+
+    def _rebuild_filter_form(self) -> None:
+        """A new form for the chosen filter's Params (its last values kept per filter)."""
+        if self.filter_form is not None:
+            self._filter_values[self.filter_form.filter_name] = self.filter_form.params()
+            self.filter_form.setParent(None)
+            self.filter_form.deleteLater()
+            self.filter_form = None
+        while self.filter_form_holder.count():
+            w = self.filter_form_holder.takeAt(0).widget()
+            if w is not None:
+                w.setParent(None)
+                w.deleteLater()
+        self._path_edits.clear()
+        self._path_buttons.clear()
+        self._path_kinds.clear()
+        name = self.filter_name()
+        if not name:
+            return
+        try:
+            spec = get_filter(name)
+        except Stylize3DError:
+            return
+        self.filter_about.setText(spec.description or "")
+        files = [s for s in describe(spec.params) if s.type is str and not s.choices]
+        form = ParamsForm(spec.params, values=self._filter_values.get(name),
+                          exclude=tuple(s.name for s in files))
+        form.filter_name = name
+        form.changed.connect(self._on_params_changed)
+        self.filter_form = form
+        if files:
+            rows = QWidget()
+            fl = QFormLayout(rows)
+            fl.setContentsMargins(0, 0, 0, 0)
+            for s in files:
+                kind = _file_kind(s)
+                edit = QLineEdit(self._paths.get((name, s.name), ""))
+                edit.setPlaceholderText(f"choose {article(kind)}…")
+                edit.setToolTip(s.tooltip)
+                edit.editingFinished.connect(
+                    lambda s=s, e=edit: e.isModified() and self.set_filter_file(s.name, e.text()))
+                button = QPushButton("Choose…")
+                button.setToolTip(f"Open {article(kind)} file for '{s.label}'.")
+                button.clicked.connect(lambda _=False, s=s: self._choose_file(s.name))
+                row = QHBoxLayout()
+                row.addWidget(edit, 1)
+                row.addWidget(button)
+                label = QLabel(s.label)
+                label.setToolTip(s.tooltip)
+                fl.addRow(label, row)
+                self._path_edits[s.name] = edit
+                self._path_buttons[s.name] = button
+                self._path_kinds[s.name] = kind
+            self.filter_form_holder.addWidget(rows)
+        if form.specs:
+            self.filter_form_holder.addWidget(form)
+        elif not files:
+            none = QLabel("This filter has no settings.")
+            none.setStyleSheet("color: #777;")
+            self.filter_form_holder.addWidget(none)
+
+    # -- files (target image, target mesh) -------------------------------------------------------
+    def _choose_file(self, field: str) -> None:
+        from algorithms.mesh import file_filter
+
+        from app import dialogs
+
+        kind = self._path_kinds.get(field, "file")
+        flt = {"image": "Images (*.png *.jpg *.jpeg *.bmp *.tif *.tiff)",
+               "mesh": file_filter("read")}.get(
+                   kind, "All files (*)")
+        path = dialogs.open_file(self, f"Choose the {kind}", flt,
+                                 str(self.window_.settings.value("files/last_dir", "") or ""))
+        if path:
+            self.set_filter_file(field, path)
+
+    def set_filter_file(self, field: str, path: str) -> bool:
+        """Use ``path`` for the current filter's file field ``field``, after checking that it
+        can be read; a file that cannot be used gives a plain message and changes nothing."""
+        from app import dialogs
+
+        name = self.filter_name()
+        kind = self._path_kinds.get(field, "file")
+        edit = self._path_edits.get(field)
+        old = self._paths.get((name, field), "")
+        try:
+            note = self._check_file(kind, path)
+        except Stylize3DError as e:
+            if edit is not None:
+                edit.setText(old)
+            text = str(e)
+            self.status_label.setText(text)
+            self.window_.report(f"Cannot use this {kind}: {text}", "error")
+            dialogs.error(self.window_, f"Cannot use this {kind}", text)
+            return False
+        self._paths[(name, field)] = str(path)
+        if edit is not None:
+            edit.setText(str(path))
+            edit.setModified(False)
+        self.status_label.setText(f"{Path(path).name}: {note}.")
+        self._on_params_changed(None)
+        return True
+
+    @staticmethod
+    def _check_file(kind: str, path: str) -> str:
+        """Read the file as the filter will (raises a Stylize3DError); a short description."""
+        if kind == "image":
+            img = read_image(path)
+            from PIL import Image
+
+            with Image.open(path) as im:
+                grey = im.mode in ("L", "LA", "I", "I;16", "F", "1")
+            return (f"{img.shape[1]} × {img.shape[0]} pixels, {'grey' if grey else 'colour'}"
+                    f"{' (used as colour)' if grey else ''}; resized to the render resolution")
+        if kind == "mesh":
+            from algorithms.mesh import read_mesh
+
+            data = read_mesh(path)
+            return f"{len(data.V):,} vertices, {len(data.F):,} triangles"
+        if not Path(path).is_file():
+            raise ImageReadError(f"{path} is not a file.")
+        return "file chosen"
+
+    # -- the run ---------------------------------------------------------------------------------
+    def filter_params(self):
+        """The current filter's Params (form values and chosen files)."""
+        spec = get_filter(self.filter_name())
+        p = self.filter_form.params() if self.filter_form is not None else spec.params()
+        files = {f: self._paths.get((spec.name, f), "") for f in self._path_edits}
+        return dataclasses.replace(p, **files) if files else p
+
+    def job_options(self) -> dict:
+        return {"filter": self.filter_name(), "filter_params": params_to_dict(self.filter_params())}
+
+    def job_factory(self, state: MeshState, params: Any):
+        spec = get_filter(self.filter_name())
+        fparams = self.filter_params()
+        run_params = PaparazziParams(**{f.name: getattr(params, f.name)
+                                        for f in dataclasses.fields(PaparazziParams)})
+        self._monitor_every = run_params.monitor_every
+        self._first_monitor = None
+        return lambda: self._steps(state, spec, fparams, run_params)
+
+    def build_steps(self, state: MeshState, params: Any) -> Iterator[Step]:
+        return self.job_factory(state, params)()
+
+    @staticmethod
+    def _steps(state: MeshState, spec, fparams, params: PaparazziParams) -> Iterator[Step]:
+        from algorithms.paparazzi import Paparazzi
+
+        run = Paparazzi(np.asarray(state.V), np.asarray(state.F), spec, fparams, params)
+        yield from run.steps()
+
+    def run(self, live: bool = False) -> None:
+        doc = self.window_.document
+        if doc.state is None:
+            self.status_label.setText("Open a mesh first (File > Open).")
+            return
+        if not self._mesh_is_usable():
+            return
+        missing = [s for s in self._path_edits
+                   if not self._paths.get((self.filter_name(), s), "")]
+        if missing:
+            kind = self._path_kinds[missing[0]]
+            self.status_label.setText(f"The '{self.filter_name()}' filter needs "
+                                      f"{article(kind)}: press Choose… next to it first.")
+            return
+        super().run(live)
+        loops = (doc.report.stats.get("boundary_loops") or 0) if doc.report is not None else 0
+        if loops:
+            self.status_label.setText(
+                f"Starting… This mesh has {plural(loops, 'open border')}: "
+                f"{'it stays' if loops == 1 else 'they stay'} where {'it is' if loops == 1 else 'they are'}.")
+
+    def _mesh_is_usable(self) -> bool:
+        """Paparazzi remeshes as it goes, so it needs a 2-manifold mesh: offer Clean, or say
+        plainly why not."""
+        from algorithms.mesh import validate_mesh
+        from algorithms.mesh.topology import is_manifold
+
+        from app import dialogs
+
+        doc = self.window_.document
+        if is_manifold(doc.F):
+            return True
+        report = validate_mesh(doc.V, doc.F)
+        need = ("Paparazzi needs a 2-manifold mesh: every edge shared by one or two triangles "
+                "and every vertex with a single fan of triangles, because it remeshes the "
+                "surface as it goes. This mesh is not.")
+        fixable = report.needs_cleaning and all(i.fixable for i in report.errors)
+        if fixable:
+            choice = dialogs.choose(self.window_, "Paparazzi needs a 2-manifold mesh",
+                                    f"{need}\n\n{report.advice}.",
+                                    ["Clean, then run", "Cancel"], default="Clean, then run",
+                                    details=report.summary())
+            if choice == "Clean, then run":
+                self.window_.clean_mesh()
+                if is_manifold(self.window_.document.F):
+                    return True
+                need += " Cleaning did not make it one."
+            else:
+                self.status_label.setText("Not run: " + need)
+                return False
+        self.status_label.setText("Not run: " + need)
+        dialogs.error(self.window_, "Paparazzi needs a 2-manifold mesh",
+                      f"{need}\n\n{report.advice or 'Repair the mesh in a mesh editor.'}")
+        return False
+
+    # -- streamed results ------------------------------------------------------------------------
+    def _on_preview(self, step: Step) -> None:
+        super()._on_preview(step)
+        if not self._mine():
+            return
+        image = getattr(step, "image", None)
+        filtered = getattr(step, "filtered", None)
+        if image is not None:
+            self.render_label.setPixmap(QPixmap.fromImage(_image_to_qimage(image)))
+        if filtered is not None:
+            self.filtered_label.setPixmap(QPixmap.fromImage(_image_to_qimage(filtered)))
+        m = step.metrics
+        parts = [f"Iteration {step.iteration}/{step.total}" if step.total
+                 else f"Iteration {step.iteration}"]
+        if "vertices" in m:
+            parts.append(f"{int(m['vertices']):,} vertices")
+        if m.get("remeshes"):
+            parts.append(plural(int(m["remeshes"]), "remesh", "remeshes"))
+        if m.get("rollbacks"):
+            parts.append(plural(int(m["rollbacks"]), "rollback"))
+        text = " · ".join(parts)
+        if step.message:
+            text += f"\n{step.message}"
+        self.status_label.setText(text)
+
+    def _on_metrics(self, history) -> None:
+        """Plot the monitor energy where it was evaluated (the start, every ``monitor_every``
+        iterations, the end), not its repeated value in between."""
+        if not self._mine():
+            return
+        every = self._monitor_every
+        for it, metrics in history:
+            if "monitor_energy" not in metrics:
+                continue
+            if self._first_monitor is None:
+                self._first_monitor = metrics.get("initial_monitor_energy")
+                if self._first_monitor is not None:
+                    self.plot.append("monitor_energy", self._first_monitor)
+            if (every and it % every == 0) or self._is_last(it):
+                self.plot.append("monitor_energy", metrics["monitor_energy"])
+
+    def _is_last(self, it: int) -> bool:
+        req = getattr(self, "last_request", None)
+        return req is not None and it == req["params"].iterations
+
+    def _on_finished(self, step: Step) -> None:
+        if self.window_.last_job_name != self.title:
+            return
+        super()._on_finished(step)
+        m = step.metrics
+        e0, e1 = m.get("initial_monitor_energy"), m.get("monitor_energy")
+        extra = []
+        if e0 and e1 is not None:
+            extra.append(f"monitor energy {e0:.3g} → {e1:.3g} ({100 * (e1 - e0) / e0:+.0f} %)")
+        F = getattr(step, "F", None)
+        if F is not None:
+            extra.append(f"{len(step.V):,} vertices, {len(F):,} triangles")
+        if m.get("rollbacks"):
+            extra.append(plural(int(m["rollbacks"]), "self-intersection rollback"))
+        if extra:
+            self.status_label.setText(self.status_label.text() + "\n" + "; ".join(extra) + ".")

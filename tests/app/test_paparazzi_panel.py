@@ -1,0 +1,169 @@
+"""The Paparazzi panel with real widgets and the real viewport (pytest-qt)."""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtCore import Qt
+
+from algorithms.mesh.topology import boundary_loops, is_manifold
+from algorithms.paparazzi import register_filter, unregister_filter
+from app.panels.paparazzi import THUMB
+from tests.conftest import ROOT
+
+DATA = ROOT / "tests" / "data"
+
+
+def open_panel(window, name="hand_lowres.obj"):
+    assert window.open_path(DATA / name)
+    panel = window.panels["Paparazzi"]
+    panel.raise_()
+    assert not panel.live_box.isChecked()  # a run is long: Live is off
+    return panel
+
+
+def short_run(panel, iterations=30):
+    p = panel.form.params()
+    panel.form.set_params(p.__class__(iterations=iterations, resolution=64, remesh_every=10,
+                                      monitor_every=5, learning_rate=1e-3))
+
+
+def test_run_streams_mesh_images_and_monitor_then_one_undo_step(window, dialogs, qtbot):
+    panel = open_panel(window)  # the hand has an open wrist: the border must stay
+    doc = window.document
+    V0, F0 = np.array(doc.V), np.array(doc.F)
+    assert panel.filter_name() == "guided"
+    short_run(panel)
+    seen = []  # (faces carried, vertices shown on the 3D view, vertices of the step)
+
+    def on_preview(step):
+        seen.append((step.F is not None, window.viewport.poly.n_points, len(step.V)))
+
+    window.runner.preview.connect(on_preview)
+    with qtbot.waitSignal(window.job_committed, timeout=60000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    window.runner.preview.disconnect(on_preview)
+    # streamed updates arrived, each shown with its own vertices (also after a remesh)
+    assert len(seen) >= 2 and all(f and shown == n for f, shown, n in seen)
+    # the image pair shows, sized
+    for lab in (panel.render_label, panel.filtered_label):
+        pix = lab.pixmap()
+        assert not pix.isNull() and pix.width() == THUMB and pix.height() == THUMB
+    # the monitor plot: the start, every 5 iterations (5, ..., 30)
+    mon = panel.plot.series["monitor_energy"]
+    assert len(mon) == 7 and all(np.isfinite(mon)) and mon[-1] != mon[0]
+    # one undoable command with the remeshed faces; the border stayed where it was
+    assert window.undo_stack.count() == 1 and window.undo_stack.undoText() == "Paparazzi"
+    V1, F1 = np.array(doc.V), np.array(doc.F)
+    assert F1.shape != F0.shape or not np.array_equal(F1, F0)
+    assert is_manifold(F1) and window.viewport.poly.n_points == len(V1)
+    (ring0,), (ring1,) = boundary_loops(F0), boundary_loops(F1)
+    np.testing.assert_allclose(np.sort(V1[ring1], axis=0), np.sort(V0[ring0], axis=0),
+                               atol=1e-9)
+    assert "Done" in panel.status_label.text()
+    # undo restores V and F exactly, redo re-applies
+    window.undo_stack.undo()
+    np.testing.assert_array_equal(doc.V, V0)
+    np.testing.assert_array_equal(doc.F, F0)
+    np.testing.assert_array_equal(window.viewport.points, V0)
+    window.undo_stack.redo()
+    np.testing.assert_array_equal(doc.V, V1)
+    np.testing.assert_array_equal(doc.F, F1)
+    assert window.viewport.poly.n_points == len(V1)
+
+
+def test_stop_after_a_remesh_restores_the_mesh_exactly(window, dialogs, qtbot):
+    panel = open_panel(window, "spot_lowres.obj")
+    doc = window.document
+    V0, F0 = np.array(doc.V), np.array(doc.F)
+    short_run(panel, iterations=5000)
+    remeshed = []
+    window.runner.preview.connect(
+        lambda s: remeshed.append(s.metrics.get("remeshes", 0) > 0
+                                  and window.viewport.poly.n_points == len(s.V)))
+    panel.run_button.click()
+    qtbot.waitUntil(lambda: any(remeshed), timeout=60000)
+    with qtbot.waitSignal(window.runner.cancelled, timeout=30000):
+        panel.stop_button.click()
+    np.testing.assert_array_equal(doc.V, V0)
+    np.testing.assert_array_equal(doc.F, F0)
+    np.testing.assert_array_equal(window.viewport.points, V0)
+    assert window.undo_stack.count() == 0 and not dialogs.errors
+
+
+def test_target_image_that_cannot_be_used_changes_nothing(window, dialogs, qtbot, tmp_path):
+    from PIL import Image
+
+    panel = open_panel(window, "spot_lowres.obj")
+    panel.set_filter("target-image")
+    assert "image" in panel._path_edits
+    # a file that is not an image, and a non-square picture: plain messages, nothing changes
+    bad = tmp_path / "notes.png"
+    bad.write_text("not a picture")
+    dialogs.open_paths.append(str(bad))
+    panel._path_buttons["image"].click()
+    assert dialogs.errors[-1][0] == "Cannot use this image"
+    assert "cannot be read" in dialogs.errors[-1][1] and "PNG or JPEG" in dialogs.errors[-1][1]
+    wide = tmp_path / "wide.png"
+    Image.new("RGB", (40, 20), (200, 10, 10)).save(wide)
+    assert not panel.set_filter_file("image", str(wide))
+    assert "40 x 20" in dialogs.errors[-1][1] and "square" in dialogs.errors[-1][1]
+    assert panel._path_edits["image"].text() == "" and panel.filter_params().image == ""
+    # Run without an image: a plain note, no job, no change
+    panel.run_button.click()
+    assert not window.runner.busy and "needs a image" not in panel.status_label.text()
+    assert "needs an image" in panel.status_label.text()
+    assert window.undo_stack.count() == 0
+    # a grey square picture is fine (used as colour); it is kept per filter
+    grey = tmp_path / "grey.png"
+    Image.new("L", (32, 32), 128).save(grey)
+    assert panel.set_filter_file("image", str(grey))
+    assert "grey" in panel.status_label.text() and panel.filter_params().image == str(grey)
+    panel.set_filter("guided")
+    panel.set_filter("target-image")
+    assert panel._path_edits["image"].text() == str(grey)
+    assert len(dialogs.errors) == 2
+
+
+def test_a_filter_that_raises_stops_the_job_and_leaves_the_document(window, dialogs, qtbot):
+    panel = open_panel(window, "spot_lowres.obj")
+    doc = window.document
+    V0, F0 = np.array(doc.V), np.array(doc.F)
+
+    @register_filter("test-panel-broken", kind="iterative", resolution=32)
+    def broken(image, params, ctx):
+        raise ValueError("the test filter broke")
+
+    try:
+        panel.set_filter("test-panel-broken")  # the registry is listed: it appears by itself
+        assert panel.filter_name() == "test-panel-broken"
+        short_run(panel, iterations=20)
+        with qtbot.waitSignal(window.runner.failed, timeout=60000):
+            panel.run_button.click()
+    finally:
+        unregister_filter("test-panel-broken")
+    title, text = dialogs.errors[-1]
+    assert "the test filter broke" in text and "test-panel-broken" in text
+    assert "the test filter broke" in panel.status_label.text()
+    np.testing.assert_array_equal(doc.V, V0)
+    np.testing.assert_array_equal(doc.F, F0)
+    assert window.undo_stack.count() == 0
+    panel.refresh_filters()
+    assert panel.filter_combo.findText("test-panel-broken") < 0
+
+
+def test_non_manifold_mesh_offers_clean_or_is_refused(window, dialogs, qtbot):
+    from algorithms.mesh import validate_mesh
+    from algorithms.mesh.primitives import icosphere
+
+    panel = window.panels["Paparazzi"]
+    V, F = icosphere(1)
+    # a fin: a third triangle on the first edge makes it shared by three triangles
+    V2 = np.vstack([V, [[2.0, 2.0, 2.0]]])
+    F2 = np.vstack([F, [[F[0, 0], F[0, 1], len(V)]]])
+    window.document.load(V2, F2, None, validate_mesh(V2, F2))
+    dialogs.answers.append("Cancel")
+    panel.run_button.click()
+    title, text, choices = dialogs.questions[-1]
+    assert "2-manifold" in title and "Clean" in text and "Clean, then run" in choices
+    assert not window.runner.busy and "Not run" in panel.status_label.text()
+    np.testing.assert_array_equal(window.document.F, F2)
