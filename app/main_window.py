@@ -13,17 +13,19 @@ from pathlib import Path
 import numpy as np
 from PySide6.QtCore import QSettings, Qt, QTimer, Signal
 from PySide6.QtGui import QAction, QKeySequence, QShortcut, QUndoStack
-from PySide6.QtWidgets import (QLabel, QMainWindow, QProgressBar, QPushButton, QWidget)
+from PySide6.QtWidgets import (QDockWidget, QLabel, QMainWindow, QProgressBar, QPushButton,
+                               QWidget)
 
 from algorithms.errors import Stylize3DError
 from algorithms.mesh import (SUPPORTED_READ, SUPPORTED_WRITE, clean_mesh, file_filter, read_mesh,
                              validate_mesh, write_mesh)
 from algorithms.steps import Step
-from app import dialogs
+from app import __version__, dialogs
 from app.commands import StateCommand
 from app.document import Document
 from app.jobs import JobRunner
 from app.viewport import Viewport
+from app.widgets import MessageLog, plural
 
 APP_NAME = "Stylize3D"
 MAX_RECENT = 8
@@ -45,6 +47,10 @@ SHORTCUTS: list[tuple[str, str, str | None]] = [
     ("W", "Show / hide edges", "wireframe"),
     ("F", "Flat / smooth shading", "flat"),
     ("G", "Show the original mesh as a ghost", "ghost"),
+    ("1", "Front view", "view_front"),
+    ("7", "Top view", "view_top"),
+    ("3", "Side view", "view_side"),
+    ("5", "Orthographic / perspective view", "orthographic"),
     ("F1", "This list of shortcuts", "shortcuts"),
     ("Ctrl+Q", "Quit", "quit"),
 ]
@@ -83,13 +89,20 @@ class MainWindow(QMainWindow):
         self._ever_saved_here: set[str] = set()
 
         self.viewport = Viewport(self)
-        self.setCentralWidget(self.viewport)
+        # View > Before / After: the mesh as opened, side by side, through the same camera
+        from PySide6.QtWidgets import QSplitter
+
+        self.central_split = QSplitter(Qt.Orientation.Horizontal)
+        self.before_view: Viewport | None = None
+        self.central_split.addWidget(self.viewport)
+        self.setCentralWidget(self.central_split)
         self.setAcceptDrops(True)
         self.setDockOptions(QMainWindow.DockOption.AnimatedDocks | QMainWindow.DockOption.AllowTabbedDocks)
 
         self._build_actions()
         self._build_menus()
         self._build_status_bar()
+        self._build_toolbar()
         self._build_panels()
 
         self.document.subscribe(self._on_document_changed)
@@ -135,6 +148,14 @@ class MainWindow(QMainWindow):
           tip="Save the mesh under a new name or format (OBJ, PLY, STL, OFF, glTF .glb)")
         A("screenshot", "Export &Screenshot…", lambda: self.export_screenshot_dialog(),
           tip="Save the 3D view as a PNG image")
+        A("export_field", "Export Shown &Field…", lambda: self.export_field_dialog(),
+          tip="Save the values of the colour view shown now, one per vertex (.txt, .csv, .npy)")
+        A("export_colored", "Export &Coloured Mesh…", lambda: self.export_colored_dialog(),
+          tip="Save the mesh with the colour view shown now as vertex colours (.ply, .obj), "
+              "to show it in another program")
+        A("study", "Start &Study Session…", lambda: self.start_study_dialog(),
+          tip="Run a user-study protocol (.json / .toml): tasks, locked panels, a log of every "
+              "action (docs/study.md)")
         A("quit", "&Quit", self.close)
         undo = self.undo_stack.createUndoAction(self, "&Undo")
         undo.setShortcuts(shortcut_keys("undo"))
@@ -152,8 +173,18 @@ class MainWindow(QMainWindow):
           tip="Draw the triangle edges on the surface")
         A("flat", "&Flat Shading", self.viewport.set_flat_shading,
           checkable=True, tip="Shade each triangle with one colour (shows facets)")
+        A("before_after", "&Before / After", self.show_before_after, checkable=True,
+          tip="The mesh as it was opened next to the current one, seen through one camera")
         A("ghost", "Show &Original as Ghost", self._toggle_ghost,
           checkable=True, tip="Overlay the mesh as it was when opened, translucent")
+        for key, text in (("front", "&Front View"), ("top", "&Top View"),
+                          ("side", "&Side View")):
+            A(f"view_{key}", text, lambda _=False, key=key: self.viewport.standard_view(key),
+              tip=f"Look at the whole mesh from the {key}")
+        A("orthographic", "&Orthographic", self.viewport.set_orthographic, checkable=True,
+          tip="Parallel projection: no perspective, so sizes compare across the view")
+        A("welcome", "&Welcome…", lambda: self.show_welcome(),
+          tip="Open a sample mesh or your own file, with a suggestion of what to try first")
         A("about", "&About Stylize3D", self.show_about)
         A("shortcuts", "&Keyboard Shortcuts", self.show_shortcuts)
 
@@ -168,6 +199,10 @@ class MainWindow(QMainWindow):
         m.addAction(a["save"])
         m.addAction(a["save_as"])
         m.addAction(a["screenshot"])
+        m.addAction(a["export_field"])
+        m.addAction(a["export_colored"])
+        m.addSeparator()
+        m.addAction(a["study"])
         m.addSeparator()
         m.addAction(a["quit"])
         m = mb.addMenu("&Edit")
@@ -176,19 +211,85 @@ class MainWindow(QMainWindow):
         m.addSeparator()
         m.addAction(a["clean"])
         m = mb.addMenu("&View")
-        for name in ("reset_camera", "wireframe", "flat", "ghost"):
+        for name in ("reset_camera", "view_front", "view_top", "view_side", "orthographic",
+                     "wireframe", "flat", "ghost", "before_after"):
             m.addAction(a[name])
         self.panels_menu = m.addMenu("&Panels")
+        self.view_menu = m
         m = mb.addMenu("&Help")
+        m.addAction(a["welcome"])
         m.addAction(a["shortcuts"])
         m.addAction(a["about"])
         self._fill_recent_menu()
 
+    def _build_toolbar(self) -> None:
+        """The common actions as icons (the same actions as the menus)."""
+        from PySide6.QtWidgets import QStyle, QToolBar
+
+        tb = QToolBar("Toolbar", self)
+        tb.setObjectName("toolbar_main")
+        tb.setMovable(False)
+        tb.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextUnderIcon)
+        style = self.style()
+        icons = {"open": QStyle.StandardPixmap.SP_DialogOpenButton,
+                 "save": QStyle.StandardPixmap.SP_DialogSaveButton,
+                 "undo": QStyle.StandardPixmap.SP_ArrowBack,
+                 "redo": QStyle.StandardPixmap.SP_ArrowForward,
+                 "reset_camera": QStyle.StandardPixmap.SP_BrowserReload,
+                 "screenshot": QStyle.StandardPixmap.SP_DesktopIcon,
+                 "ghost": QStyle.StandardPixmap.SP_TitleBarShadeButton}
+        labels = {"reset_camera": "Reset view", "screenshot": "Screenshot", "ghost": "Ghost",
+                  "before_after": "Before/After",
+                  "view_front": "Front", "view_top": "Top", "view_side": "Side",
+                  "orthographic": "Ortho"}
+        groups = (("open", "save"), ("undo", "redo"), ("reset_camera", "view_front", "view_top",
+                                                      "view_side", "orthographic", "ghost",
+                                                      "before_after"),
+                  ("screenshot",))
+        self.toolbar_buttons = {}
+        for i, group in enumerate(groups):
+            if i:
+                tb.addSeparator()
+            for name in group:
+                a = self.actions_by_name[name]
+                if name in icons:
+                    a.setIcon(style.standardIcon(icons[name]))
+                if name in labels:
+                    a.setIconText(labels[name])
+                keys = a.shortcut().toString()
+                if keys and keys not in a.toolTip():
+                    a.setToolTip(f"{a.toolTip() or a.text().replace('&', '')} ({keys})")
+                tb.addAction(a)
+                self.toolbar_buttons[name] = tb.widgetForAction(a)
+        self.addToolBar(Qt.ToolBarArea.TopToolBarArea, tb)
+        self.toolbar = tb
+
     def _build_status_bar(self) -> None:
         sb = self.statusBar()
+        self.message_log = MessageLog()
+        self.messages_dock = QDockWidget("Messages", self)
+        self.messages_dock.setObjectName("dock_messages")
+        self.messages_dock.setWidget(self.message_log)
+        self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, self.messages_dock)
+        self.messages_dock.hide()
+        self.view_menu.addAction(self.messages_dock.toggleViewAction())
+        self.details_button = QPushButton("Details…")
+        self.details_button.setFlat(True)
+        self.details_button.setToolTip("Show every message of this session in full (the status "
+                                       "bar shows each one for a few seconds).")
+        self.details_button.clicked.connect(self.show_messages)
+        sb.addPermanentWidget(self.details_button)
         self.stats_label = QLabel()
         self.stats_label.setToolTip("Vertices, triangles, boundary loops and genus of the open mesh")
         sb.addPermanentWidget(self.stats_label)
+        self.job_label = QLabel()  # what the running job does now, and for how long
+        self.job_label.setVisible(False)
+        self.job_label.setToolTip("The running job's current stage and the time it has taken")
+        sb.addPermanentWidget(self.job_label)
+        self._job_stage = ""
+        self._job_clock = QTimer(self)
+        self._job_clock.setInterval(1000)
+        self._job_clock.timeout.connect(self._show_job_stage)
         self.progress_bar = QProgressBar()
         self.progress_bar.setMaximumWidth(220)
         self.progress_bar.setTextVisible(True)
@@ -203,22 +304,46 @@ class MainWindow(QMainWindow):
         self._esc.setContext(Qt.ShortcutContext.ApplicationShortcut)
         self._esc.activated.connect(self.cancel_job)
 
+    # ------------------------------------------------------------------------------ messages
+    def report(self, text: str, level: str = "info", timeout_ms: int = 8000) -> None:
+        """Tell the user something: the whole text goes to the message log (View > Messages,
+        "Details…"); its first line, shortened with "…" to the free width, to the status bar."""
+        self.message_log.add(text, level)
+        sb = self.statusBar()
+        used = sum(w.width() for w in (self.details_button, self.stats_label, self.job_label,
+                                       self.progress_bar, self.cancel_button) if w.isVisible())
+        free = max(sb.width() - used - 40, 120)
+        line = text.strip().splitlines()[0] if text.strip() else ""
+        shown = sb.fontMetrics().elidedText(line, Qt.TextElideMode.ElideRight, free)
+        sb.showMessage(shown, timeout_ms)
+
+    def _error(self, title: str, text: str, details: str | None = None) -> None:
+        """An error dialog whose text also stays in the message log."""
+        self.message_log.add(f"{title}: {text}", "error")
+        dialogs.error(self, title, text, details)
+
+    def show_messages(self) -> None:
+        self.messages_dock.show()
+        self.messages_dock.raise_()
+
     def _layout_version(self) -> int:
         import zlib
 
         return zlib.crc32(",".join(self.panels).encode()) & 0x7FFFFFFF
 
     def _build_panels(self) -> None:
+        from app.panels.adversarial import AdversarialPanel
         from app.panels.analogies import AnalogiesPanel
         from app.panels.cubic import CubicPanel
         from app.panels.multigrid import MultigridPanel
+        from app.panels.paparazzi import PaparazziPanel
         from app.panels.smooth import SmoothPanel
         from app.panels.spectral import SpectralPanel
         from app.panels.subdivision import SubdivisionPanel
 
         self.panels = {}
         for cls in (CubicPanel, AnalogiesPanel, SmoothPanel, MultigridPanel, SpectralPanel,
-                    SubdivisionPanel):
+                    SubdivisionPanel, PaparazziPanel, AdversarialPanel):
             panel = cls(self)
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, panel)
             self.panels[cls.title] = panel
@@ -272,12 +397,12 @@ class MainWindow(QMainWindow):
         stays as it was. Returns True when the mesh was opened."""
         path = str(path)
         if self.runner.busy:
-            dialogs.error(self, "A job is running", "Stop the running job (Esc) before opening a file.")
+            self._error("A job is running", "Stop the running job (Esc) before opening a file.")
             return False
         try:
             data = read_mesh(path)
         except Stylize3DError as e:
-            dialogs.error(self, "Cannot open mesh", str(e))
+            self._error("Cannot open mesh", str(e))
             return False
         V, F, notes = data.V, data.F, list(data.notes)
         report = validate_mesh(V, F, notes=notes)
@@ -295,13 +420,13 @@ class MainWindow(QMainWindow):
                     notes += list(res.actions)
                     report = validate_mesh(V, F, notes=notes)
                     if report.errors:
-                        dialogs.error(self, "Cannot open mesh",
+                        self._error("Cannot open mesh",
                                       f"Cleaning could not fix everything:\n\n{report.summary()}")
                         return False
                 elif choice != "Open as it is":
                     return False
             else:
-                dialogs.error(self, "Cannot open mesh", text + "\n\nThese problems cannot be "
+                self._error("Cannot open mesh", text + "\n\nThese problems cannot be "
                               "fixed automatically; repair the file in a mesh editor.")
                 return False
         if not self._confirm_discard():
@@ -313,24 +438,24 @@ class MainWindow(QMainWindow):
         msg = f"Opened {Path(path).name}: {len(V):,} vertices, {len(F):,} triangles."
         if notes:
             msg += " " + " ".join(notes)
-        self.statusBar().showMessage(msg, 8000)
+        self.report(msg + (f"\n{report.summary()}" if report.warnings else ""))
         return True
 
     def _write(self, path: str) -> bool:
         try:
             write_mesh(path, self.document.V, self.document.F)
         except Stylize3DError as e:
-            dialogs.error(self, "Could not save", str(e))
+            self._error("Could not save", str(e))
             return False
         except OSError as e:  # pragma: no cover - write_mesh wraps these
-            dialogs.error(self, "Could not save", f"{path}: {e.strerror or e}")
+            self._error("Could not save", f"{path}: {e.strerror or e}")
             return False
         self._ever_saved_here.add(str(Path(path).resolve()))
         if Path(path).suffix.lower() in SUPPORTED_READ:
             self.document.mark_saved(path)
             self.undo_stack.setClean()
             self._add_recent(path)
-        self.statusBar().showMessage(f"Saved {path}", 5000)
+        self.report(f"Saved {path}", timeout_ms=5000)
         self._update_title()
         return True
 
@@ -382,10 +507,98 @@ class MainWindow(QMainWindow):
         except Exception as e:
             if os.path.exists(tmp):
                 os.remove(tmp)
-            dialogs.error(self, "Could not export screenshot", f"{path}: {e}")
+            self._error("Could not export screenshot", f"{path}: {e}")
             return False
         self._ever_saved_here.add(str(Path(path).resolve()))
-        self.statusBar().showMessage(f"Screenshot saved to {path}", 5000)
+        self.report(f"Screenshot saved to {path}", timeout_ms=5000)
+        return True
+
+    def export_field_dialog(self) -> bool:
+        """File > Export Shown Field: the per-vertex values behind the colours on screen."""
+        from algorithms.mesh.fields import FIELD_EXTENSIONS, field_file_filter
+
+        shown = None if self.document.is_empty else self.viewport.shown_field()
+        if shown is None:
+            dialogs.info(self, "Export field", "No per-vertex colour view is shown. Choose one "
+                         "in a panel first (for example Cubic > Show > λ scale, or Analogies > "
+                         "Colour by).")
+            return False
+        path = dialogs.save_file(self, "Export the shown field", field_file_filter(),
+                                 self._last_dir())
+        if not path:
+            return False
+        if Path(path).suffix.lower() not in FIELD_EXTENSIONS:
+            path += ".txt"
+        if not self._may_overwrite(path):
+            return False
+        return self.export_field(path)
+
+    def start_study_dialog(self):
+        """File > Start Study Session: choose a protocol; the start dialog asks for the
+        participant and condition (app/study/session.py)."""
+        from app.study.session import start_study
+
+        if getattr(self, "study_session", None) is not None and not self.study_session.finished:
+            dialogs.info(self, "Study session", "A study session is already running.")
+            return None
+        path = dialogs.open_file(self, "Open a study protocol", "Study protocols (*.json *.toml)",
+                                 self._last_dir())
+        if not path:
+            return None
+        try:
+            return start_study(self, path)
+        except Stylize3DError as e:
+            self._error("Cannot start the study session", str(e))
+            return None
+
+    def export_colored_dialog(self) -> bool:
+        """File > Export Coloured Mesh: the mesh with the colour view on screen as vertex
+        colours (PLY or OBJ), to show the result in another program."""
+        if self.document.is_empty or self.viewport.shown_colors() is None:
+            dialogs.info(self, "Export coloured mesh", "No per-vertex colour view is shown. "
+                         "Choose one in a panel first (for example Analogies > Colour by).")
+            return False
+        path = dialogs.save_file(self, "Export the mesh with its colours",
+                                 "Coloured meshes (*.ply *.obj)", self._last_dir())
+        if not path:
+            return False
+        if Path(path).suffix.lower() not in (".ply", ".obj"):
+            path += ".ply"
+        if not self._may_overwrite(path):
+            return False
+        return self.export_colored(path)
+
+    def export_colored(self, path: str) -> bool:
+        from algorithms.mesh import write_mesh
+
+        colors = self.viewport.shown_colors()
+        if colors is None or self.document.is_empty:
+            return False
+        try:
+            write_mesh(path, self.document.V, self.document.F, vertex_colors=colors)
+        except Stylize3DError as e:
+            self._error("Could not export the coloured mesh", str(e))
+            return False
+        self._ever_saved_here.add(str(Path(path).resolve()))
+        self.report(f"Saved the mesh with its colours ({len(colors):,} vertices) to {path}",
+                    timeout_ms=5000)
+        return True
+
+    def export_field(self, path: str) -> bool:
+        from algorithms.mesh.fields import write_field
+
+        shown = self.viewport.shown_field()
+        if shown is None:
+            return False
+        name, values = shown
+        try:
+            write_field(path, values)
+        except Stylize3DError as e:
+            self._error("Could not export the field", str(e))
+            return False
+        self._ever_saved_here.add(str(Path(path).resolve()))
+        self.report(f"Saved the field '{name}' ({len(values):,} values, one per vertex) to "
+                    f"{path}", timeout_ms=5000)
         return True
 
     def save_window_image(self, path: str) -> bool:
@@ -418,7 +631,7 @@ class MainWindow(QMainWindow):
         try:
             res = clean_mesh(doc.V, doc.F)
         except Stylize3DError as e:
-            dialogs.error(self, "Cannot clean the mesh", str(e))
+            self._error("Cannot clean the mesh", str(e))
             return False
         changed = res.V.shape != doc.V.shape or res.F.shape != doc.F.shape or not (
             np.array_equal(res.F, doc.F) and np.array_equal(res.V, doc.V))
@@ -467,7 +680,18 @@ class MainWindow(QMainWindow):
         if self.document.state is not None and step.V.shape == self.document.V.shape:
             self.viewport.update_points(step.V)
 
+    def _show_job_stage(self) -> None:
+        import time
+
+        if not self.runner.busy:
+            return
+        seconds = time.perf_counter() - self.runner.started_at
+        stage = self._job_stage or "working"
+        self.job_label.setText(f"{stage[:60]} — {seconds:.0f} s")
+
     def _on_progress(self, it: int, total, message: str) -> None:
+        self._job_stage = message or ""
+        self._show_job_stage()
         if total:
             self.progress_bar.setRange(0, int(total))
             self.progress_bar.setValue(int(it))
@@ -477,6 +701,14 @@ class MainWindow(QMainWindow):
             self.progress_bar.setFormat(f"{self.runner.name}: {it}")
 
     def _on_busy_changed(self, busy: bool) -> None:
+        self.viewport.set_streaming(busy)
+        self._job_stage = ""
+        self.job_label.setVisible(busy)
+        if busy:
+            self._show_job_stage()
+            self._job_clock.start()
+        else:
+            self._job_clock.stop()
         self.progress_bar.setVisible(busy)
         self.cancel_button.setVisible(busy)
         if busy:
@@ -494,8 +726,7 @@ class MainWindow(QMainWindow):
 
     def _on_job_finished(self, step: Step) -> None:
         if getattr(self, "_job_kind", "positions") == "analysis":
-            self.statusBar().showMessage(f"{self.last_job_name} finished in "
-                                         f"{self.runner.last_duration:.2f} s.", 8000)
+            self.report(f"{self.last_job_name} finished in {self.runner.last_duration:.2f} s.")
             return
         before = self._job_before
         if before is None or self.document.state is not before:
@@ -503,7 +734,7 @@ class MainWindow(QMainWindow):
             return
         if step.V.shape != before.V.shape or not np.isfinite(step.V).all():
             self._restore_view()
-            dialogs.error(self, f"{self.last_job_name} failed",
+            self._error(f"{self.last_job_name} failed",
                           "The method returned an invalid result; your mesh was not changed.")
             return
         commit = getattr(self, "_job_commit", None)
@@ -512,18 +743,17 @@ class MainWindow(QMainWindow):
                                           merge_id=getattr(self, "_job_merge_id", -1)))
         self._job_before = None
         self.job_committed.emit(self.last_job_name, after)
-        self.statusBar().showMessage(
-            f"{self.last_job_name} finished in {self.runner.last_duration:.2f} s "
-            f"({step.iteration} iterations). Undo with Ctrl+Z.", 8000)
+        self.report(f"{self.last_job_name} finished in {self.runner.last_duration:.2f} s "
+                    f"({plural(step.iteration, 'iteration')}). Undo with Ctrl+Z.")
 
     def _on_job_cancelled(self, message: str) -> None:
         if not self.runner.busy:  # a restarted (live) job keeps streaming instead
             self._restore_view()
-        self.statusBar().showMessage(message + " The mesh is as it was.", 5000)
+        self.report(message + " The mesh is as it was.", timeout_ms=5000)
 
     def _on_job_failed(self, message: str, details: str) -> None:
         self._restore_view()
-        dialogs.error(self, f"{self.last_job_name or 'Job'} failed",
+        self._error(f"{self.last_job_name or 'Job'} failed",
                       message + "\n\nYour mesh is as it was before the job.", details or None)
 
     # ------------------------------------------------------------------------------ document
@@ -532,6 +762,7 @@ class MainWindow(QMainWindow):
         if what == "mesh":
             self.viewport.set_mesh(doc.V, doc.F)
             self._refresh_ghost()
+            self._refresh_before()
             self._update_stats()
             self.mesh_shown.emit()
         elif what == "topology":
@@ -572,6 +803,32 @@ class MainWindow(QMainWindow):
     def _toggle_ghost(self, on: bool) -> None:
         self._refresh_ghost()
 
+    def show_before_after(self, on: bool) -> None:
+        """Split the view: left the mesh as it was opened ("before"), right the current one;
+        one camera for both."""
+        if on and self.before_view is None:
+            self.before_view = Viewport(self)
+            self.before_view.show_legend = False
+            self.central_split.insertWidget(0, self.before_view)
+        if self.before_view is None:
+            return
+        self.before_view.setVisible(on)
+        if on:
+            self._refresh_before()
+            self.before_view.link_camera(self.viewport)
+        else:
+            self.before_view.unlink_camera()
+
+    def _refresh_before(self) -> None:
+        bv = self.before_view
+        if bv is None or not bv.isVisible():
+            return
+        orig = self.document.original
+        if orig is None:
+            bv.clear()
+        else:
+            bv.set_mesh(orig.V, orig.F, reset_camera=False)
+
     def _refresh_ghost(self) -> None:
         if self.actions_by_name["ghost"].isChecked() and self.document.original is not None:
             self.viewport.set_ghost(self.document.original.V, self.document.original.F)
@@ -582,9 +839,23 @@ class MainWindow(QMainWindow):
     def show_about(self) -> None:
         dialogs.info(self, "About Stylize3D",
                      "Stylize3D — stylize and process 3D surface meshes.\n\n"
-                     "Cubic stylization, shape analogies, Paparazzi, neural subdivision, spectral "
-                     "coarsening and surface multigrid, after one PhD thesis on data-driven "
-                     "geometric stylization and scalable geometry processing.")
+                     "In this app: cubic stylization, shape analogies, neural subdivision, "
+                     "smoothing, surface multigrid and spectral coarsening; Paparazzi image "
+                     "filters and parametric adversaries run from the command line "
+                     "(stylize3d paparazzi / adversary). After one PhD thesis on data-driven "
+                     "geometric stylization and scalable geometry processing.\n\n"
+                     f"Version {__version__}.")
+
+    def show_welcome(self):
+        """Help > Welcome (and the first start): samples with thumbnails, or open a file."""
+        from app.welcome import WelcomeDialog
+
+        dlg = getattr(self, "welcome_dialog", None)
+        if dlg is None:
+            dlg = self.welcome_dialog = WelcomeDialog(self)
+        dlg.show()
+        dlg.raise_()
+        return dlg
 
     def show_shortcuts(self) -> None:
         dialogs.info(self, "Keyboard shortcuts", SHORTCUTS_TEXT)
