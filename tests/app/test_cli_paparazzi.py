@@ -11,7 +11,8 @@ from algorithms.mesh import icosphere, read_mesh, write_mesh
 from algorithms.mesh.topology import is_manifold
 from app.cli import main
 
-FAST = ["--iterations", "12", "--resolution", "32", "--remesh-every", "6", "--monitor-every", "0"]
+FAST = ["--iterations", "12", "--resolution", "32", "--remesh-every", "6", "--remesh-threshold", "0",
+        "--monitor-every", "0"]
 
 
 @pytest.fixture

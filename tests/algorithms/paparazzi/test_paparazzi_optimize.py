@@ -75,9 +75,10 @@ def test_remeshing_keeps_a_manifold_with_the_input_topology_and_no_self_intersec
     d = read_mesh(shared_mesh(name))
     before = palette_fraction(d.V, d.F)
     steps = list(paparazzi_iter(d.V, d.F, "quantize", None, PaparazziParams(
-        iterations=90, learning_rate=5e-4, resolution=64, monitor_every=0, remesh_every=30)))
+        iterations=90, learning_rate=5e-4, resolution=64, monitor_every=0, remesh_every=30,
+        remesh_threshold=0.0)))
     last = steps[-1]
-    assert last.metrics["remeshes"] == 2
+    assert last.metrics["remeshes"] == 2            # remesh_threshold=0: at every check
     assert len(last.V) != len(d.V)                            # it was remeshed
     assert is_manifold(last.F)
     assert euler_characteristic(last.F) == euler_characteristic(d.F)
@@ -162,3 +163,23 @@ def test_self_intersections_are_rolled_back_and_the_step_shrinks():
     assert last.metrics["rollbacks"] >= 1
     assert count_self_intersections(last.V, last.F) == 0
     assert is_manifold(last.F)
+
+
+def test_remeshing_happens_only_when_the_edge_lengths_left_the_band():
+    # a regular sphere: every edge within [4/5 h, 4/3 h], so the checks only look for crossings
+    V, F = icosphere(3)
+    pp = PaparazziParams(iterations=12, resolution=32, remesh_every=6, monitor_every=0)
+    run = Paparazzi(V, F, "guided", None, pp)
+    assert run.band_fraction(run.V0, run.F0) < 0.05
+    last = run_to_end(run.steps())
+    assert last.metrics["remeshes"] == 0 and len(last.V) == len(V)
+    # stretched 2.5x along x: most edges leave the band, so the first check remeshes, and the
+    # remeshed mesh has far fewer edges outside it
+    run = Paparazzi(V * [2.5, 1.0, 1.0], F, "guided", None, pp)
+    before = run.band_fraction(run.V0, run.F0)
+    assert before > 0.3
+    steps = list(run.steps())
+    assert steps[5].metrics["remeshes"] == 1
+    after = run.band_fraction((steps[5].V - run.center) / run.scale, steps[5].F)
+    assert after < 0.6 * before, (before, after)
+    assert is_manifold(steps[-1].F) and count_self_intersections(steps[-1].V, steps[-1].F) == 0
