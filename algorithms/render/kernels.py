@@ -329,7 +329,25 @@ def normal_vjp(V, F, faces, g, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _sh_parts(x, y, z, d, Q, Cm, Sm):  # pragma: no cover - compiled
+def _sh_scratch(d):  # pragma: no cover - compiled
+    """Per-call scratch: ``Q (d+2, d+2)`` zeros, ``Cm``, ``Sm``, and the recurrence factors
+    ``R[l, m, 0] = (2l - 1) / (l - m)``, ``R[l, m, 1] = (l + m - 1) / (l - m)`` (``l >= m + 2``),
+    ``R[m, m, 0] = (2m - 1)!!``, ``R[m + 1, m, 0] = (2m + 1)!!`` (no division per face)."""
+    Q = np.zeros((d + 2, d + 2))
+    R = np.zeros((d + 2, d + 2, 2))
+    dfact = 1.0
+    for m in range(d + 1):
+        R[m, m, 0] = dfact
+        R[m + 1, m, 0] = dfact * (2 * m + 1)
+        for l in range(m + 2, d + 1):
+            R[l, m, 0] = (2.0 * l - 1.0) / (l - m)
+            R[l, m, 1] = (l + m - 1.0) / (l - m)
+        dfact *= 2 * m + 1
+    return Q, R, np.empty(d + 1), np.empty(d + 1)
+
+
+@njit(cache=True, nogil=True)
+def _sh_parts(x, y, z, d, R, Q, Cm, Sm):  # pragma: no cover - compiled
     """``Cm[m] + i Sm[m] = (x + i y)^m`` and ``Q[l, m] = d^m P_l/dz^m (z)`` for ``m <= l <= d``
     (``Q[l, l + 1]`` stays 0)."""
     Cm[0] = 1.0
@@ -337,14 +355,12 @@ def _sh_parts(x, y, z, d, Q, Cm, Sm):  # pragma: no cover - compiled
     for m in range(1, d + 1):
         Cm[m] = Cm[m - 1] * x - Sm[m - 1] * y
         Sm[m] = Cm[m - 1] * y + Sm[m - 1] * x
-    dfact = 1.0                                  # (2m - 1)!!
     for m in range(d + 1):
-        Q[m, m] = dfact
+        Q[m, m] = R[m, m, 0]
         if m + 1 <= d:
-            Q[m + 1, m] = (2 * m + 1) * z * dfact
+            Q[m + 1, m] = R[m + 1, m, 0] * z
         for l in range(m + 2, d + 1):
-            Q[l, m] = ((2 * l - 1) * z * Q[l - 1, m] - (l + m - 1) * Q[l - 2, m]) / (l - m)
-        dfact *= 2 * m + 1
+            Q[l, m] = R[l, m, 0] * z * Q[l - 1, m] - R[l, m, 1] * Q[l - 2, m]
 
 
 @njit(cache=True, nogil=True)
@@ -373,19 +389,30 @@ def sh_shade(N, W, Kf, out):  # pragma: no cover - compiled
     """``out (k, C) = sum_j W_jc Y_j(n_k / |n_k|)`` (the irradiance with ``W = A U``)."""
     nc, C = W.shape
     d = int(round(math.sqrt(nc))) - 1
-    Q = np.zeros((d + 2, d + 2))
-    Cm = np.empty(d + 1)
-    Sm = np.empty(d + 1)
+    Q, R, Cm, Sm = _sh_scratch(d)
     Y = np.empty(nc)
     for f in range(N.shape[0]):
         x, y, z = _unit(N, f)
-        _sh_parts(x, y, z, d, Q, Cm, Sm)
+        _sh_parts(x, y, z, d, R, Q, Cm, Sm)
         _sh_values(d, Kf, Q, Cm, Sm, Y)
-        for c in range(C):
-            acc = 0.0
+        if C == 3:                       # RGB: three independent accumulators
+            a0 = 0.0
+            a1 = 0.0
+            a2 = 0.0
             for j in range(nc):
-                acc += Y[j] * W[j, c]
-            out[f, c] = acc
+                yj = Y[j]
+                a0 += yj * W[j, 0]
+                a1 += yj * W[j, 1]
+                a2 += yj * W[j, 2]
+            out[f, 0] = a0
+            out[f, 1] = a1
+            out[f, 2] = a2
+        else:
+            for c in range(C):
+                acc = 0.0
+                for j in range(nc):
+                    acc += Y[j] * W[j, c]
+                out[f, c] = acc
 
 
 @njit(cache=True, nogil=True)
@@ -393,13 +420,11 @@ def sh_lighting_vjp(N, Gc, Kf, out):  # pragma: no cover - compiled
     """``out (nc, C)`` (zeroed beforehand) += ``sum_k Y_j(n_k) Gc_kc``."""
     nc, C = out.shape
     d = int(round(math.sqrt(nc))) - 1
-    Q = np.zeros((d + 2, d + 2))
-    Cm = np.empty(d + 1)
-    Sm = np.empty(d + 1)
+    Q, R, Cm, Sm = _sh_scratch(d)
     Y = np.empty(nc)
     for f in range(N.shape[0]):
         x, y, z = _unit(N, f)
-        _sh_parts(x, y, z, d, Q, Cm, Sm)
+        _sh_parts(x, y, z, d, R, Q, Cm, Sm)
         _sh_values(d, Kf, Q, Cm, Sm, Y)
         for j in range(nc):
             for c in range(C):
@@ -412,18 +437,23 @@ def sh_normal_vjp(N, Gc, W, Kf, out):  # pragma: no cover - compiled
     the projection onto the tangent plane of the unit normal (the gradient of ``Y(n/|n|)``)."""
     nc, C = W.shape
     d = int(round(math.sqrt(nc))) - 1
-    Q = np.zeros((d + 2, d + 2))
-    Cm = np.empty(d + 1)
-    Sm = np.empty(d + 1)
+    Q, R, Cm, Sm = _sh_scratch(d)
     w = np.empty(nc)
     for f in range(N.shape[0]):
         x, y, z = _unit(N, f)
-        _sh_parts(x, y, z, d, Q, Cm, Sm)
-        for j in range(nc):
-            acc = 0.0
-            for c in range(C):
-                acc += Gc[f, c] * W[j, c]
-            w[j] = acc
+        _sh_parts(x, y, z, d, R, Q, Cm, Sm)
+        if C == 3:
+            g0 = Gc[f, 0]
+            g1 = Gc[f, 1]
+            g2 = Gc[f, 2]
+            for j in range(nc):
+                w[j] = g0 * W[j, 0] + g1 * W[j, 1] + g2 * W[j, 2]
+        else:
+            for j in range(nc):
+                acc = 0.0
+                for c in range(C):
+                    acc += Gc[f, c] * W[j, c]
+                w[j] = acc
         gx = 0.0
         gy = 0.0
         gz = 0.0
@@ -442,3 +472,15 @@ def sh_normal_vjp(N, Gc, W, Kf, out):  # pragma: no cover - compiled
         out[f, 0] = gx - r * x
         out[f, 1] = gy - r * y
         out[f, 2] = gz - r * z
+
+
+@njit(cache=True, nogil=True)
+def sh_values(N, Kf, Y):  # pragma: no cover - compiled
+    """``Y (k, nc)``: the basis at the unit normals ``n_k / |n_k|``."""
+    nc = Y.shape[1]
+    d = int(round(math.sqrt(nc))) - 1
+    Q, R, Cm, Sm = _sh_scratch(d)
+    for f in range(N.shape[0]):
+        x, y, z = _unit(N, f)
+        _sh_parts(x, y, z, d, R, Q, Cm, Sm)
+        _sh_values(d, Kf, Q, Cm, Sm, Y[f])

@@ -60,6 +60,8 @@ class Rendering:
     colors : (k, C) their colours.
     albedo : (k, C) their albedo, or None.
     shading : the shading used.
+    state : what the shading kept for its derivatives (see :class:`~algorithms.render.shading.
+        Shading`; e.g. the SH basis of the seen faces), or None.
     """
 
     raster: Raster
@@ -70,6 +72,7 @@ class Rendering:
     colors: np.ndarray
     albedo: np.ndarray | None
     shading: Shading
+    state: object = None
 
     @property
     def camera(self) -> Camera:
@@ -99,10 +102,11 @@ def render(V, F, camera: Camera, shading: Shading | None = None, *, albedo=None,
         N = np.empty((len(faces), 3))
         kern.face_normals(np.ascontiguousarray(V), np.ascontiguousarray(F), faces, N)
         alb = None if albedo is None else np.asarray(albedo, dtype=np.float64)[faces]
-        colors = np.ascontiguousarray(shading.face_colors(N, camera, alb), dtype=np.float64)
+        colors, state = _shade(shading, N, camera, alb)
+        colors = np.ascontiguousarray(colors, dtype=np.float64)
         image = np.empty(fid.shape + (colors.shape[1],))
         kern.paint(slot, colors, float(background), image)
-        return Rendering(r, image, faces, slot, N, colors, alb, shading)
+        return Rendering(r, image, faces, slot, N, colors, alb, shading, state)
     mask = fid >= 0
     seen = fid[mask]
     faces = np.flatnonzero(np.bincount(seen, minlength=len(F)))   # O(pixels + faces), no sort
@@ -112,11 +116,20 @@ def render(V, F, camera: Camera, shading: Shading | None = None, *, albedo=None,
     inv = slot[mask]
     N = face_unit_normals(V, F[faces])
     alb = None if albedo is None else np.asarray(albedo, dtype=np.float64)[faces]
-    colors = shading.face_colors(N, camera, alb)
+    colors, state = _shade(shading, N, camera, alb)
     C = colors.shape[1]
     image = np.full(fid.shape + (C,), float(background))
     image[mask] = colors[inv]
-    return Rendering(r, image, faces, slot, N, colors, alb, shading)
+    return Rendering(r, image, faces, slot, N, colors, alb, shading, state)
+
+
+def _shade(shading, N, camera, alb):
+    """Colours of the seen faces, and the shading's state for its derivatives when it keeps one
+    (the optional ``face_colors_with_state`` of the :class:`Shading` protocol)."""
+    with_state = getattr(shading, "face_colors_with_state", None)
+    if with_state is not None:
+        return with_state(N, camera, alb)
+    return shading.face_colors(N, camera, alb), None
 
 
 def normal_vjp(V, F, faces, grad_normals) -> np.ndarray:

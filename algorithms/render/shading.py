@@ -5,7 +5,11 @@ A shading object implements the :class:`Shading` protocol:
 * ``channels`` -- colours per pixel (3 for RGB, 1 for grey);
 * ``face_colors(normals, camera, albedo=None) -> (k, C)``;
 * ``face_colors_vjp(normals, camera, grad_colors, albedo=None) -> (grad_normals (k, 3),
-  grad_albedo (k, C) or None)`` -- the vector-Jacobian product of ``face_colors``.
+  grad_albedo (k, C) or None)`` -- the vector-Jacobian product of ``face_colors``;
+* optionally ``face_colors_with_state(normals, camera, albedo=None) -> (colours, state)``: the
+  renderer then keeps ``state`` in :attr:`Rendering.state` for the shading's own derivatives
+  (:class:`~algorithms.render.sh.SHShading` keeps the SH basis of the seen faces, so the lighting
+  derivative is one matrix product).
 
 The renderer (:func:`algorithms.render.render`) paints each pixel with the colour of its face, and
 :func:`algorithms.render.image_vjp` pulls image gradients back through ``face_colors_vjp`` and the
