@@ -111,6 +111,20 @@ def main(names: list[str]) -> None:
         panel.show_combo.setCurrentText("Clusters and roots")
         pump(app)
         shot("spectral_coarsening")
+    if not names or "paparazzi" in names:
+        # the whole window: the panel's live image pair and monitor plot belong to the picture
+        win.open_path(samples / "blob.obj")
+        panel = win.panels["Paparazzi"]
+        panel.raise_()
+        pump(app)
+        panel.set_filter("quantize")
+        panel.form.set_value("iterations", 300)
+        panel.form.set_value("learning_rate", 5e-4)
+        run_and_wait(app, win, panel.run)
+        win.grab().save(str(OUT / "paparazzi.png"))
+        print("wrote", OUT / "paparazzi.png")
+        win.undo_stack.setClean()
+        win.document.modified = False
     win.document.modified = False
     win.close()
 

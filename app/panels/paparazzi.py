@@ -43,7 +43,7 @@ from app.widgets import article, plural
 #: filter's resolution (the command line and the thesis use 1000 or more)
 GUI_ITERATIONS = 300
 #: side of the two live images, in pixels
-THUMB = 132
+THUMB = 112
 
 
 @dataclass(frozen=True)
@@ -117,11 +117,9 @@ class _FilterCombo(QComboBox):
 
 class PaparazziPanel(MethodPanel):
     title = "Paparazzi"
-    description = ("Changes the shape so that its pictures look as if an image filter had been "
-                   "applied to them (Paparazzi, thesis ch. 2): it renders the shape from many "
-                   "cameras, filters each picture, and moves the surface towards the filtered "
-                   "look. A run takes a while, so Live is off: choose a filter, press Run, and "
-                   "watch the shape change.")
+    description = ("Moves the surface until its pictures, taken from many cameras, look "
+                   "filtered (thesis ch. 2). A run takes a while: choose a filter, press Run, "
+                   "watch it change.")
     params_cls = PaparazziPanelParams
     plot_metrics = ("monitor_energy",)
     plot_title = "Monitor view energy (fixed camera; lower = closer to the filter's look)"
@@ -145,6 +143,7 @@ class PaparazziPanel(MethodPanel):
         self._build_filter_box()
         self._build_views_box()
         self._rebuild_filter_form()
+        self.form.changed.connect(lambda _p: self._show_filter_defaults())
 
     # -- widgets -------------------------------------------------------------------------------
     def _add_plain_words(self) -> None:
@@ -251,6 +250,7 @@ class PaparazziPanel(MethodPanel):
         except Stylize3DError:
             return
         self.filter_about.setText(spec.description or "")
+        self._show_filter_defaults()
         files = [s for s in describe(spec.params) if s.type is str and not s.choices]
         form = ParamsForm(spec.params, values=self._filter_values.get(name),
                           exclude=tuple(s.name for s in files))
@@ -287,6 +287,19 @@ class PaparazziPanel(MethodPanel):
             none = QLabel("This filter has no settings.")
             none.setStyleSheet("color: #777;")
             self.filter_form_holder.addWidget(none)
+
+    def _show_filter_defaults(self) -> None:
+        """Resolution, σ and view width at 0 mean "the filter's own": say which value that is."""
+        try:
+            spec = get_filter(self.filter_name())
+        except Stylize3DError:
+            return
+        for name, value in (("resolution", spec.resolution), ("sigma", spec.sigma),
+                            ("view_width", spec.width)):
+            editor = self.form.editors.get(name)
+            if editor is not None:  # "auto" as elsewhere in the app (cubic, spectral)
+                editor.spin.setSpecialValueText(f"auto ({value:g})")
+                editor.spin.update()
 
     # -- files (target image, target mesh) -------------------------------------------------------
     def _choose_file(self, field: str) -> None:
@@ -395,6 +408,8 @@ class PaparazziPanel(MethodPanel):
                                       f"{article(kind)}: press Choose… next to it first.")
             return
         super().run(live)
+        # what to watch while it runs: the images and the plot
+        self.scroll_area.ensureWidgetVisible(self.plot)
         loops = (doc.report.stats.get("boundary_loops") or 0) if doc.report is not None else 0
         if loops:
             self.status_label.setText(
