@@ -51,8 +51,8 @@ def test_nadam_first_step_is_1_9_learning_rates_times_the_sign():
     np.testing.assert_allclose(v, 0.001 * g * g)
 
 
-def _bumpy_target(tmp_path):
-    V, F = icosphere(3)
+def _bumpy_target(tmp_path, level=3):
+    V, F = icosphere(level)
     T = V.copy()
     z = T[:, 2] > 0.3
     T[z, 2] += 0.15 * np.sin(6 * T[z, 0]) * np.cos(5 * T[z, 1]) * (T[z, 2] - 0.3)
@@ -62,12 +62,19 @@ def _bumpy_target(tmp_path):
 
 
 def test_single_view_l2_to_another_shape_reproduces_it_in_that_view(tmp_path):
-    V, F, target = _bumpy_target(tmp_path)
+    # Fig. 2.5: the image error (over the pixels both renderings cover, see the target-mesh
+    # filter) falls by >= 90 %. The derivative keeps visibility fixed, so a face's pixels do not
+    # follow its vertices: with faces of several pixels (icosphere(3) at 64 px, ~4 px a face) the
+    # face boundaries cannot be aligned and the error stops at 15-20 % of its start whatever the
+    # step; with faces of about a pixel (icosphere(4), as the thesis's 10^5-10^6-vertex meshes at
+    # 128-256 px) it falls below 10 % (measured: 5.2 % after 300 iterations).
+    V, F, target = _bumpy_target(tmp_path, level=4)
     fp = get_filter("target-mesh").params(target=target, single_view=True)
     last = run_to_end(paparazzi_iter(V, F, "target-mesh", fp, PaparazziParams(
-        iterations=300, learning_rate=1e-3, resolution=64, monitor_every=0)))
+        iterations=300, learning_rate=5e-4, resolution=64, monitor_every=0)))
     e0, e1 = last.metrics["initial_monitor_energy"], last.metrics["monitor_energy"]
-    assert e1 < 0.2 * e0, (e0, e1)
+    assert e1 < 0.10 * e0, (e0, e1)
+    assert is_manifold(last.F) and count_self_intersections(last.V, last.F) == 0
 
 
 @pytest.mark.parametrize("name", ["spot_lowres.obj"])
