@@ -8,6 +8,7 @@ from .measures import bending_energy, palette_fraction, planar_area_fraction
 from .offset import OffsetSurface, offset_surface, sample_camera
 from .optimize import (FilterFailed, Paparazzi, PaparazziParams, PaparazziStep,
                        count_self_intersections, paparazzi, paparazzi_iter)
+from . import neural_style  # noqa: F401  (registers the neural-style filter; no heavy imports)
 
 __all__ = ["FilterContext", "FilterSpec", "ImageReadError", "NoParams", "filter_names",
            "get_filter", "read_image", "register_filter", "unregister_filter", "bending_energy",

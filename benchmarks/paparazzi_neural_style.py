@@ -1,0 +1,127 @@
+"""Neural-style Paparazzi benchmark (issue 12): time per filter call, and whether a run with the
+CLI's defaults makes the monitor view's Gram (style) loss fall.
+
+    python benchmarks/paparazzi_neural_style.py [--mesh bob.obj] [--iterations 1000]
+                                                [--style 0] [--skip-run]
+
+1. Per call, medians in this process: the built-in style network at 128 and 256 px, the
+   style-image network (384 px inside) at 128 px, and the guided filter at 128 px as the peer
+   (ratios printed).
+2. A run with ``stylize3d paparazzi IN -o OUT --filter neural-style`` defaults (1000 iterations,
+   128 px, view width 0.1, sigma 0.02, lr 2e-4, remesh every 30). Every 100 iterations: the Gram
+   loss (:func:`gram_style_loss`) of the fixed monitor view against its own stylization
+   ``f(R)``, against the stylization of the *first* monitor image ``f(R0)``, and, as a control,
+   against another built-in style's stylization; the optimizer's monitor energy
+   ``1/2 |f(R) - R|^2``; then the time split and the output checks.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks._timing import median_seconds, mesh_path  # noqa: E402
+
+
+def per_call(repeat: int) -> None:
+    from algorithms.paparazzi.filters import guided_filter
+    from algorithms.paparazzi.neural_style import NeuralStyleParams, StyleNetwork, stylize
+
+    rng = np.random.default_rng(0)
+    p = NeuralStyleParams()
+    g128 = rng.random((128, 128))
+    g256 = rng.random((256, 256))
+    vec = StyleNetwork.style_vector(rng.random((256, 256, 3)))
+    stylize(g128, p)
+    stylize(g128, p, vec)
+    rgb = np.repeat(g128[..., None], 3, axis=2)
+    guided_filter(rgb, rgb, 15, 1e-8, 4)
+    t128 = median_seconds(lambda: stylize(g128, p), repeat)
+    t256 = median_seconds(lambda: stylize(g256, p), repeat)
+    tarb = median_seconds(lambda: stylize(g128, p, vec), max(3, repeat // 3))
+    tgf = median_seconds(lambda: guided_filter(rgb, rgb, 15, 1e-8, 4), repeat)
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    print(f"per call (median of {repeat}): built-in style 128 px {1e3 * t128:.1f} ms, "
+          f"256 px {1e3 * t256:.1f} ms (x{t256 / t128:.2f}); style image 128 px (384 inside) "
+          f"{1e3 * tarb:.1f} ms; guided filter 128 px (peer) {1e3 * tgf:.1f} ms "
+          f"(built-in / guided = {t128 / tgf:.2f})")
+
+
+def run(mesh: str, iterations: int, style: int, control: int) -> None:
+    from algorithms.mesh import read_mesh
+    from algorithms.mesh.topology import euler_characteristic, is_manifold
+    from algorithms.paparazzi import Paparazzi, PaparazziParams, count_self_intersections
+    from algorithms.paparazzi.neural_style import NeuralStyleParams, gram_style_loss, stylize
+    from algorithms.render import render
+
+    path = mesh_path(mesh)
+    if not path.exists():
+        print(f"{mesh} not found; skipping the run")
+        return
+    data = read_mesh(path)
+    params = PaparazziParams(iterations=iterations)
+    fp = NeuralStyleParams(style=style)
+    other = NeuralStyleParams(style=control)
+    t0 = time.perf_counter()
+    pz = Paparazzi(data.V, data.F, "neural-style", fp, params)
+    cam = pz.camera(np.random.default_rng([params.seed, 1]))    # the optimizer's monitor view
+
+    def view(Vw, F):
+        return render((Vw - pz.center) / pz.scale, F, cam, pz.shading).image[..., 0]
+
+    R0 = view(pz.to_world(pz.V0), pz.F0)
+    S0 = stylize(R0, fp)
+
+    def losses(R):
+        return (gram_style_loss(R, stylize(R, fp)), gram_style_loss(R, S0),
+                gram_style_loss(R, stylize(R, other)))
+
+    first = losses(R0)
+    print(f"{path.name}: {len(data.V)} vertices, {len(data.F)} faces; {iterations} iterations, "
+          f"{pz.resolution} px, view width {pz.width}, sigma {pz.sigma}, style {style} "
+          f"(control style {control}); setup {time.perf_counter() - t0:.1f} s")
+    print(f"  it     0: Gram(R, f(R)) {first[0]:9.2f}  Gram(R, f(R0)) {first[1]:9.2f}  "
+          f"Gram(R, style {control}) {first[2]:9.2f}")
+    t1 = time.perf_counter()
+    last = None
+    for last in pz.steps():
+        if last.iteration % 100 == 0 or last.iteration == iterations:
+            g = losses(view(last.V, last.F))
+            print(f"  it {last.iteration:5d}: Gram(R, f(R)) {g[0]:9.2f} ({g[0] / first[0]:.3f})  "
+                  f"Gram(R, f(R0)) {g[1]:9.2f} ({g[1] / first[1]:.3f})  "
+                  f"Gram(R, style {control}) {g[2]:9.2f} ({g[2] / first[2]:.3f})  "
+                  f"monitor 1/2|f(R)-R|^2 {last.metrics['monitor_energy']:.2f}", flush=True)
+    secs = time.perf_counter() - t1
+    V = (last.V - pz.center) / pz.scale
+    split = ", ".join(f"{k} {v / iterations * 1e3:.1f}" for k, v in last.seconds.items())
+    print(f"  {secs:.0f} s for {iterations} iterations ({secs / iterations * 1e3:.0f} ms each; "
+          f"per iteration ms: {split})")
+    print(f"  output: {len(V)} vertices, manifold {is_manifold(last.F)}, Euler characteristic "
+          f"{euler_characteristic(pz.F0)} -> {euler_characteristic(last.F)}, self-intersecting "
+          f"face pairs {count_self_intersections(V, last.F)}, remeshes "
+          f"{int(last.metrics['remeshes'])}, rollbacks {int(last.metrics['rollbacks'])}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--mesh", default="bob.obj")
+    ap.add_argument("--iterations", type=int, default=1000)
+    ap.add_argument("--style", type=int, default=0)
+    ap.add_argument("--control-style", type=int, default=7)
+    ap.add_argument("--repeat", type=int, default=15)
+    ap.add_argument("--skip-run", action="store_true")
+    a = ap.parse_args()
+    per_call(a.repeat)
+    if not a.skip_run:
+        run(a.mesh, a.iterations, a.style, a.control_style)
+
+
+if __name__ == "__main__":
+    main()
