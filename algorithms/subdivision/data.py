@@ -17,7 +17,10 @@ Loop subdivision (libigl, in our vertex order).
 Generation is embarrassingly parallel: one task per coarse mesh, submitted to any
 ``concurrent.futures.Executor`` -- a local process pool by default, or a Dask distributed
 ``Client``'s executor when a scheduler address is given (the workers need this package
-installed). Every coarse mesh is cached as a plain ``.npz`` (no pickle) named by the hash of the
+installed). The local pool's processes get the (normalized) training shapes once, when they
+start, so a task sends only its index and parameters, and they are started with one thread for
+OpenMP / BLAS / Numba (two processes on two cores must not each start a thread per core). The
+result of a coarse mesh does not depend on where it was made (bit-for-bit equal, tested). Every coarse mesh is cached as a plain ``.npz`` (no pickle) named by the hash of the
 shape, the data parameters and its index, so a second run (or a run with more coarse meshes)
 only computes what is missing. Meshes with boundary and of any genus work (the map is the
 project's, which handles both).
@@ -26,6 +29,7 @@ project's, which handles both).
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import hashlib
 import json
 import multiprocessing
@@ -224,6 +228,42 @@ def _cache_path(cache_dir: Path, shape_key: str, params: DataParams, index: int)
     return cache_dir / f"{shape_key[:16]}-{pk}-{index:05d}.npz"
 
 
+# shapes handed to a local pool's process once, when it starts (see _init_worker)
+_WORKER_SHAPES: list = []
+_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                     "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+
+
+def _init_worker(shapes) -> None:
+    """Local pool process start: keep the training shapes (sent once, not per task)."""
+    _WORKER_SHAPES[:] = list(shapes)
+
+
+def _shape_task(shape, index, params_dict, path):
+    """Local pool task: coarse mesh ``index`` of the worker's training shape ``shape``."""
+    V, F = _WORKER_SHAPES[shape]
+    return _task(V, F, index, params_dict, path)
+
+
+class _OneThreadChildren:
+    """While active, processes started from here see 1 thread in the usual variables
+    (a spawned process reads them before it imports NumPy / Numba); restored afterwards."""
+
+    def __enter__(self):
+        self._old = {k: os.environ.get(k) for k in _THREAD_VARIABLES}
+        for k in _THREAD_VARIABLES:
+            os.environ[k] = "1"
+        return self
+
+    def __exit__(self, *exc):
+        for k, v in self._old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        return False
+
+
 def _task(V, F, index, params_dict, path) -> str:
     """Worker entry point (top level, picklable): generate one coarse mesh and cache it."""
     from ..mesh.io import atomic_write
@@ -248,13 +288,13 @@ def _to_sample(arrays: dict, levels: int) -> CoarseSample:
                                  for lv in range(levels + 1)])
 
 
-def _make_executor(workers: int | None, scheduler: str | None):
+def _make_executor(workers: int | None, scheduler: str | None, shapes=()):
     if scheduler:
         try:
             from distributed import Client
-        except ImportError:  # pragma: no cover - dask is a dependency
-            raise ParameterError("A scheduler address needs Dask distributed "
-                                 "(pip install 'dask[distributed]').") from None
+        except ImportError:
+            raise ParameterError("A scheduler address needs Dask distributed, which is not "
+                                 "installed: pip install 'stylize3d[cluster]'.") from None
         try:
             client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
         except Exception as exc:  # noqa: BLE001 - a plain message
@@ -263,7 +303,8 @@ def _make_executor(workers: int | None, scheduler: str | None):
                                  f"the scheduler is running.") from None
         return client.get_executor(), client.close
     w = max(1, int(workers if workers else min(2, os.cpu_count() or 1)))
-    ex = cf.ProcessPoolExecutor(max_workers=w, mp_context=multiprocessing.get_context("spawn"))
+    ex = cf.ProcessPoolExecutor(max_workers=w, mp_context=multiprocessing.get_context("spawn"),
+                                initializer=_init_worker, initargs=(list(shapes),))
     return ex, lambda: ex.shutdown(wait=True, cancel_futures=True)
 
 
@@ -349,14 +390,19 @@ def generate_dataset(shapes: Sequence[tuple[np.ndarray, np.ndarray]], params: Da
                     progress(done / N, f"{done} of {N} coarse meshes")
         else:
             ex = executor
+            local = ex is None and not scheduler
             if ex is None:
-                ex, own = _make_executor(workers, scheduler)
+                ex, own = _make_executor(workers, scheduler,
+                                         [(Vn, F) for Vn, F, _ in prepared])
             try:
                 futs = {}
-                for t, s, idx, path in todo:
-                    Vn, F, _ = prepared[s]
-                    futs[ex.submit(_task, Vn, F, idx, pd,
-                                   str(path) if path is not None else None)] = (t, path)
+                with _OneThreadChildren() if local else _nothing():
+                    for t, s, idx, path in todo:
+                        Vn, F, _ = prepared[s]
+                        sp = str(path) if path is not None else None
+                        fut = (ex.submit(_shape_task, s, idx, pd, sp) if local
+                               else ex.submit(_task, Vn, F, idx, pd, sp))
+                        futs[fut] = (t, path)
                 for fut in cf.as_completed(list(futs)):
                     t, path = futs[fut]
                     r = fut.result()
@@ -368,6 +414,11 @@ def generate_dataset(shapes: Sequence[tuple[np.ndarray, np.ndarray]], params: Da
                 if own is not None:
                     own()
     return results
+
+
+@contextlib.contextmanager
+def _nothing():
+    yield
 
 
 def with_levels(params: DataParams, levels: int) -> DataParams:
