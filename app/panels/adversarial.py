@@ -235,6 +235,7 @@ class AdversarialPanel(MethodPanel):
         # classifier
         row = QHBoxLayout()
         self.classifier_label = QLabel(self.classifier_name)
+        self.classifier_label.setWordWrap(True)
         self.classifier_label.setToolTip("The image classifier being fooled. The default is "
                                          "EfficientNet-lite0 trained on ImageNet (1000 classes of "
                                          "everyday objects and animals), installed with the app.")
@@ -258,20 +259,27 @@ class AdversarialPanel(MethodPanel):
         box = QGroupBox("What the classifier sees")
         box.setToolTip("The shape rendered exactly as the attack renders it: 224 × 224 pixels, "
                        "black background, the lighting below, seen from the view below.")
-        v = QVBoxLayout(box)
+        h = QHBoxLayout(box)
         self.image_label = QLabel("Open a mesh.")
         self.image_label.setFixedSize(IMAGE_SIZE, IMAGE_SIZE)
         self.image_label.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self.image_label.setWordWrap(True)
         self.image_label.setStyleSheet("background: black; color: #ddd;")
         self.image_label.setToolTip(box.toolTip())
-        v.addWidget(self.image_label, 0, Qt.AlignmentFlag.AlignHCenter)
+        h.addWidget(self.image_label, 0, Qt.AlignmentFlag.AlignTop)
+        v = QVBoxLayout()
+        head = QLabel("Top-5")
+        head.setStyleSheet("font-weight: bold;")
+        head.setToolTip(TOP5_TIP)
+        v.addWidget(head)
         self.top5_view = Top5View()
         v.addWidget(self.top5_view)
         self.image_note = QLabel("")
         self.image_note.setWordWrap(True)
         self.image_note.setStyleSheet("color: #555;")
         v.addWidget(self.image_note)
+        v.addStretch(1)
+        h.addLayout(v, 1)
         lay.insertWidget(at, box)
         self.image_box = box
         at += 1
@@ -344,13 +352,13 @@ class AdversarialPanel(MethodPanel):
         self.link_box = QCheckBox("Link R, G, B")
         self.link_box.setToolTip("Move the three colours of a coefficient together (white light "
                                  "changes).")
-        row.addWidget(QLabel("Preset"))
+        row.addWidget(QLabel("Environment"))
         row.addWidget(self.env_combo, 1)
         row.addWidget(self.link_box)
         v.addLayout(row)
         grid = QGridLayout()
-        grid.setHorizontalSpacing(4)
-        grid.setVerticalSpacing(0)
+        grid.setHorizontalSpacing(6)
+        grid.setVerticalSpacing(3)
         for c, name in enumerate(("R", "G", "B")):
             h = QLabel(name)
             h.setAlignment(Qt.AlignmentFlag.AlignCenter)
@@ -400,6 +408,7 @@ class AdversarialPanel(MethodPanel):
         self.file_colors_box.setToolTip("Use the colours stored in the mesh file instead.")
         self.file_colors_box.setVisible(False)
         self.file_colors_box.toggled.connect(lambda _on: self.schedule_preview())
+        self.file_colors_box.toggled.connect(lambda on: self.color_button.setEnabled(not on))
         row.addWidget(QLabel("Surface colour"))
         row.addWidget(self.color_button, 1)
         row.addWidget(self.file_colors_box)
@@ -427,7 +436,7 @@ class AdversarialPanel(MethodPanel):
             col.addWidget(cap)
             h.addLayout(col)
         box.setVisible(False)
-        lay.insertWidget(lay.indexOf(self.plot), box)
+        lay.insertWidget(lay.indexOf(self.image_box) + 1, box)
         self.before_after_box = box
 
         # footer: the two attacks instead of Run
@@ -887,6 +896,7 @@ class AdversarialPanel(MethodPanel):
         self.after_caption.setText(f"After: {v.label_after} {100 * v.confidence_after:.0f} %"
                                    + (" (fooled)" if v.success else ""))
         self.before_after_box.setVisible(True)
+        QTimer.singleShot(0, lambda: self.scroll_area.ensureWidgetVisible(self.before_after_box))
         fooled = sum(x.success for x in res.views)
         what = "lighting coefficient" if self._attack_mode == "lighting" else \
             "vertex coordinate (of the shape scaled to a unit box)"
