@@ -10,6 +10,7 @@ Prints sizes, medians and ratios measured in this run. The mesh is Loop-subdivid
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -21,19 +22,26 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks._timing import median_seconds, mesh_path  # noqa: E402
 
 
-def torch_peer(V, F, r, G, light_matrix):
-    """dE/dV by PyTorch autograd: normals of all faces, per-pixel gather, backward."""
+def torch_peer(V, F, face_id, G, light_matrix, *, seen_only=False):
+    """dE/dV by PyTorch autograd (float64, one thread) through the same image formation: given
+    our rasterizer's face ids, the face normals in torch (of all faces, as a PyTorch renderer
+    does; ``seen_only``: only of the faces seen, found with ``torch.unique``), the shaded image
+    ``(n.l + 1)/2`` gathered per pixel, ``E = <G, image>``, backward."""
     import torch
 
     Vt = torch.tensor(V, requires_grad=True)
+    fid = torch.as_tensor(face_id.ravel())
+    m = fid >= 0
     Ft = torch.as_tensor(F)
+    fm = fid[m]
+    if seen_only:
+        faces, inv = torch.unique(fm, return_inverse=True)
+        Ft, fm = Ft[faces], inv
     N = torch.linalg.cross(Vt[Ft[:, 1]] - Vt[Ft[:, 0]], Vt[Ft[:, 2]] - Vt[Ft[:, 0]])
     N = N / N.norm(dim=1, keepdim=True)
     col = 0.5 * N @ torch.as_tensor(light_matrix) + 0.5
-    fid = torch.as_tensor(r.raster.face_id.ravel())
-    m = fid >= 0
     img = torch.zeros(fid.shape[0], 3, dtype=torch.float64)
-    img[m] = col[fid[m]]
+    img[m] = col[fm]
     (img * torch.as_tensor(G.reshape(-1, 3))).sum().backward()
     return Vt.grad.numpy()
 
@@ -64,10 +72,18 @@ def main() -> int:
     print(f"mesh {a.mesh} subdivided: {len(V)} vertices, {len(F)} faces")
     off = offset_surface(V, F, 0.1)
     sh = LambertianShading()
+    print(f"one thread; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores (times "
+          "are medians over the views; ratios are of medians measured in this run)")
+    print("peer: the same raster (face ids from our rasterizer), then PyTorch autograd (float64, one "
+          "thread): face normals, (n.l + 1)/2 per pixel, backward of <G, image>")
+    from algorithms.render import rasterize
+
     for res in (128, 256):
         rng = np.random.default_rng(0)
         cams = [sample_camera(off, rng, resolution=res) for _ in range(a.repeat)]
         Gs = [np.random.default_rng(i).standard_normal((res, res, 3)) for i in range(a.repeat)]
+        rs = [render(V, F, c, sh) for c in cams]
+        Ms = [sh.light_matrix(c) for c in cams]
         k = iter(range(10**9))
 
         def ours():
@@ -78,25 +94,46 @@ def main() -> int:
         def only_render():
             render(V, F, cams[next(k) % a.repeat], sh)
 
-        rs = [render(V, F, c, sh) for c in cams]
-
-        def peer():
+        def only_vjp():
             i = next(k) % a.repeat
-            torch_peer(V, F, rs[i], Gs[i], sh.light_matrix(cams[i]))
+            image_vjp(V, F, rs[i], Gs[i])
 
-        ours()
-        peer()
+        def only_raster():
+            rasterize(V, F, cams[next(k) % a.repeat])
+
+        def peer(seen_only=False):
+            i = next(k) % a.repeat
+            torch_peer(V, F, rs[i].raster.face_id, Gs[i], Ms[i], seen_only=seen_only)
+
+        def peer_full(seen_only=False):
+            i = next(k) % a.repeat
+            fid = rasterize(V, F, cams[i]).face_id
+            torch_peer(V, F, fid, Gs[i], Ms[i], seen_only=seen_only)
+
+        for f in (ours, peer, lambda: peer(True)):
+            f()
         t_ours = median_seconds(ours, a.repeat)
         t_render = median_seconds(only_render, a.repeat)
+        t_vjp = median_seconds(only_vjp, a.repeat)
+        t_raster = median_seconds(only_raster, a.repeat)
         t_peer = median_seconds(peer, a.repeat)
+        t_full = median_seconds(peer_full, a.repeat)
+        t_peer_s = median_seconds(lambda: peer(True), a.repeat)
+        t_full_s = median_seconds(lambda: peer_full(True), a.repeat)
         g1 = image_vjp(V, F, rs[0], Gs[0])
-        g2 = torch_peer(V, F, rs[0], Gs[0], sh.light_matrix(cams[0]))
+        g2 = torch_peer(V, F, rs[0].raster.face_id, Gs[0], Ms[0])
         err = np.abs(g1 - g2).max() / max(1e-300, np.abs(g2).max())
-        print(f"{res}^2: ours render+VJP {t_ours * 1e3:.2f} ms (render {t_render * 1e3:.2f} ms, "
-              f"VJP {(t_ours - t_render) * 1e3:.2f} ms); torch autograd VJP alone (same raster) "
-              f"{t_peer * 1e3:.2f} ms; ratio peer-VJP / our render+VJP "
-              f"{t_peer / t_ours:.1f}x, peer-VJP / our VJP "
-              f"{t_peer / max(1e-9, t_ours - t_render):.1f}x; max rel. difference {err:.1e}")
+        n_seen = int(np.median([len(r.faces) for r in rs]))
+        print(f"{res}^2 ({n_seen} faces seen, median): ours render+VJP {t_ours * 1e3:.2f} ms "
+              f"(render {t_render * 1e3:.2f} ms of which rasterize {t_raster * 1e3:.2f} ms; VJP "
+              f"{t_vjp * 1e3:.2f} ms) [target <= 10 ms]; max rel. difference to the peer {err:.1e}")
+        print(f"  peer, normals of all faces: VJP (torch forward + backward) {t_peer * 1e3:.2f} ms, "
+              f"with the rasterization {t_full * 1e3:.2f} ms; peer VJP / our VJP "
+              f"{t_peer / t_vjp:.1f}x; peer (raster + torch shading + backward) / our render+VJP "
+              f"{t_full / t_ours:.1f}x [target >= 10x]")
+        print(f"  peer, normals of the seen faces only: VJP {t_peer_s * 1e3:.2f} ms, with the "
+              f"rasterization {t_full_s * 1e3:.2f} ms; peer VJP / our VJP {t_peer_s / t_vjp:.1f}x; "
+              f"peer (raster + torch shading + backward) / our render+VJP {t_full_s / t_ours:.1f}x")
     if a.skip_run:
         return 0
     t = time.perf_counter()

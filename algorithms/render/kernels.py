@@ -60,7 +60,11 @@ def project(V, position, basis, perspective, scale, res, out):  # pragma: no cov
 @njit(cache=True, nogil=True)
 def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no cover - compiled
     """Z-buffer ``F`` with vertices ``P (n, 3)`` = (column, row, depth) into the output arrays
-    (``face_id`` filled with -1, ``depth`` with inf beforehand)."""
+    (every pixel is written: -1 / inf / 0 for background).
+
+    The z-test runs on one interleaved scratch buffer (depth, face id) so that a covered pixel
+    touches one cache line, not three arrays; the barycentrics of the winning faces are computed
+    afterwards in one pass over the pixels, by the same formulas (so bit-identical)."""
     # Outcodes (Cohen-Sutherland): a face whose three corners are all left of, right of, above
     # or below the pixel centres is skipped after reading three bytes; the same faces are
     # rejected by the bounding-box test below, so the result does not change (NaN -> code 0).
@@ -80,6 +84,11 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
         if y > hi:
             k |= 8
         code[v] = k
+    zbuf = np.empty((res, res, 2))
+    for i in range(res):
+        for j in range(res):
+            zbuf[i, j, 0] = np.inf
+            zbuf[i, j, 1] = -1.0
     m = F.shape[0]
     for f in range(m):
         a = F[f, 0]
@@ -115,6 +124,8 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
         i1 = min(res - 1, int(math.floor(ymax)))
         j0 = max(0, int(math.ceil(xmin)))
         j1 = min(res - 1, int(math.floor(xmax)))
+        if i1 < i0 or j1 < j0:          # no pixel centre in the bounding box (small faces)
+            continue
         area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
         if area == 0.0 or not math.isfinite(area):
             continue
@@ -123,12 +134,18 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
         # of columns where all three are >= 0 is found analytically, widened by one pixel on
         # each side, and the exact test below (the NumPy formulas) decides, so the result is
         # the same as testing the whole bounding box.
+        # Narrow boxes (up to 4 columns: most faces of a dense mesh) skip the span computation.
         a0 = -(y2 - y1) * inv
         a1 = -(y0 - y2) * inv
+        narrow = j1 - j0 < 4
         for i in range(i0, i1 + 1):
             py = float(i)
             lo = float(j0)
             hi = float(j1)
+            if narrow:
+                _fill_row(i, j0, j1, f, x0, y0, z0, x1, y1, z1, x2, y2, z2, inv, perspective,
+                          near, zbuf)
+                continue
             c0 = (x1 * (y2 - py) - x2 * (y1 - py)) * inv
             c1 = (x2 * (y0 - py) - x0 * (y2 - py)) * inv
             c2 = 1.0 - c0 - c1
@@ -155,34 +172,70 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
                     hi = min(hi, math.floor(t) + 1.0)
             if empty or hi < lo:
                 continue
-            for j in range(int(lo), int(hi) + 1):
-                px = float(j)
-                w0 = ((x1 - px) * (y2 - py) - (x2 - px) * (y1 - py)) * inv
-                w1 = ((x2 - px) * (y0 - py) - (x0 - px) * (y2 - py)) * inv
-                w2 = 1.0 - w0 - w1
-                if w0 < 0.0 or w1 < 0.0 or w2 < 0.0:
-                    continue
-                if perspective:
-                    q0 = w0 / z0
-                    q1 = w1 / z1
-                    q2 = w2 / z2
-                    s = q0 + q1 + q2
-                    z = 1.0 / s
-                    b0 = q0 * z
-                    b1 = q1 * z
-                    b2 = q2 * z
-                else:
-                    z = w0 * z0 + w1 * z1 + w2 * z2
-                    b0 = w0
-                    b1 = w1
-                    b2 = w2
-                if z <= near or z >= depth[i, j]:
-                    continue
-                depth[i, j] = z
-                face_id[i, j] = f
-                bary[i, j, 0] = b0
-                bary[i, j, 1] = b1
-                bary[i, j, 2] = b2
+            _fill_row(i, int(lo), int(hi), f, x0, y0, z0, x1, y1, z1, x2, y2, z2, inv,
+                      perspective, near, zbuf)
+    # the winners' barycentrics (same formulas and operands as in _fill_row)
+    for i in range(res):
+        py = float(i)
+        for j in range(res):
+            fz = zbuf[i, j, 1]
+            if fz < 0.0:
+                face_id[i, j] = -1
+                depth[i, j] = np.inf
+                bary[i, j, 0] = 0.0
+                bary[i, j, 1] = 0.0
+                bary[i, j, 2] = 0.0
+                continue
+            f = int(fz)
+            a = F[f, 0]
+            b = F[f, 1]
+            c = F[f, 2]
+            x0 = P[a, 0]
+            y0 = P[a, 1]
+            x1 = P[b, 0]
+            y1 = P[b, 1]
+            x2 = P[c, 0]
+            y2 = P[c, 1]
+            inv = 1.0 / ((x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0))
+            px = float(j)
+            w0 = ((x1 - px) * (y2 - py) - (x2 - px) * (y1 - py)) * inv
+            w1 = ((x2 - px) * (y0 - py) - (x0 - px) * (y2 - py)) * inv
+            w2 = 1.0 - w0 - w1
+            if perspective:
+                q0 = w0 / P[a, 2]
+                q1 = w1 / P[b, 2]
+                q2 = w2 / P[c, 2]
+                z = 1.0 / (q0 + q1 + q2)
+                w0 = q0 * z
+                w1 = q1 * z
+                w2 = q2 * z
+            face_id[i, j] = f
+            depth[i, j] = zbuf[i, j, 0]
+            bary[i, j, 0] = w0
+            bary[i, j, 1] = w1
+            bary[i, j, 2] = w2
+
+
+@njit(cache=True, nogil=True)
+def _fill_row(i, jlo, jhi, f, x0, y0, z0, x1, y1, z1, x2, y2, z2, inv, perspective, near,
+              zbuf):  # pragma: no cover - compiled
+    """The exact coverage and depth test (the NumPy formulas) of pixels ``(i, jlo..jhi)``."""
+    py = float(i)
+    for j in range(jlo, jhi + 1):
+        px = float(j)
+        w0 = ((x1 - px) * (y2 - py) - (x2 - px) * (y1 - py)) * inv
+        w1 = ((x2 - px) * (y0 - py) - (x0 - px) * (y2 - py)) * inv
+        w2 = 1.0 - w0 - w1
+        if w0 < 0.0 or w1 < 0.0 or w2 < 0.0:
+            continue
+        if perspective:
+            z = 1.0 / (w0 / z0 + w1 / z1 + w2 / z2)
+        else:
+            z = w0 * z0 + w1 * z1 + w2 * z2
+        if z <= near or z >= zbuf[i, j, 0]:
+            continue
+        zbuf[i, j, 0] = z
+        zbuf[i, j, 1] = f
 
 
 @njit(cache=True, nogil=True)

@@ -79,13 +79,13 @@ def rasterize(V, F, camera: Camera, *, backend: str = "auto") -> Raster:
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     res = camera.resolution
-    face_id = np.full((res, res), -1, dtype=np.int64)
-    depth = np.full((res, res), np.inf)
-    bary = np.zeros((res, res, 3))
     kern = compiled_kernels() if backend in ("auto", "compiled") else None
     if backend == "compiled" and kern is None:
         raise RuntimeError("the compiled rasterizer is not available (Numba missing or switched off)")
-    if kern is not None:
+    if kern is not None:                      # the kernel writes every pixel
+        face_id = np.empty((res, res), dtype=np.int64)
+        depth = np.empty((res, res))
+        bary = np.empty((res, res, 3))
         V = np.ascontiguousarray(V).reshape(-1, 3)
         P = np.empty_like(V)
         kern.project(V, camera.position, camera._basis, camera.perspective,
@@ -93,6 +93,9 @@ def rasterize(V, F, camera: Camera, *, backend: str = "auto") -> Raster:
         kern.rasterize(P, np.ascontiguousarray(F).reshape(-1, 3), res, camera.perspective,
                        camera.near, face_id, depth, bary)
     else:
+        face_id = np.full((res, res), -1, dtype=np.int64)
+        depth = np.full((res, res), np.inf)
+        bary = np.zeros((res, res, 3))
         P = camera.to_pixels(V)
         _rasterize_numpy(P, F, res, camera.perspective, camera.near, face_id, depth, bary)
     return Raster(face_id, depth, bary, camera)
