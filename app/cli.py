@@ -1114,17 +1114,85 @@ def _paparazzi_filter_flags() -> list[tuple[str, str, object]]:
     return out
 
 
-def _add_paparazzi_parser(sub) -> None:
+_PAPARAZZI_PLUGIN_HELP = (
+    "a Python file that registers image filters with "
+    "algorithms.paparazzi.register_filter (see the algorithms.paparazzi.filters documentation); "
+    "it is imported before the other flags are read, so its filters become --filter choices and "
+    "their Params fields become flags (shown by --help after --plugin). Repeatable. A file that "
+    "is missing, fails to import or registers nothing stops the command with a message; nothing "
+    "is written.")
+
+
+class _PaparazziParser(argparse.ArgumentParser):
+    """The ``paparazzi`` sub-parser: before parsing, it imports the ``--plugin`` files found among
+    its arguments and adds their filters' flags (argparse classifies every flag before it runs
+    any action, so a plugin's flags must exist before parsing starts)."""
+
+    def parse_known_args(self, args=None, namespace=None):
+        args = list(sys.argv[1:] if args is None else args)
+        files = []
+        for i, a in enumerate(args):
+            if a == "--":
+                break
+            if a == "--plugin" and i + 1 < len(args):
+                files.append(args[i + 1])
+            elif a.startswith("--plugin="):
+                files.append(a.split("=", 1)[1])
+        if files:
+            from algorithms.paparazzi.filters import load_filter_plugin
+
+            try:
+                for f in files:
+                    load_filter_plugin(f)
+            except Stylize3DError as e:
+                self.exit(e.exit_code, f"stylize3d paparazzi: {e}\n")
+            _add_paparazzi_filter_flags(self)
+        return super().parse_known_args(args, namespace)
+
+
+def _add_paparazzi_filter_flags(s: argparse.ArgumentParser) -> None:
+    """Add the flags of every registered filter that ``s`` does not have yet (all of them when
+    the parser is built, a plugin's when ``--plugin`` loaded one) and refresh ``--filter``."""
     from algorithms.paparazzi import filter_names, get_filter
+
+    group = getattr(s, "_pz_group", None)
+    if group is None:
+        group = s._pz_group = s.add_argument_group(
+            "filter parameters (only those of the chosen --filter are used)")
+    have = {a.dest for a in s._actions}
+    flags = set(s._option_string_actions)
+    for name, flag, spec in _paparazzi_filter_flags():
+        dest = f"pz_{name}_{spec.name}".replace("-", "_")
+        if dest in have:
+            continue
+        if flag in flags:                  # a plugin's field clashing with a flag already there
+            flag = f"--{name}-{spec.name.replace('_', '-')}"
+        help_text = f"[{name}] {spec.tooltip} Default: {spec.default}.".replace("%", "%%")
+        if spec.type is bool:
+            group.add_argument(flag, dest=dest, action=argparse.BooleanOptionalAction,
+                               default=spec.default, help=help_text)
+        else:
+            group.add_argument(flag, dest=dest, type=spec.type, default=spec.default,
+                               choices=spec.choices, metavar=spec.name.upper(), help=help_text)
+    for action in s._actions:
+        if action.dest == "filter":
+            action.choices = filter_names()
+            action.help = "the image filter: " + "; ".join(
+                f"{n}: {get_filter(n).description or 'a user filter'}"
+                for n in filter_names()).replace("%", "%%")
+
+
+def _add_paparazzi_parser(sub) -> None:
     from algorithms.paparazzi.optimize import PaparazziParams
 
     s = sub.add_parser("paparazzi", help="Paparazzi: image filters applied to a shape through "
                                          "many rendered views (thesis ch. 2)")
+    s.__class__ = _PaparazziParser     # same state, plus the --plugin pre-pass above
     s.add_argument("mesh")
     s.add_argument("-o", "--output", required=True, help="where to write the filtered mesh")
-    s.add_argument("--filter", required=True, choices=filter_names(),
-                   help="the image filter: " + "; ".join(
-                       f"{n}: {get_filter(n).description}" for n in filter_names()))
+    s.add_argument("--filter", required=True, help="the image filter")
+    s.add_argument("--plugin", action="append", default=[], metavar="FILE.py",
+                   help=_PAPARAZZI_PLUGIN_HELP)
     s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
     s.add_argument("--json", action="store_true",
                    help="print iterations, seconds (render / filter / derivative / remesh), the "
@@ -1134,16 +1202,7 @@ def _add_paparazzi_parser(sub) -> None:
     s.add_argument("--clean", action="store_true",
                    help="clean the mesh first when it has fixable problems (says what it fixed)")
     add_params_arguments(s, PaparazziParams)
-    group = s.add_argument_group("filter parameters (only those of the chosen --filter are used)")
-    for name, flag, spec in _paparazzi_filter_flags():
-        help_text = f"[{name}] {spec.tooltip} Default: {spec.default}.".replace("%", "%%")
-        dest = f"pz_{name}_{spec.name}".replace("-", "_")
-        if spec.type is bool:
-            group.add_argument(flag, dest=dest, action=argparse.BooleanOptionalAction,
-                               default=spec.default, help=help_text)
-        else:
-            group.add_argument(flag, dest=dest, type=spec.type, default=spec.default,
-                               choices=spec.choices, metavar=spec.name.upper(), help=help_text)
+    _add_paparazzi_filter_flags(s)
     s.set_defaults(func=cmd_paparazzi)
 
 

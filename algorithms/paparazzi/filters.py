@@ -24,7 +24,9 @@ image, a target mesh) and a ``render_other(V, F)`` helper. Register your own::
         return np.round(image * (params.levels - 1)) / (params.levels - 1)
 
 A filter that raises stops the run with its message (the optimizer wraps it in a
-:class:`~algorithms.errors.Stylize3DError` naming the filter).
+:class:`~algorithms.errors.Stylize3DError` naming the filter). Such a file is a *plugin*:
+``stylize3d paparazzi --plugin posterize.py --filter posterize --levels 6 ...`` imports it (with
+:func:`load_filter_plugin`) before the command's flags are built, so its Params become flags.
 
 Built-in filters and their defaults (DESIGN.md §5, the authors' settings)
 -------------------------------------------------------------------------
@@ -59,11 +61,18 @@ from ..render import Camera, LambertianShading, Shading
 
 __all__ = ["FilterSpec", "FilterContext", "register_filter", "unregister_filter", "get_filter",
            "filter_names", "read_image", "ImageReadError", "icosahedron_face_normals",
-           "guided_filter", "l0_smooth", "front_camera", "NoParams"]
+           "guided_filter", "l0_smooth", "front_camera", "NoParams", "load_filter_plugin",
+           "PluginError"]
 
 
 class ImageReadError(Stylize3DError):
     """An image file could not be used."""
+
+    exit_code = 2
+
+
+class PluginError(Stylize3DError):
+    """A filter plugin file could not be loaded."""
 
     exit_code = 2
 
@@ -149,6 +158,51 @@ def get_filter(name: str) -> FilterSpec:
     except KeyError:
         raise ParameterError(f"There is no image filter called {name!r}; choose one of "
                              f"{', '.join(_REGISTRY)}.") from None
+
+
+def load_filter_plugin(path) -> list[str]:
+    """Import the Python file ``path`` (which registers filters with :func:`register_filter`) and
+    return the names it registered or replaced. A file that is missing, fails to import, or
+    registers nothing raises :class:`PluginError` with a plain message, and the registry is left
+    as it was."""
+    import hashlib
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    p = Path(str(path))
+    if not p.is_file():
+        raise PluginError(f"The filter plugin {path} does not exist (give a .py file).")
+    if p.suffix != ".py":
+        raise PluginError(f"The filter plugin {path} is not a Python file (.py).")
+    before = dict(_REGISTRY)
+    tag = hashlib.sha1(str(p.resolve()).encode()).hexdigest()[:10]
+    name = f"stylize3d_filter_plugin_{tag}"
+    try:
+        spec = importlib.util.spec_from_file_location(name, p)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module          # dataclasses look their module up while importing
+        spec.loader.exec_module(module)
+    except (Exception, SystemExit) as e:  # noqa: BLE001 - any failure is the same plain message
+        sys.modules.pop(name, None)
+        _REGISTRY.clear()
+        _REGISTRY.update(before)
+        where = ""
+        tb = e.__traceback__
+        while tb is not None:
+            if tb.tb_frame.f_code.co_filename == str(p):
+                where = f" (line {tb.tb_lineno})"
+            tb = tb.tb_next
+        if isinstance(e, SyntaxError) and e.lineno:
+            where = f" (line {e.lineno})"
+        raise PluginError(f"The filter plugin {path} could not be loaded{where}: "
+                          f"{type(e).__name__}: {e}") from None
+    changed = [n for n, f in _REGISTRY.items() if before.get(n) is not f]
+    if not changed:
+        raise PluginError(f"The filter plugin {path} registered no image filter; it must "
+                          "decorate a function with @register_filter(...) (see the "
+                          "algorithms.paparazzi.filters documentation).")
+    return changed
 
 
 def front_camera(resolution: int, shading_width: float = 2.4) -> Camera:

@@ -79,3 +79,76 @@ def test_out_of_range_parameters_are_refused(sphere, tmp_path, capsys):
     rc = main(["paparazzi", str(sphere), "-o", str(tmp_path / "o.obj"), "--filter", "guided",
                "--radius", "0"])
     assert rc != 0 and "Radius must be at least 1" in capsys.readouterr().err
+
+
+PLUGIN = '''
+from dataclasses import dataclass
+
+import numpy as np
+
+from algorithms.params import param
+from algorithms.paparazzi import register_filter
+
+
+@dataclass(frozen=True)
+class Darken:
+    test_gain: float = param(0.5, label="Gain", minimum=0.0, maximum=1.0,
+                             tooltip="How much darker the target image is.")
+
+
+@register_filter("test-plugin-darken", kind="iterative", params=Darken)
+def darken(image, params, ctx):
+    return image * params.test_gain
+'''
+
+
+def test_a_plugin_file_adds_a_filter_and_its_flags(sphere, tmp_path, capsys):
+    from algorithms.paparazzi import filter_names, unregister_filter
+
+    plugin = tmp_path / "darken.py"
+    plugin.write_text(PLUGIN)
+    out = tmp_path / "d.obj"
+    try:
+        # without the plugin the filter and its flag are unknown to argparse
+        assert main(["paparazzi", str(sphere), "-o", str(out), "--filter",
+                     "test-plugin-darken", *FAST]) == 2
+        assert "invalid choice" in capsys.readouterr().err and not out.exists()
+        rc = main(["paparazzi", str(sphere), "-o", str(out), "--plugin", str(plugin),
+                   "--filter", "test-plugin-darken", "--test-gain", "0.25", "--json", *FAST])
+        assert rc == 0
+        rep = json.loads(capsys.readouterr().out)
+        assert rep["filter"] == "test-plugin-darken"
+        assert rep["filter_params"] == {"test_gain": 0.25}
+        assert rep["manifold"] is True and out.exists()
+        # the shape moved: darkening every view tilts faces away from the lights
+        assert not np.allclose(read_mesh(out).V, read_mesh(sphere).V)
+        # --help after --plugin lists the plugin's flag
+        assert main(["paparazzi", "--plugin", str(plugin), "--help"]) == 0
+        assert "--test-gain" in capsys.readouterr().out
+    finally:
+        unregister_filter("test-plugin-darken")
+    assert "test-plugin-darken" not in filter_names()
+
+
+@pytest.mark.parametrize("text, message", [
+    ("import no_such_module_here\n", "could not be loaded (line 1): ModuleNotFoundError"),
+    ("def broken(:\n", "could not be loaded (line 1): SyntaxError"),
+    ("x = 1\n", "registered no image filter"),
+    (None, "does not exist"),
+])
+def test_a_plugin_that_cannot_be_loaded_is_a_plain_error_and_nothing_is_written(
+        sphere, tmp_path, capsys, text, message):
+    from algorithms.paparazzi import filter_names
+
+    before = filter_names()
+    plugin = tmp_path / "bad_plugin.py"
+    if text is not None:
+        plugin.write_text(text)
+    out = tmp_path / "o.obj"
+    rc = main(["paparazzi", str(sphere), "-o", str(out), "--plugin", str(plugin), "--filter",
+               "guided", *FAST])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert message in err and "Traceback" not in err and str(plugin) in err
+    assert not out.exists()
+    assert filter_names() == before
