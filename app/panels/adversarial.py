@@ -204,7 +204,6 @@ class AdversarialPanel(MethodPanel):
         self._attack_mode = "lighting"
         self._attack_lighting_before: np.ndarray | None = None
         self._preview_stale = True
-        self._true_auto = True
         self.preview_runner = JobRunner(self)
         self.preview_runner.finished.connect(self._on_preview_done)
         self.preview_runner.failed.connect(self._on_preview_failed)
@@ -331,7 +330,6 @@ class AdversarialPanel(MethodPanel):
             edit.setCompleter(comp)
             edit.setClearButtonEnabled(True)
             edit.editingFinished.connect(lambda e=edit: self.check_label(e))
-        self.true_edit.textEdited.connect(self._on_true_edited)
         form.addRow("True label", self.true_edit)
         form.addRow("Target", self.target_edit)
         lay.insertLayout(at, form)
@@ -636,7 +634,6 @@ class AdversarialPanel(MethodPanel):
         self.names_model.setStringList(list(self.class_names()))
         self.true_edit.clear()
         self.target_edit.clear()
-        self._true_auto = True
         self.status_label.setText(f"Classifier: {self.classifier_name}.")
         self.schedule_preview()
 
@@ -649,9 +646,6 @@ class AdversarialPanel(MethodPanel):
             self.load_classifier(path)
 
     # -- labels ---------------------------------------------------------------------------------
-    def _on_true_edited(self, text: str) -> None:
-        self._true_auto = not text.strip()
-
     def check_label(self, edit: QLineEdit) -> int | None:
         """The class index typed in ``edit`` (None when empty); an unknown name is shown with
         close names in the status line and the field is marked."""
@@ -739,8 +733,7 @@ class AdversarialPanel(MethodPanel):
         self.visible_error = None
         self.show_classification(step.image, top_k(step.probs, step.names))
         self.probs = np.asarray(step.probs)
-        if self._true_auto or not self.true_edit.text().strip():
-            self._true_auto = True
+        if not self.true_edit.text().strip():  # the object's class: set once, not after attacks
             self.true_edit.setText(top_k(step.probs, step.names, 1)[0][0])
             self.true_edit.setStyleSheet("")
         self.image_note.setText(f"{step.covered * 100:.0f} % of the image is the shape.")
@@ -770,7 +763,6 @@ class AdversarialPanel(MethodPanel):
 
     def _on_doc(self, what: str) -> None:
         if what in ("mesh", "topology"):
-            self._true_auto = True
             self.true_edit.clear()
             self.probs = None
             self._read_file_colors()

@@ -57,6 +57,20 @@ def test_image_top5_and_sh_slider_reclassifies(window, qtbot, mug_path):
     assert np.abs(panel.shown_image - image0).max() > 0.1
     assert np.abs(panel.probs - probs0).max() > 1e-3
     assert panel.true_edit.text() == "coffee mug"                  # the true label stays
+    # a classification with another top-1 (as after a successful attack) keeps the true label;
+    # an emptied field takes the top-1 again
+    from app.panels.adversarial import PreviewStep
+
+    names = tuple(panel.class_names())
+    p = np.full(len(names), 1e-4)
+    p[0] = 1 - p[1:].sum()                                          # class 0: tench
+    step = PreviewStep(0, None, window.document.V, image=panel.shown_image, probs=p, names=names)
+    panel._on_preview_done(step)
+    assert panel.top5_view.entries[0][0] == "tench" and panel.true_edit.text() == "coffee mug"
+    panel.true_edit.clear()
+    panel._on_preview_done(step)
+    assert panel.true_edit.text() == "tench"
+    panel.true_edit.setText("coffee mug")
     # linked channels move together; a preset restores the published lighting exactly
     panel.link_box.setChecked(True)
     before = panel.lighting[0].copy()
