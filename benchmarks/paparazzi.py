@@ -19,7 +19,19 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks._timing import median_seconds, mesh_path  # noqa: E402
+from benchmarks._timing import mesh_path  # noqa: E402
+
+
+def timed(fn, repeat):
+    """Medians of the wall time and of this process's CPU time of ``repeat`` calls (one thread:
+    the CPU time is what the call costs, not inflated by other processes on a loaded machine)."""
+    wall, cpu = [], []
+    for _ in range(max(1, repeat)):
+        t, c = time.perf_counter(), time.process_time()
+        fn()
+        cpu.append(time.process_time() - c)
+        wall.append(time.perf_counter() - t)
+    return float(np.median(wall)), float(np.median(cpu))
 
 
 def torch_peer(V, F, face_id, G, light_matrix, *, seen_only=False):
@@ -72,8 +84,9 @@ def main() -> int:
     print(f"mesh {a.mesh} subdivided: {len(V)} vertices, {len(F)} faces")
     off = offset_surface(V, F, 0.1)
     sh = LambertianShading()
-    print(f"one thread; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores (times "
-          "are medians over the views; ratios are of medians measured in this run)")
+    print(f"one thread; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; times are "
+          "medians over the views of the wall time and [in brackets] of this process's CPU time; "
+          "ratios are of medians measured in this run")
     print("peer: the same raster (face ids from our rasterizer), then PyTorch autograd (float64, one "
           "thread): face normals, (n.l + 1)/2 per pixel, backward of <G, image>")
     from algorithms.render import rasterize
@@ -112,28 +125,35 @@ def main() -> int:
 
         for f in (ours, peer, lambda: peer(True)):
             f()
-        t_ours = median_seconds(ours, a.repeat)
-        t_render = median_seconds(only_render, a.repeat)
-        t_vjp = median_seconds(only_vjp, a.repeat)
-        t_raster = median_seconds(only_raster, a.repeat)
-        t_peer = median_seconds(peer, a.repeat)
-        t_full = median_seconds(peer_full, a.repeat)
-        t_peer_s = median_seconds(lambda: peer(True), a.repeat)
-        t_full_s = median_seconds(lambda: peer_full(True), a.repeat)
+        n = 2 * a.repeat
+        t_ours = timed(ours, n)
+        t_render = timed(only_render, n)
+        t_vjp = timed(only_vjp, n)
+        t_raster = timed(only_raster, n)
+        t_peer = timed(peer, n)
+        t_full = timed(peer_full, n)
+        t_peer_s = timed(lambda: peer(True), n)
+        t_full_s = timed(lambda: peer_full(True), n)
         g1 = image_vjp(V, F, rs[0], Gs[0])
         g2 = torch_peer(V, F, rs[0].raster.face_id, Gs[0], Ms[0])
         err = np.abs(g1 - g2).max() / max(1e-300, np.abs(g2).max())
         n_seen = int(np.median([len(r.faces) for r in rs]))
-        print(f"{res}^2 ({n_seen} faces seen, median): ours render+VJP {t_ours * 1e3:.2f} ms "
-              f"(render {t_render * 1e3:.2f} ms of which rasterize {t_raster * 1e3:.2f} ms; VJP "
-              f"{t_vjp * 1e3:.2f} ms) [target <= 10 ms]; max rel. difference to the peer {err:.1e}")
-        print(f"  peer, normals of all faces: VJP (torch forward + backward) {t_peer * 1e3:.2f} ms, "
-              f"with the rasterization {t_full * 1e3:.2f} ms; peer VJP / our VJP "
-              f"{t_peer / t_vjp:.1f}x; peer (raster + torch shading + backward) / our render+VJP "
-              f"{t_full / t_ours:.1f}x [target >= 10x]")
-        print(f"  peer, normals of the seen faces only: VJP {t_peer_s * 1e3:.2f} ms, with the "
-              f"rasterization {t_full_s * 1e3:.2f} ms; peer VJP / our VJP {t_peer_s / t_vjp:.1f}x; "
-              f"peer (raster + torch shading + backward) / our render+VJP {t_full_s / t_ours:.1f}x")
+
+        def ms(t):
+            return f"{t[0] * 1e3:.2f} ms [{t[1] * 1e3:.2f}]"
+
+        def ratio(x, y):
+            return f"{x[0] / y[0]:.1f}x [CPU {x[1] / y[1]:.1f}x]"
+
+        print(f"{res}^2 ({n_seen} faces seen, median): ours render+VJP {ms(t_ours)} (render "
+              f"{ms(t_render)} of which rasterize {ms(t_raster)}; VJP {ms(t_vjp)}) "
+              f"[target <= 10 ms]; max rel. difference to the peer {err:.1e}")
+        print(f"  peer, normals of all faces: VJP (torch forward + backward) {ms(t_peer)}, with the "
+              f"rasterization {ms(t_full)}; peer VJP / our VJP {ratio(t_peer, t_vjp)}; peer (raster "
+              f"+ torch shading + backward) / our render+VJP {ratio(t_full, t_ours)} [target >= 10x]")
+        print(f"  peer, normals of the seen faces only: VJP {ms(t_peer_s)}, with the rasterization "
+              f"{ms(t_full_s)}; peer VJP / our VJP {ratio(t_peer_s, t_vjp)}; peer (raster + torch "
+              f"shading + backward) / our render+VJP {ratio(t_full_s, t_ours)}")
     if a.skip_run:
         return 0
     t = time.perf_counter()
