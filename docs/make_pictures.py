@@ -125,6 +125,34 @@ def main(names: list[str]) -> None:
         print("wrote", OUT / "paparazzi.png")
         win.undo_stack.setClean()
         win.document.modified = False
+    if not names or "adversarial_lighting" in names:
+        # the whole window: the classifier's image, its top-5 and before / after are the picture
+        import numpy as np
+
+        from algorithms.adversarial.shapes import orange
+        from algorithms.mesh import write_mesh
+
+        V, F, A = orange()
+        C, n = np.zeros((len(V), 3)), np.zeros(len(V))
+        for k in range(3):  # the orange's face colours as vertex colours of an OBJ file
+            np.add.at(C, F[:, k], A)
+            np.add.at(n, F[:, k], 1)
+        path = Path(tempfile.mkdtemp()) / "orange.obj"
+        write_mesh(path, V, F, vertex_colors=C / n[:, None])
+        panel = win.panels["Adversarial lighting"]
+        panel.raise_()
+        pump(app)
+        win.open_path(path)
+        while panel.preview_count == 0:
+            pump(app, 0.1)
+        run_and_wait(app, win, lambda: panel.attack("lighting"))  # the thesis's settings
+        while panel.preview_runner.busy:
+            pump(app, 0.1)
+        pump(app, 0.5)
+        win.save_window_image(str(OUT / "adversarial_lighting.png"))
+        print("wrote", OUT / "adversarial_lighting.png")
+        win.undo_stack.setClean()
+        win.document.modified = False
     win.document.modified = False
     win.close()
 
