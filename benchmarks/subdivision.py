@@ -3,11 +3,18 @@
 * inference: a ~1k-face mesh (spot, QSlim-decimated) -> 2 levels, neural vs Loop (libigl) vs
   modified butterfly (ours);
 * data generation: seconds per coarse mesh at the default sizes (150-300 vertices, 100 random
-  edges per collapse) on armadillo (14.5k vertices), 1 local worker vs 2 (speed-up);
-* training: seconds per coarse mesh and per epoch at the default sizes (an epoch = 180 training
-  meshes of the default 200, 20 held out).
+  edges per collapse) on armadillo (14.5k vertices), split into collapses (the
+  self-parameterization), map queries and Loop topology + target points; 1 local worker vs 2
+  (speed-up);
+* training: seconds per coarse mesh (forward, backward + Adam, other) and per epoch at the
+  default sizes (an epoch = 180 training meshes of the default 200, 20 validated in one batch),
+  and the whole default training extrapolated (data + epochs).
 
-Usage: ``python benchmarks/subdivision.py [--quick]`` (``--quick``: fewer repeats and meshes).
+Every timing is wall-clock on a possibly shared machine: the load average is printed with them.
+
+Usage: ``python benchmarks/subdivision.py [--quick] [--full [--save W.pt]]`` (``--quick``: fewer
+repeats and meshes; ``--full``: also runs the whole default training once -- 200 coarse meshes
+with 2 workers, then ``TrainParams()`` -- and prints its measured split).
 
 ``--learn-loop N EPOCHS`` instead runs App. 4.8.7 (learning Loop): trains on N coarse meshes of
 bob whose targets are their own Loop subdivision, for EPOCHS epochs, then subdivides unseen
@@ -18,6 +25,8 @@ per-vertex distance to libigl's Loop, in % of the bounding-box diagonal (thesis:
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import statistics
 import sys
 import tempfile
@@ -31,12 +40,36 @@ import numpy as np  # noqa: E402
 from benchmarks._timing import median_seconds, mesh_path  # noqa: E402
 
 
+def _load() -> str:
+    try:
+        return "load average " + " / ".join(f"{x:.1f}" for x in os.getloadavg()) + \
+            f" (1/5/15 min) on {os.cpu_count()} cores"
+    except OSError:  # pragma: no cover - not on Linux
+        return "load average unknown"
+
+
+def _cpu_and_wall(fn):
+    """(result, CPU seconds of this process, wall seconds)."""
+    c, w = time.process_time(), time.perf_counter()
+    r = fn()
+    return r, time.process_time() - c, time.perf_counter() - w
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--learn-loop", nargs=2, type=int, metavar=("N", "EPOCHS"))
     ap.add_argument("--coarse", type=int, default=0,
-                    help="coarse meshes for the data-generation timing (default 2 quick, 8)")
+                    help="coarse meshes for the data-generation timing (default 4 quick, 8)")
+    ap.add_argument("--mesh", default="armadillo.obj",
+                    help="training shape (default armadillo.obj, as the shipped weights)")
+    ap.add_argument("--full", action="store_true",
+                    help="also run the whole default training once (200 coarse meshes, "
+                         "TrainParams() defaults incl. early stopping) and print its split")
+    ap.add_argument("--save", default="", help="with --full: write the trained weights here")
+    ap.add_argument("--cache-dir", default="",
+                    help="with --full: data cache folder (default: a fresh temporary one, so "
+                         "the data generation is timed)")
     args = ap.parse_args()
     import torch
 
@@ -46,11 +79,13 @@ def main() -> int:
     from algorithms.mesh import read_mesh
     from algorithms.mesh.subdivision import loop_subdivide
     from algorithms.subdivision.baselines import butterfly_subdivide
-    from algorithms.subdivision.data import DataParams, generate_dataset
+    from algorithms.subdivision.data import (DataParams, generate_coarse_sample,
+                                             generate_dataset, normalization)
     from algorithms.subdivision.metrics import coarsen_to_vertices
     from algorithms.subdivision.model import SubdivisionNet, load_weights, neural_subdivide
     from algorithms.subdivision.train import Trainer, TrainParams
 
+    print(f"start: {_load()}; torch {torch.__version__}, 1 torch thread", flush=True)
     rep = 3 if args.quick else 7
     # ---- inference
     spot = read_mesh(mesh_path("spot_lowres.obj"))
@@ -67,45 +102,118 @@ def main() -> int:
           f"median of {rep}")
     print(f"  neural    {t_n * 1e3:8.1f} ms   (target <= 300 ms)  {t_n / t_l:7.1f}x Loop")
     print(f"  Loop      {t_l * 1e3:8.1f} ms   (libigl)")
-    print(f"  butterfly {t_b * 1e3:8.1f} ms   {t_b / t_l:7.1f}x Loop")
+    print(f"  butterfly {t_b * 1e3:8.1f} ms   {t_b / t_l:7.1f}x Loop", flush=True)
 
-    # ---- data generation
-    arm = read_mesh(mesh_path("armadillo.obj"))
-    k = args.coarse or (2 if args.quick else 8)
+    # ---- data generation, one process: split per coarse mesh
+    shape = read_mesh(mesh_path(args.mesh))
+    k = args.coarse or (4 if args.quick else 8)
     p = DataParams(coarse_meshes=k, seed=12345)
+    c, s = normalization(shape.V)
+    Vn = (shape.V - c) * s
+    generate_coarse_sample(Vn, shape.F, 10_000, p)  # compiled kernels loaded
+    split = {"seconds_collapses": 0.0, "seconds_map": 0.0, "seconds_topology": 0.0}
+    cpu = wall = 0.0
+    for i in range(k):
+        out, dc, dw = _cpu_and_wall(lambda i=i: generate_coarse_sample(Vn, shape.F, i, p))
+        info = json.loads(str(out["info"]))
+        for key in split:
+            split[key] += info[key]
+        cpu += dc
+        wall += dw
+    print(f"data generation: {args.mesh} {len(shape.V)} vertices / {len(shape.F)} faces -> "
+          f"{k} coarse meshes of {p.min_vertices}-{p.max_vertices} vertices, {p.levels} levels, "
+          f"{p.candidates} random edges per collapse")
+    print(f"  1 process {wall / k:7.2f} s per coarse mesh (CPU {cpu / k:.2f} s): collapses + "
+          f"self-parameterization {split['seconds_collapses'] / k:.2f} s, map queries "
+          f"{split['seconds_map'] / k:.3f} s, Loop topology + target points "
+          f"{split['seconds_topology'] / k:.3f} s", flush=True)
+    # ---- 1 worker vs 2 workers (generate_dataset, no cache; the pool's start-up included)
     res = {}
     for w in (1, 2):
-        with tempfile.TemporaryDirectory() as d:
-            t = time.perf_counter()
-            generate_dataset([(arm.V, arm.F)], p, workers=w, use_cache=False)
-            res[w] = time.perf_counter() - t
-            del d
-    print(f"data generation: armadillo {len(arm.V)} vertices / {len(arm.F)} faces -> "
-          f"{k} coarse meshes of 150-300 vertices, 2 levels")
-    print(f"  1 worker  {res[1] / k:7.2f} s per coarse mesh")
-    print(f"  2 workers {res[2] / k:7.2f} s per coarse mesh   speed-up {res[1] / res[2]:.2f}x "
-          f"(process start-up included)")
-    print(f"  default 200 coarse meshes: ~{200 * res[2] / k / 60:.1f} min with 2 workers")
+        t = time.perf_counter()
+        generate_dataset([(shape.V, shape.F)], p, workers=w, use_cache=False)
+        res[w] = time.perf_counter() - t
+    print(f"  generate_dataset, workers=1: {res[1] / k:7.2f} s per coarse mesh")
+    print(f"  generate_dataset, workers=2: {res[2] / k:7.2f} s per coarse mesh   speed-up "
+          f"{res[1] / res[2]:.2f}x (2 processes started and loaded per run)  [{_load()}]")
+    data_200 = 200 * res[2] / k
+    print(f"  default 200 coarse meshes: ~{data_200 / 60:.1f} min with 2 workers", flush=True)
 
-    # ---- training
-    samples = generate_dataset([(arm.V, arm.F)], DataParams(coarse_meshes=k, seed=12345),
-                               workers=1, use_cache=False)
-    tr = Trainer(samples, TrainParams(epochs=2, validation_fraction=0.0))
-    ts = []
-    for _ in range(2):
-        for item in tr.train_set:
-            t = time.perf_counter()
-            tr.opt.zero_grad()
-            tr._loss(item).backward()
-            tr.opt.step()
-            ts.append(time.perf_counter() - t)
-    per_mesh = statistics.median(ts)
-    sizes = [len(s.V) for s in samples]
-    print(f"training: coarse meshes of {min(sizes)}-{max(sizes)} vertices, 2 levels, "
-          f"1 thread")
-    print(f"  {per_mesh:7.3f} s per coarse mesh (forward + backward + Adam step)")
-    print(f"  {180 * per_mesh:7.1f} s per epoch at the default 200 coarse meshes (180 trained)")
-    print(f"  default 700 epochs: ~{700 * 180 * per_mesh / 3600:.1f} h")
+    # ---- training: seconds per epoch at the default sizes, split
+    samples = generate_dataset([(shape.V, shape.F)], p, workers=1, use_cache=False)
+    t = time.perf_counter()
+    tr = Trainer(samples, TrainParams(epochs=3, validation_fraction=0.0, patience=0))
+    t_prep = (time.perf_counter() - t) / k
+    c0 = time.process_time()
+    steps = list(tr.steps())
+    cpu_ep = (time.process_time() - c0) / len(steps)
+    h = tr.history[1:]  # the first epoch warms up
+    fwd = statistics.median(x["seconds_forward"] for x in h) / k
+    bwd = statistics.median(x["seconds_backward"] for x in h) / k
+    val = statistics.median(x["seconds_validation"] for x in h) / k  # all k in one batch
+    oth = statistics.median(x["seconds_other"] for x in h) / k
+    per_mesh = fwd + bwd + oth
+    sizes = [len(x.V) for x in samples]
+    d = TrainParams()
+    ntrain, nval = 180, 20
+    epoch = ntrain * per_mesh + nval * val
+    print(f"training: coarse meshes of {min(sizes)}-{max(sizes)} vertices, 2 levels, 1 torch "
+          f"thread, median of {len(h)} epochs over {k} meshes")
+    print(f"  per coarse mesh: forward {fwd * 1e3:6.1f} ms, backward + Adam {bwd * 1e3:6.1f} ms,"
+          f" other {oth * 1e3:5.1f} ms; validation (batched) {val * 1e3:5.1f} ms; index tensors "
+          f"built once {t_prep * 1e3:5.1f} ms")
+    print(f"  CPU per epoch of these {k} meshes {cpu_ep:.2f} s vs wall "
+          f"{statistics.median(x['seconds'] for x in h):.2f} s")
+    print(f"  {epoch:7.1f} s per epoch at the default 200 coarse meshes ({ntrain} trained, "
+          f"{nval} validated)")
+    print(f"  whole default training, extrapolated: data {data_200 / 60:.1f} min (2 workers) + "
+          f"{d.epochs} epochs {d.epochs * epoch / 60:.1f} min = "
+          f"{(data_200 + d.epochs * epoch) / 60:.1f} min if it runs all epochs; early stopping "
+          f"(patience {d.patience}, {100 * d.min_improvement:g} %) ends it sooner: "
+          f"{epoch * 100 / 60:.1f} min per 100 epochs")
+    print(f"end: {_load()}", flush=True)
+    if args.full:
+        return full(shape, args)
+    return 0
+
+
+def full(shape, args) -> int:
+    """The whole default training (DataParams(), TrainParams()) on one shape, measured."""
+    from algorithms.subdivision.data import DataParams, generate_dataset
+    from algorithms.subdivision.model import save_weights
+    from algorithms.subdivision.train import Trainer, TrainParams
+
+    print(f"--full: default training on {args.mesh} [{_load()}]", flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        cache = args.cache_dir or tmp
+        t0 = time.perf_counter()
+        samples = generate_dataset([(shape.V, shape.F)], DataParams(), workers=2, cache_dir=cache)
+        t_data = time.perf_counter() - t0
+    print(f"  data: {len(samples)} coarse meshes in {t_data:.0f} s "
+          f"({t_data / len(samples):.2f} s each, 2 workers) [{_load()}]", flush=True)
+    t1 = time.perf_counter()
+    tr = Trainer(samples, TrainParams())
+    t_prep = time.perf_counter() - t1
+    for step in tr.steps():
+        if step.iteration % 10 == 0 or step.iteration == 1:
+            print(f"  {step.message} ({step.metrics['seconds']:.1f} s) [{_load()}]", flush=True)
+    t_train = time.perf_counter() - t1
+    hs = tr.history
+    tot = {k: sum(x[k] for x in hs) for k in ("seconds_forward", "seconds_backward",
+                                               "seconds_validation", "seconds_other")}
+    print(f"  training: {len(hs)} epochs (stopped early: {tr.stopped_early}), best validation "
+          f"loss {tr.best_loss:.4g} at epoch {tr.best_epoch}; {t_train:.0f} s = preparation "
+          f"{t_prep:.0f} s + forward {tot['seconds_forward']:.0f} s + backward/Adam "
+          f"{tot['seconds_backward']:.0f} s + validation {tot['seconds_validation']:.0f} s + "
+          f"other {tot['seconds_other']:.0f} s; median {statistics.median(tr.seconds_per_epoch):.1f}"
+          f" s per epoch")
+    print(f"  whole default training: {(t_data + t_train) / 60:.1f} min (data "
+          f"{t_data / 60:.1f} + training {t_train / 60:.1f}) [{_load()}]", flush=True)
+    if args.save:
+        save_weights(args.save, tr.net, {"trained_on": args.mesh, "coarse_meshes": len(samples),
+                                         "epochs_run": len(hs), "best_epoch": tr.best_epoch,
+                                         "best_validation_loss": float(tr.best_loss)})
+        print(f"  wrote {args.save}")
     return 0
 
 

@@ -264,9 +264,9 @@ class SubdivisionNet:
     def _apply(self, torch, name, V, Z, lv):
         """Outputs of module ``name`` on every half-flap: world displacement (H, 3), feature."""
         ijkl = lv["ijkl"]
-        P = V[ijkl]                                   # (H, 4, 3)
+        PD = torch.cat([V, self._laplace(torch, V, lv)], dim=1)[ijkl]  # (H, 4, 6): one gather
+        P, D = PD[..., :3], PD[..., 3:]
         R = self._frames(torch, V, P, lv)
-        D = self._laplace(torch, V, lv)[ijkl]         # (H, 4, 3)
         W = torch.cat([P[:, 1:] - P[:, :1], D], dim=1)  # eij eik eil di dj dk dl: (H, 7, 3)
         loc = torch.bmm(W, R.transpose(1, 2))        # in the local frame
         if lv["boundary"]:  # no l: the mirror of k (rotated by pi about the edge)
