@@ -19,7 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["project", "rasterize", "seen_faces", "face_normals", "paint", "face_sums",
+__all__ = ["project", "rasterize", "barycentrics", "seen_faces", "face_normals", "paint", "face_sums",
            "normal_vjp", "sh_shade", "sh_lighting_vjp", "sh_normal_vjp"]
 
 
@@ -174,49 +174,68 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
                 continue
             _fill_row(i, int(lo), int(hi), f, x0, y0, z0, x1, y1, z1, x2, y2, z2, inv,
                       perspective, near, zbuf)
-    # the winners' barycentrics (same formulas and operands as in _fill_row)
+    # the winners' ids, depths and barycentrics (same formulas and operands as in _fill_row);
+    # an empty ``bary`` (shape (0, 0, 3)) leaves them to :func:`barycentrics`
+    with_bary = bary.shape[0] == res
     for i in range(res):
-        py = float(i)
         for j in range(res):
             fz = zbuf[i, j, 1]
             if fz < 0.0:
                 face_id[i, j] = -1
                 depth[i, j] = np.inf
-                bary[i, j, 0] = 0.0
-                bary[i, j, 1] = 0.0
-                bary[i, j, 2] = 0.0
-                continue
-            f = int(fz)
-            a = F[f, 0]
-            b = F[f, 1]
-            c = F[f, 2]
-            x0 = P[a, 0]
-            y0 = P[a, 1]
-            x1 = P[b, 0]
-            y1 = P[b, 1]
-            x2 = P[c, 0]
-            y2 = P[c, 1]
-            inv = 1.0 / ((x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0))
-            px = float(j)
-            w0 = ((x1 - px) * (y2 - py) - (x2 - px) * (y1 - py)) * inv
-            w1 = ((x2 - px) * (y0 - py) - (x0 - px) * (y2 - py)) * inv
-            w2 = 1.0 - w0 - w1
-            if perspective:
-                q0 = w0 / P[a, 2]
-                q1 = w1 / P[b, 2]
-                q2 = w2 / P[c, 2]
-                z = 1.0 / (q0 + q1 + q2)
-                w0 = q0 * z
-                w1 = q1 * z
-                w2 = q2 * z
-            face_id[i, j] = f
-            depth[i, j] = zbuf[i, j, 0]
-            bary[i, j, 0] = w0
-            bary[i, j, 1] = w1
-            bary[i, j, 2] = w2
+            else:
+                face_id[i, j] = int(fz)
+                depth[i, j] = zbuf[i, j, 0]
+            if with_bary:
+                _bary_at(P, F, face_id[i, j], i, j, perspective, bary)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _bary_at(P, F, f, i, j, perspective, bary):  # pragma: no cover - compiled
+    """``bary[i, j]``: barycentrics of pixel ``(i, j)`` in face ``f`` (0 for ``f < 0``)."""
+    if f < 0:
+        bary[i, j, 0] = 0.0
+        bary[i, j, 1] = 0.0
+        bary[i, j, 2] = 0.0
+        return
+    a = F[f, 0]
+    b = F[f, 1]
+    c = F[f, 2]
+    x0 = P[a, 0]
+    y0 = P[a, 1]
+    x1 = P[b, 0]
+    y1 = P[b, 1]
+    x2 = P[c, 0]
+    y2 = P[c, 1]
+    inv = 1.0 / ((x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0))
+    px = float(j)
+    py = float(i)
+    w0 = ((x1 - px) * (y2 - py) - (x2 - px) * (y1 - py)) * inv
+    w1 = ((x2 - px) * (y0 - py) - (x0 - px) * (y2 - py)) * inv
+    w2 = 1.0 - w0 - w1
+    if perspective:
+        q0 = w0 / P[a, 2]
+        q1 = w1 / P[b, 2]
+        q2 = w2 / P[c, 2]
+        z = 1.0 / (q0 + q1 + q2)
+        w0 = q0 * z
+        w1 = q1 * z
+        w2 = q2 * z
+    bary[i, j, 0] = w0
+    bary[i, j, 1] = w1
+    bary[i, j, 2] = w2
 
 
 @njit(cache=True, nogil=True)
+def barycentrics(P, F, face_id, perspective, bary):  # pragma: no cover - compiled
+    """``bary (H, W, 3)`` of the faces ``face_id`` seen (as :func:`rasterize` computes them)."""
+    H, W = face_id.shape
+    for i in range(H):
+        for j in range(W):
+            _bary_at(P, F, face_id[i, j], i, j, perspective, bary)
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _fill_row(i, jlo, jhi, f, x0, y0, z0, x1, y1, z1, x2, y2, z2, inv, perspective, near,
               zbuf):  # pragma: no cover - compiled
     """The exact coverage and depth test (the NumPy formulas) of pixels ``(i, jlo..jhi)``."""

@@ -21,8 +21,6 @@ The compiled kernel goes through the project's one switch, :mod:`algorithms.comp
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from ..compiled import KernelModule
@@ -43,7 +41,6 @@ def set_compiled_kernels(enabled: bool) -> bool:
     return _KERNELS.set(enabled)
 
 
-@dataclass
 class Raster:
     """What the rasterizer sees through one camera.
 
@@ -52,13 +49,35 @@ class Raster:
     face_id : (H, W) int64, the nearest face under each pixel centre, -1 for background.
     depth : (H, W) float64 depth along the view direction (inf for background).
     bary : (H, W, 3) float64 barycentric coordinates of the seen point in its face (0 for background).
+        The compiled rasterizer computes them on first access (flat shading never needs them)
+        from its projected vertices and the faces it was given (do not change that ``F`` in
+        place before reading them), by the same formulas as the z-test.
     camera : the camera used.
     """
 
-    face_id: np.ndarray
-    depth: np.ndarray
-    bary: np.ndarray
-    camera: Camera
+    def __init__(self, face_id: np.ndarray, depth: np.ndarray, bary: np.ndarray | None,
+                 camera: Camera, *, _lazy_bary=None):
+        self.face_id = face_id
+        self.depth = depth
+        self._bary = bary
+        self.camera = camera
+        self._lazy = _lazy_bary          # (kernel module, P, F) while bary is not computed
+
+    @property
+    def bary(self) -> np.ndarray:
+        if self._bary is None:
+            kern, P, F = self._lazy
+            b = np.empty(self.face_id.shape + (3,))
+            kern.barycentrics(P, F, self.face_id, self.camera.perspective, b)
+            self._bary, self._lazy = b, None
+        return self._bary
+
+    @bary.setter
+    def bary(self, value: np.ndarray) -> None:
+        self._bary, self._lazy = value, None
+
+    def __repr__(self) -> str:
+        return f"Raster({self.face_id.shape[1]}x{self.face_id.shape[0]}, camera={self.camera!r})"
 
     @property
     def mask(self) -> np.ndarray:
@@ -85,13 +104,14 @@ def rasterize(V, F, camera: Camera, *, backend: str = "auto") -> Raster:
     if kern is not None:                      # the kernel writes every pixel
         face_id = np.empty((res, res), dtype=np.int64)
         depth = np.empty((res, res))
-        bary = np.empty((res, res, 3))
         V = np.ascontiguousarray(V).reshape(-1, 3)
+        F = np.ascontiguousarray(F).reshape(-1, 3)
         P = np.empty_like(V)
         kern.project(V, camera.position, camera._basis, camera.perspective,
                      camera.projection_scale, res, P)
-        kern.rasterize(P, np.ascontiguousarray(F).reshape(-1, 3), res, camera.perspective,
-                       camera.near, face_id, depth, bary)
+        kern.rasterize(P, F, res, camera.perspective, camera.near, face_id, depth,
+                       np.empty((0, 0, 3)))
+        return Raster(face_id, depth, None, camera, _lazy_bary=(kern, P, F))
     else:
         face_id = np.full((res, res), -1, dtype=np.int64)
         depth = np.full((res, res), np.inf)

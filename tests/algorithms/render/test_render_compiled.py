@@ -57,6 +57,24 @@ def test_compiled_projection_is_bit_identical_to_to_pixels(name):
 
 
 @pytest.mark.parametrize("name", sorted(CAMERAS))
+def test_lazy_and_eager_barycentrics_are_identical(name):
+    from algorithms.render import kernels, rasterize
+
+    cam = CAMERAS[name]
+    V, F = _bumpy(8)
+    r = rasterize(V, F, cam, backend="compiled")
+    res = cam.resolution
+    P = cam.to_pixels(V)
+    fid, depth, bary = np.empty((res, res), np.int64), np.empty((res, res)), np.empty((res, res, 3))
+    kernels.rasterize(P, F, res, cam.perspective, cam.near, fid, depth, bary)
+    np.testing.assert_array_equal(fid, r.face_id)
+    np.testing.assert_array_equal(depth, r.depth)
+    np.testing.assert_array_equal(bary, r.bary)
+    assert (fid >= 0).sum() > 300 and np.all(bary[fid < 0] == 0)
+    np.testing.assert_allclose(bary[fid >= 0].sum(1), 1.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", sorted(CAMERAS))
 def test_render_and_image_vjp_agree_with_numpy(name):
     cam = CAMERAS[name]
     V, F = _bumpy(2)
