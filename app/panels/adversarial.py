@@ -81,6 +81,22 @@ def _classifier(ref):
         return default_classifier()
 
 
+def _read_face_colors(key, F):
+    """Face colours ``(m, 3)`` stored in the mesh file ``key[0]`` (vertex colours averaged over
+    each face's corners), or None (no colours, another size, unreadable)."""
+    from algorithms.render.sh import read_mesh_colors
+
+    path, n, m = key
+    try:
+        got = read_mesh_colors(path, n, m)
+    except Stylize3DError:
+        return None
+    if got is None:
+        return None
+    kind, C = got
+    return C[np.asarray(F)].mean(axis=1) if kind == "vertex" else C
+
+
 def image_to_pixmap(img: np.ndarray, size: int | None = None) -> QPixmap:
     """A QPixmap of an ``(H, W, 3)`` image with values in [0, 1] (scaled to ``size`` pixels)."""
     a = np.ascontiguousarray((np.clip(np.asarray(img, np.float64), 0, 1) * 255 + 0.5)
@@ -109,8 +125,8 @@ class PreviewStep(Step):
     image: np.ndarray | None = None
     probs: np.ndarray | None = None
     names: tuple = ()
-    key: object = None
     covered: float = 0.0
+    colors: tuple | None = None   # (key, face colours or None) when the job read the file's
 
 
 @dataclass
@@ -194,9 +210,10 @@ class AdversarialPanel(MethodPanel):
         self.classifier_name = "EfficientNet-lite0 (ImageNet, default)"
         self.color = (0.7, 0.7, 0.7)
         self._file_colors = None          # (m, 3) face colours of the opened file, if any
+        self._file_colors_key = None      # (path, n, m) they were read for
         self.probs: np.ndarray | None = None
         self.shown_image: np.ndarray | None = None
-        self.visible_error: str | None = None
+        self.preview_error: str | None = None
         self.streamed_images = 0
         self.preview_count = 0
         self.last_result = None
@@ -578,22 +595,26 @@ class AdversarialPanel(MethodPanel):
             return self._file_colors
         return np.array(self.color)
 
-    def _read_file_colors(self) -> None:
-        from algorithms.render.sh import read_mesh_colors
-
+    def _colors_key(self, state):
         doc = self.window_.document
-        self._file_colors = None
-        if doc.path is not None and doc.state is not None:
-            try:
-                got = read_mesh_colors(doc.path, len(doc.V), len(doc.F))
-            except Stylize3DError:
-                got = None
-            if got is not None:
-                kind, C = got
-                self._file_colors = C[np.asarray(doc.F)].mean(axis=1) if kind == "vertex" else C
-        has = self._file_colors is not None
+        return None if doc.path is None else (str(doc.path), len(state.V), len(state.F))
+
+    def _take_file_colors(self, key, colors) -> None:
+        """The opened file's face colours (or None), read by a preview job on the worker."""
+        if key != self._colors_key_of_doc():
+            return
+        self._file_colors_key = key
+        self._file_colors = colors
+        has = colors is not None
+        self.file_colors_box.blockSignals(True)
         self.file_colors_box.setVisible(has)
         self.file_colors_box.setChecked(has)
+        self.file_colors_box.blockSignals(False)
+        self.color_button.setEnabled(not has)
+
+    def _colors_key_of_doc(self):
+        st = self.window_.document.state
+        return None if st is None else self._colors_key(st)
 
     # -- classifier -----------------------------------------------------------------------------
     def class_names(self):
@@ -708,20 +729,25 @@ class AdversarialPanel(MethodPanel):
         self._preview_stale = False
         sc = self._scene(state, self.form.params())
         ref = self.classifier
+        key = self._colors_key(state)
+        read_colors = key is not None and key != self._file_colors_key
 
         def steps():
             from algorithms.adversarial.attack import (classify, orbit_cameras, prepare_scene,
                                                        render_views)
 
+            colors = _read_face_colors(key, sc.F) if read_colors else None
             clf = _classifier(ref)
-            scene = prepare_scene(sc.V, sc.F, albedo=sc.albedo, lighting=sc.lighting)
+            scene = prepare_scene(sc.V, sc.F, albedo=sc.albedo if colors is None else colors,
+                                  lighting=sc.lighting)
             cams = orbit_cameras(sc.azimuths, elevation=sc.elevation, width=sc.width,
                                  resolution=sc.resolution * sc.supersample)
             images, renders, _ = render_views(scene, cams, supersample=sc.supersample)
             p = classify(clf, images)[0]
             yield PreviewStep(0, None, sc.V, {}, "", image=images[0].astype(np.float32),
                               probs=p, names=tuple(clf.class_names),
-                              covered=float(renders[0].mask.mean()))
+                              covered=float(renders[0].mask.mean()),
+                              colors=(key, colors) if read_colors else None)
 
         if self.probs is None:
             self.image_note.setText("Loading the classifier…" if ref is None else "Classifying…")
@@ -730,7 +756,9 @@ class AdversarialPanel(MethodPanel):
     def _on_preview_done(self, step) -> None:
         if not isinstance(step, PreviewStep) or self._attacking():
             return
-        self.visible_error = None
+        self.preview_error = None
+        if step.colors is not None:
+            self._take_file_colors(*step.colors)
         self.show_classification(step.image, top_k(step.probs, step.names))
         self.probs = np.asarray(step.probs)
         if not self.true_edit.text().strip():  # the object's class: set once, not after attacks
@@ -741,7 +769,7 @@ class AdversarialPanel(MethodPanel):
         self.classified.emit()
 
     def _on_preview_failed(self, message: str, _details: str) -> None:
-        self.visible_error = message
+        self.preview_error = message
         self.probs = None
         self.shown_image = None
         self.image_label.setPixmap(QPixmap())
@@ -765,7 +793,8 @@ class AdversarialPanel(MethodPanel):
         if what in ("mesh", "topology"):
             self.true_edit.clear()
             self.probs = None
-            self._read_file_colors()
+            self._take_file_colors(self._colors_key_of_doc(), None)
+            self._file_colors_key = None  # read by the next preview job, on the worker
         if what in ("mesh", "topology", "positions"):
             if self.is_shown():
                 self.schedule_preview()
@@ -795,8 +824,8 @@ class AdversarialPanel(MethodPanel):
         if state is None:
             self.status_label.setText("Open a mesh first (File > Open).")
             return False
-        if self.visible_error:
-            self.status_label.setText(self.visible_error)
+        if self.preview_error:
+            self.status_label.setText(self.preview_error)
             return False
         try:
             true = self.check_label(self.true_edit)

@@ -47,6 +47,7 @@ def test_image_top5_and_sh_slider_reclassifies(window, qtbot, mug_path):
     assert entries[0][0] == "coffee mug" and probs[0] > 0.5       # a grey mug from the front
     assert panel.true_edit.text() == "coffee mug"                  # the true label's default
     assert panel.shown_image.shape == (224, 224, 3)
+    assert not panel.file_colors_box.isVisibleTo(panel)              # the OBJ has no colours
     assert panel.image_label.pixmap().width() == 224
     assert [b.format() for b in panel.top5_view.bars][0] == f"{100 * probs[0]:.1f} %"
     image0, probs0 = panel.shown_image.copy(), panel.probs.copy()
@@ -151,8 +152,18 @@ def test_geometry_attack_is_one_undo_step(window, qtbot, mug_path):
 def test_bad_inputs_give_plain_messages(window, qtbot, mug_path, tmp_path):
     import torch
 
+    from PySide6.QtWidgets import QAbstractButton, QComboBox, QLineEdit, QSlider
+
     panel = open_panel(window, qtbot, mug_path)
     n0 = window.undo_stack.count()
+    # every control says what it does (its own tooltip, or its editor's for a form field's parts)
+    for root in (panel.scroll_area.widget(), panel.footer):
+        for cls in (QAbstractButton, QSlider, QComboBox, QLineEdit):
+            for w in (w for w in root.findChildren(cls) if w.isVisibleTo(panel)):
+                assert w.toolTip() or w.parent().toolTip() or w.parent().parent().toolTip(), w
+    assert "L∞" in panel.form.editors["radius"].toolTip()
+    assert "spherical-harmonics coefficient" in panel.sh_sliders[4][2].toolTip()
+    assert "Top-5" in panel.top5_view.toolTip()
     # a weights file that is not a model: refused unexecuted, the classifier stays
     class Boom:
         def __reduce__(self):
@@ -195,7 +206,7 @@ def test_bad_inputs_give_plain_messages(window, qtbot, mug_path, tmp_path):
     panel.form.set_value("elevation", 0.0)
     with qtbot.waitSignal(panel.classified, timeout=30000):
         assert window.open_path(flat)
-    assert panel.visible_error and "not visible" in panel.visible_error
+    assert panel.preview_error and "not visible" in panel.preview_error
     assert "not visible" in panel.image_label.text()
     assert not panel.attack("geometry")
     assert "not visible" in panel.status_label.text()
