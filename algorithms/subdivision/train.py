@@ -145,10 +145,12 @@ class Trainer:
             return float(self._loss(self._val_batch))
 
     def steps(self, epochs: int | None = None) -> Iterator[Step]:
-        """Train ``epochs`` (default ``params.epochs``) epochs, one Step per epoch.
+        """Train ``epochs`` (default ``params.epochs``) epochs, one Step per epoch; fewer when
+        early stopping ends it (``params.patience``; :attr:`stopped_early` says so).
 
         Step.metrics: ``loss`` (mean training loss of the epoch), ``validation_loss``,
-        ``best_validation_loss``, ``seconds``. Step.V is the first validation mesh's
+        ``best_validation_loss``, ``seconds`` and its split ``seconds_forward``,
+        ``seconds_backward`` (backward + Adam step), ``seconds_validation``, ``seconds_other``. Step.V is the first validation mesh's
         prediction at the last level (for a preview). The best weights are in
         :attr:`best_state` after every step (and loaded into :attr:`net` when the generator
         finishes or is closed).
