@@ -31,7 +31,8 @@ A filter that raises stops the run with its message (the optimizer wraps it in a
 Built-in filters and their defaults (DESIGN.md §5, the authors' settings)
 -------------------------------------------------------------------------
 * ``guided`` -- fast guided filter (He and Sun 2015), self-guided with the colour image as guide
-  (3x3 covariance per window), radius 15, epsilon 1e-8, subsampling 4, at 128 px. (The thesis's
+  (3x3 covariance per window), radius 15, epsilon 1e-8, subsampling 4, at 128 px, learning rate
+  5e-5 (see :mod:`.optimize`). (The thesis's
   Fig. 2.15 quotes r = 4, eps = 0.02; both are settable.)
 * ``quantize`` -- each pixel's normal (rendered in the *world* frame, thesis 447-449) replaced by
   the nearest of the 20 icosahedron face normals.
@@ -98,8 +99,9 @@ class FilterContext:
 class FilterSpec:
     """A registered filter.
 
-    ``resolution`` / ``width`` / ``sigma`` are the filter's preferred render resolution, view width
-    and camera offset (used when the run's parameter is left at 0 = "the filter's default");
+    ``resolution`` / ``width`` / ``sigma`` / ``learning_rate`` are the filter's preferred render
+    resolution, view width, camera offset and NAdam step (used when the run's parameter is left at
+    0 = "the filter's default");
     ``single_view`` fixes the camera to :func:`front_camera`; ``shading(params)`` builds the
     shading (default: R, G, B lights along the camera axes); ``prepare(params, info)`` builds the
     state once (``info``: dict with ``normalize`` (a function mapping world points into the
@@ -116,6 +118,7 @@ class FilterSpec:
     width: float = 0.5
     sigma: float = 0.1
     single_view: bool | Callable[[Any], bool] = False
+    learning_rate: float = 2e-4
     description: str = ""
 
     def make_shading(self, params) -> Shading:
@@ -339,6 +342,7 @@ class GuidedParams:
 
 
 @register_filter("guided", kind="iterative", params=GuidedParams, resolution=128,
+                 learning_rate=5e-5,
                  description="Fast guided filter: edge-preserving smoothing")
 def _guided(image, params: GuidedParams, ctx: FilterContext):
     return guided_filter(image, image, params.radius, params.epsilon, params.subsample)
