@@ -455,19 +455,17 @@ class AdversarialPanel(MethodPanel):
         self.before_after_box = box
 
         # footer: the two attacks instead of Run
-        self.run_button.setVisible(False)
-        self.attack_light_button = QPushButton("Attack lighting")
+        self.attack_light_button = self.run_button     # Run = the lighting attack (see run)
+        self.run_button.setText("Attack lighting")
         self.attack_light_button.setToolTip("Change the lighting a little (within the radius) "
                                             "until the classifier no longer sees the true label "
                                             "(or sees the target). The shape is not changed.")
-        self.attack_light_button.clicked.connect(lambda: self.attack("lighting"))
         self.attack_geom_button = QPushButton("Attack geometry")
         self.attack_geom_button.setToolTip("Move the vertices a little (within the radius) until "
                                            "the classifier is fooled. The result is one undo "
                                            "step (Ctrl+Z).")
         self.attack_geom_button.clicked.connect(lambda: self.attack("geometry"))
         row = self.footer.layout().itemAt(0).layout()
-        row.insertWidget(0, self.attack_light_button, 2)
         row.insertWidget(1, self.attack_geom_button, 2)
         self.defaults_button.setToolTip("Reset the attack settings (radius, iterations, views, "
                                         "advanced) to their defaults.")
@@ -815,6 +813,7 @@ class AdversarialPanel(MethodPanel):
                 "lighting": self.lighting[:9].tolist()}
 
     def run(self, live: bool = False) -> None:
+        """The Run button is "Attack lighting"."""
         self.attack("lighting")
 
     def attack(self, mode: str) -> bool:
