@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["project", "rasterize", "barycentrics", "seen_faces", "face_normals", "paint", "face_sums",
-           "normal_vjp", "sh_shade", "sh_lighting_vjp", "sh_normal_vjp"]
+           "normal_vjp", "sh_shade", "sh_lighting_vjp", "sh_normal_vjp", "sh_values_t"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -546,13 +546,69 @@ def sh_normal_vjp(N, Gc, W, Kf, out):  # pragma: no cover - compiled
         out[f, 2] = gz - r * z
 
 
+_BLOCK = 64
+
+
 @njit(cache=True, nogil=True)
-def sh_values(N, Kf, Y):  # pragma: no cover - compiled
-    """``Y (k, nc)``: the basis at the unit normals ``n_k / |n_k|``."""
-    nc = Y.shape[1]
+def sh_values_t(N, Kf, W, Yt, irr):  # pragma: no cover - compiled
+    """``Yt (nc, k)``: the basis at the unit normals ``n_k / |n_k|``, transposed (coefficient
+    rows), and ``irr (k, C) = sum_j Y_j W_jc`` (the irradiance with ``W = A U``) while the block
+    is in cache. Blocks of faces, the face index innermost (SIMD-friendly loops); the same
+    operations in the same order as :func:`_sh_parts`, :func:`_sh_values` and :func:`sh_shade`."""
+    nc, k = Yt.shape
+    C = W.shape[1]
+    acc = np.empty((C, _BLOCK))
     d = int(round(math.sqrt(nc))) - 1
-    Q, R, Cm, Sm = _sh_scratch(d)
-    for f in range(N.shape[0]):
-        x, y, z = _unit(N, f)
-        _sh_parts(x, y, z, d, R, Q, Cm, Sm)
-        _sh_values(d, Kf, Q, Cm, Sm, Y[f])
+    _, R, _, _ = _sh_scratch(d)
+    B = _BLOCK
+    x = np.empty(B)
+    y = np.empty(B)
+    z = np.empty(B)
+    Cm = np.empty((d + 1, B))
+    Sm = np.empty((d + 1, B))
+    Q = np.empty((d + 1, d + 1, B))
+    for s in range(0, k, B):
+        nb = min(k, s + B) - s
+        for t in range(nb):
+            x[t], y[t], z[t] = _unit(N, s + t)
+            Cm[0, t] = 1.0
+            Sm[0, t] = 0.0
+        for m in range(1, d + 1):
+            for t in range(nb):
+                Cm[m, t] = Cm[m - 1, t] * x[t] - Sm[m - 1, t] * y[t]
+                Sm[m, t] = Cm[m - 1, t] * y[t] + Sm[m - 1, t] * x[t]
+        for m in range(d + 1):
+            r = R[m, m, 0]
+            for t in range(nb):
+                Q[m, m, t] = r
+            if m + 1 <= d:
+                r = R[m + 1, m, 0]
+                for t in range(nb):
+                    Q[m + 1, m, t] = r * z[t]
+            for l in range(m + 2, d + 1):
+                ra = R[l, m, 0]
+                rb = R[l, m, 1]
+                for t in range(nb):
+                    Q[l, m, t] = ra * z[t] * Q[l - 1, m, t] - rb * Q[l - 2, m, t]
+        for l in range(d + 1):
+            base = l * l + l
+            kf = Kf[base]
+            for t in range(nb):
+                Yt[base, s + t] = kf * Q[l, 0, t]
+            for m in range(1, l + 1):
+                kc = Kf[base + m]
+                ks = Kf[base - m]
+                for t in range(nb):
+                    Yt[base + m, s + t] = kc * Q[l, m, t] * Cm[m, t]
+                    Yt[base - m, s + t] = ks * Q[l, m, t] * Sm[m, t]
+        for c in range(C):
+            a = acc[c]
+            for t in range(nb):
+                a[t] = 0.0
+            for j in range(nc):
+                w = W[j, c]
+                yj = Yt[j, s:s + nb]
+                for t in range(nb):
+                    a[t] += yj[t] * w
+            for t in range(nb):
+                irr[s + t, c] = a[t]

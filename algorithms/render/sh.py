@@ -407,19 +407,23 @@ class SHShading:
 
     def basis(self, normals) -> np.ndarray:
         """``Y_j(n) (k, n_coefficients)`` (compiled when available, else :func:`sh_basis`)."""
+        return self._basis_and_irradiance(normals)[0]
+
+    def _basis_and_irradiance(self, normals):
         kern = compiled_kernels()
         if kern is not None:
             N = _as_normals(normals)
-            Y = np.empty((len(N), len(self._A)))
-            kern.sh_values(N, _kf(self.degree), Y)
-            return Y
-        return sh_basis(normals, self.degree)
+            Yt = np.empty((len(self._A), len(N)))
+            irr = np.empty((len(N), self.channels))
+            kern.sh_values_t(N, _kf(self.degree), np.ascontiguousarray(self.weighted), Yt, irr)
+            return Yt.T, irr
+        Y = sh_basis(normals, self.degree)
+        return Y, Y @ self.weighted
 
     def face_colors_with_state(self, normals, camera: Camera | None = None, albedo=None):
         """Colours and an :class:`SHState` (the basis and irradiance of these faces) that
         :func:`sh_image_vjp` reuses: the lighting derivative (Eq. 3.28) is then one product."""
-        Y = self.basis(normals)
-        irr = Y @ self.weighted
+        Y, irr = self._basis_and_irradiance(normals)
         col = irr if albedo is None else irr * albedo
         return col, SHState(self, Y, irr)
 
