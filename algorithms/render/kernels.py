@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["project", "rasterize", "barycentrics", "seen_faces", "face_normals", "paint", "face_sums",
-           "normal_vjp", "sh_shade", "sh_lighting_vjp", "sh_normal_vjp", "sh_values_t"]
+           "normal_vjp", "sh_values_t", "sh_normal_vjp"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -402,10 +402,9 @@ def normal_vjp(V, F, faces, g, out):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def _sh_scratch(d):  # pragma: no cover - compiled
-    """Per-call scratch: ``Q (d+2, d+2)`` zeros, ``Cm``, ``Sm``, and the recurrence factors
-    ``R[l, m, 0] = (2l - 1) / (l - m)``, ``R[l, m, 1] = (l + m - 1) / (l - m)`` (``l >= m + 2``),
-    ``R[m, m, 0] = (2m - 1)!!``, ``R[m + 1, m, 0] = (2m + 1)!!`` (no division per face)."""
-    Q = np.zeros((d + 2, d + 2))
+    """The recurrence factors ``R[l, m, 0] = (2l - 1) / (l - m)``, ``R[l, m, 1] = (l + m - 1) /
+    (l - m)`` (``l >= m + 2``), ``R[m, m, 0] = (2m - 1)!!``, ``R[m + 1, m, 0] = (2m + 1)!!`` (no
+    division per face)."""
     R = np.zeros((d + 2, d + 2, 2))
     dfact = 1.0
     for m in range(d + 1):
@@ -415,34 +414,7 @@ def _sh_scratch(d):  # pragma: no cover - compiled
             R[l, m, 0] = (2.0 * l - 1.0) / (l - m)
             R[l, m, 1] = (l + m - 1.0) / (l - m)
         dfact *= 2 * m + 1
-    return Q, R, np.empty(d + 1), np.empty(d + 1)
-
-
-@njit(cache=True, nogil=True)
-def _sh_parts(x, y, z, d, R, Q, Cm, Sm):  # pragma: no cover - compiled
-    """``Cm[m] + i Sm[m] = (x + i y)^m`` and ``Q[l, m] = d^m P_l/dz^m (z)`` for ``m <= l <= d``
-    (``Q[l, l + 1]`` stays 0)."""
-    Cm[0] = 1.0
-    Sm[0] = 0.0
-    for m in range(1, d + 1):
-        Cm[m] = Cm[m - 1] * x - Sm[m - 1] * y
-        Sm[m] = Cm[m - 1] * y + Sm[m - 1] * x
-    for m in range(d + 1):
-        Q[m, m] = R[m, m, 0]
-        if m + 1 <= d:
-            Q[m + 1, m] = R[m + 1, m, 0] * z
-        for l in range(m + 2, d + 1):
-            Q[l, m] = R[l, m, 0] * z * Q[l - 1, m] - R[l, m, 1] * Q[l - 2, m]
-
-
-@njit(cache=True, nogil=True)
-def _sh_values(d, Kf, Q, Cm, Sm, Y):  # pragma: no cover - compiled
-    for l in range(d + 1):
-        base = l * l + l
-        Y[base] = Kf[base] * Q[l, 0]
-        for m in range(1, l + 1):
-            Y[base + m] = Kf[base + m] * Q[l, m] * Cm[m]
-            Y[base - m] = Kf[base - m] * Q[l, m] * Sm[m]
+    return R
 
 
 @njit(cache=True, nogil=True)
@@ -456,97 +428,100 @@ def _unit(N, f):  # pragma: no cover - compiled
     return x, y, z
 
 
-@njit(cache=True, nogil=True)
-def sh_shade(N, W, Kf, out):  # pragma: no cover - compiled
-    """``out (k, C) = sum_j W_jc Y_j(n_k / |n_k|)`` (the irradiance with ``W = A U``)."""
-    nc, C = W.shape
-    d = int(round(math.sqrt(nc))) - 1
-    Q, R, Cm, Sm = _sh_scratch(d)
-    Y = np.empty(nc)
-    for f in range(N.shape[0]):
-        x, y, z = _unit(N, f)
-        _sh_parts(x, y, z, d, R, Q, Cm, Sm)
-        _sh_values(d, Kf, Q, Cm, Sm, Y)
-        if C == 3:                       # RGB: three independent accumulators
-            a0 = 0.0
-            a1 = 0.0
-            a2 = 0.0
-            for j in range(nc):
-                yj = Y[j]
-                a0 += yj * W[j, 0]
-                a1 += yj * W[j, 1]
-                a2 += yj * W[j, 2]
-            out[f, 0] = a0
-            out[f, 1] = a1
-            out[f, 2] = a2
-        else:
-            for c in range(C):
-                acc = 0.0
-                for j in range(nc):
-                    acc += Y[j] * W[j, c]
-                out[f, c] = acc
+_BLOCK = 64
 
 
-@njit(cache=True, nogil=True)
-def sh_lighting_vjp(N, Gc, Kf, out):  # pragma: no cover - compiled
-    """``out (nc, C)`` (zeroed beforehand) += ``sum_k Y_j(n_k) Gc_kc``."""
-    nc, C = out.shape
-    d = int(round(math.sqrt(nc))) - 1
-    Q, R, Cm, Sm = _sh_scratch(d)
-    Y = np.empty(nc)
-    for f in range(N.shape[0]):
-        x, y, z = _unit(N, f)
-        _sh_parts(x, y, z, d, R, Q, Cm, Sm)
-        _sh_values(d, Kf, Q, Cm, Sm, Y)
-        for j in range(nc):
-            for c in range(C):
-                out[j, c] += Y[j] * Gc[f, c]
+@njit(cache=True, nogil=True, inline="always")
+def _sh_block(N, s, nb, d, R, x, y, z, Cm, Sm, Q):  # pragma: no cover - compiled
+    """``(x + i y)^m = Cm + i Sm`` and ``Q[l, m] = d^m P_l/dz^m (z)`` (m <= l) for the faces
+    ``s .. s + nb - 1``, face index last: unit normals
+    ``x, y, z (B,)``, ``Cm, Sm (d + 1, B)``, ``Q (d + 2, d + 2, B)`` (``Q[l, l + 1] = 0``)."""
+    for t in range(nb):
+        x[t], y[t], z[t] = _unit(N, s + t)
+        Cm[0, t] = 1.0
+        Sm[0, t] = 0.0
+    for m in range(1, d + 1):
+        for t in range(nb):
+            Cm[m, t] = Cm[m - 1, t] * x[t] - Sm[m - 1, t] * y[t]
+            Sm[m, t] = Cm[m - 1, t] * y[t] + Sm[m - 1, t] * x[t]
+    for m in range(d + 1):
+        r = R[m, m, 0]
+        for t in range(nb):
+            Q[m, m, t] = r
+        if m + 1 <= d:
+            r = R[m + 1, m, 0]
+            for t in range(nb):
+                Q[m + 1, m, t] = r * z[t]
+        for l in range(m + 2, d + 1):
+            ra = R[l, m, 0]
+            rb = R[l, m, 1]
+            for t in range(nb):
+                Q[l, m, t] = ra * z[t] * Q[l - 1, m, t] - rb * Q[l - 2, m, t]
 
 
 @njit(cache=True, nogil=True)
 def sh_normal_vjp(N, Gc, W, Kf, out):  # pragma: no cover - compiled
     """``out (k, 3) = P_n sum_j w_kj grad Y_j(n_k)`` with ``w_kj = sum_c Gc_kc W_jc`` and ``P_n``
-    the projection onto the tangent plane of the unit normal (the gradient of ``Y(n/|n|)``)."""
+    the projection onto the tangent plane of the unit normal (the gradient of ``Y(n/|n|)``):
+    ``dY/dx = Kf Q_l^m m {Re, Im}((x + i y)^(m-1))``, ``dY/dy = Kf Q_l^m m {-Im, Re}(...)``
+    (``d/dx (x + i y)^m = m (x + i y)^(m-1)``, ``d/dy = i m (x + i y)^(m-1)``),
+    ``dY/dz = Kf Q_l^(m+1) {Re, Im}((x + i y)^m)``. Blocks of faces, face index innermost."""
     nc, C = W.shape
+    k = N.shape[0]
     d = int(round(math.sqrt(nc))) - 1
-    Q, R, Cm, Sm = _sh_scratch(d)
-    w = np.empty(nc)
-    for f in range(N.shape[0]):
-        x, y, z = _unit(N, f)
-        _sh_parts(x, y, z, d, R, Q, Cm, Sm)
-        if C == 3:
-            g0 = Gc[f, 0]
-            g1 = Gc[f, 1]
-            g2 = Gc[f, 2]
-            for j in range(nc):
-                w[j] = g0 * W[j, 0] + g1 * W[j, 1] + g2 * W[j, 2]
-        else:
-            for j in range(nc):
-                acc = 0.0
-                for c in range(C):
-                    acc += Gc[f, c] * W[j, c]
-                w[j] = acc
-        gx = 0.0
-        gy = 0.0
-        gz = 0.0
+    R = _sh_scratch(d)
+    B = _BLOCK
+    x = np.empty(B)
+    y = np.empty(B)
+    z = np.empty(B)
+    Cm = np.empty((d + 1, B))
+    Sm = np.empty((d + 1, B))
+    Q = np.zeros((d + 2, d + 2, B))
+    w = np.empty((nc, B))
+    gx = np.empty(B)
+    gy = np.empty(B)
+    gz = np.empty(B)
+    for s in range(0, k, B):
+        nb = min(k, s + B) - s
+        _sh_block(N, s, nb, d, R, x, y, z, Cm, Sm, Q)
+        for j in range(nc):
+            wj = w[j]
+            if C == 3:
+                w0 = W[j, 0]
+                w1 = W[j, 1]
+                w2 = W[j, 2]
+                for t in range(nb):
+                    wj[t] = Gc[s + t, 0] * w0 + Gc[s + t, 1] * w1 + Gc[s + t, 2] * w2
+            else:
+                for t in range(nb):
+                    acc = 0.0
+                    for c in range(C):
+                        acc += Gc[s + t, c] * W[j, c]
+                    wj[t] = acc
+        for t in range(nb):
+            gx[t] = 0.0
+            gy[t] = 0.0
+            gz[t] = 0.0
         for l in range(d + 1):
             base = l * l + l
-            gz += w[base] * Kf[base] * Q[l, 1]
+            kb = Kf[base]
+            for t in range(nb):
+                gz[t] += w[base, t] * kb * Q[l, 1, t]
             for m in range(1, l + 1):
-                kc = w[base + m] * Kf[base + m]
-                ks = w[base - m] * Kf[base - m]
-                q = Q[l, m] * m
-                # d/dx (x + i y)^m = m (x + i y)^(m-1), d/dy = i m (x + i y)^(m-1)
-                gx += q * (kc * Cm[m - 1] + ks * Sm[m - 1])
-                gy += q * (-kc * Sm[m - 1] + ks * Cm[m - 1])
-                gz += Q[l, m + 1] * (kc * Cm[m] + ks * Sm[m])
-        r = gx * x + gy * y + gz * z
-        out[f, 0] = gx - r * x
-        out[f, 1] = gy - r * y
-        out[f, 2] = gz - r * z
-
-
-_BLOCK = 64
+                kp = Kf[base + m]
+                kn = Kf[base - m]
+                for t in range(nb):
+                    kc = w[base + m, t] * kp
+                    ks = w[base - m, t] * kn
+                    q = Q[l, m, t] * m
+                    gx[t] += q * (kc * Cm[m - 1, t] + ks * Sm[m - 1, t])
+                    gy[t] += q * (-kc * Sm[m - 1, t] + ks * Cm[m - 1, t])
+                    gz[t] += Q[l, m + 1, t] * (kc * Cm[m, t] + ks * Sm[m, t])
+        for t in range(nb):
+            r = gx[t] * x[t] + gy[t] * y[t] + gz[t] * z[t]
+            out[s + t, 0] = gx[t] - r * x[t]
+            out[s + t, 1] = gy[t] - r * y[t]
+            out[s + t, 2] = gz[t] - r * z[t]
 
 
 @njit(cache=True, nogil=True)
@@ -554,42 +529,22 @@ def sh_values_t(N, Kf, W, Yt, irr):  # pragma: no cover - compiled
     """``Yt (nc, k)``: the basis at the unit normals ``n_k / |n_k|``, transposed (coefficient
     rows), and ``irr (k, C) = sum_j Y_j W_jc`` (the irradiance with ``W = A U``) while the block
     is in cache. Blocks of faces, the face index innermost (SIMD-friendly loops); the same
-    operations in the same order as :func:`_sh_parts`, :func:`_sh_values` and :func:`sh_shade`."""
+    operations for every block size (the block only changes the loop order)."""
     nc, k = Yt.shape
     C = W.shape[1]
     acc = np.empty((C, _BLOCK))
     d = int(round(math.sqrt(nc))) - 1
-    _, R, _, _ = _sh_scratch(d)
+    R = _sh_scratch(d)
     B = _BLOCK
     x = np.empty(B)
     y = np.empty(B)
     z = np.empty(B)
     Cm = np.empty((d + 1, B))
     Sm = np.empty((d + 1, B))
-    Q = np.empty((d + 1, d + 1, B))
+    Q = np.zeros((d + 2, d + 2, B))
     for s in range(0, k, B):
         nb = min(k, s + B) - s
-        for t in range(nb):
-            x[t], y[t], z[t] = _unit(N, s + t)
-            Cm[0, t] = 1.0
-            Sm[0, t] = 0.0
-        for m in range(1, d + 1):
-            for t in range(nb):
-                Cm[m, t] = Cm[m - 1, t] * x[t] - Sm[m - 1, t] * y[t]
-                Sm[m, t] = Cm[m - 1, t] * y[t] + Sm[m - 1, t] * x[t]
-        for m in range(d + 1):
-            r = R[m, m, 0]
-            for t in range(nb):
-                Q[m, m, t] = r
-            if m + 1 <= d:
-                r = R[m + 1, m, 0]
-                for t in range(nb):
-                    Q[m + 1, m, t] = r * z[t]
-            for l in range(m + 2, d + 1):
-                ra = R[l, m, 0]
-                rb = R[l, m, 1]
-                for t in range(nb):
-                    Q[l, m, t] = ra * z[t] * Q[l - 1, m, t] - rb * Q[l - 2, m, t]
+        _sh_block(N, s, nb, d, R, x, y, z, Cm, Sm, Q)
         for l in range(d + 1):
             base = l * l + l
             kf = Kf[base]

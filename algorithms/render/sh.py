@@ -47,8 +47,11 @@ face, ``Y_l^m = K_l^m sqrt(2) Q_l^|m|(n_z) {Re, Im}((n_x + i n_y)^|m|)`` with
 ``Q_l^m = d^m P_l / dz^m`` by the associated-Legendre recurrence
 ``(l - m) Q_l^m = (2l - 1) z Q_{l-1}^m - (l + m - 1) Q_{l-2}^m``, ``Q_m^m = (2m - 1)!!``
 (the same polynomials as the tables above, a few flops per coefficient), and ``dQ_l^m/dz =
-Q_l^{m+1}``, so ``dY/dn`` comes from the same table. The colours, ``dE/dU`` and ``dE/dn`` are
-accumulated face by face without forming the ``(k, 49)`` basis or the ``(k, 49, 3)`` gradient.
+Q_l^{m+1}``, so ``dY/dn`` comes from the same table; ``dE/dn`` is accumulated without forming
+the ``(k, 49, 3)`` gradient.
+The compiled kernels work on blocks of 64 faces with the face index innermost (vectorizable
+loops); the rendering keeps the basis (``(49, k)``, transposed) and the irradiance of the seen
+faces (:class:`SHState`), so Eq. 3.28 is one matrix product and Eq. 3.29 one multiplication.
 Same numbers as the NumPy path to rounding (tested to 1e-12).
 
 Published environments
@@ -429,13 +432,7 @@ class SHShading:
 
     def irradiance(self, normals) -> np.ndarray:
         """``F(n) = sum_j U_j A_j Y_j(n)`` (k, C), Eq. 3.25 without the albedo."""
-        kern = compiled_kernels()
-        if kern is not None:
-            N = _as_normals(normals)
-            out = np.empty((len(N), self.channels))
-            kern.sh_shade(N, np.ascontiguousarray(self.weighted), _kf(self.degree), out)
-            return out
-        return sh_basis(normals, self.degree) @ self.weighted
+        return self._basis_and_irradiance(normals)[1]
 
     def face_colors(self, normals, camera: Camera | None = None, albedo=None) -> np.ndarray:
         col = self.irradiance(normals)
@@ -465,16 +462,9 @@ class SHShading:
         g = np.asarray(grad_colors, dtype=np.float64)
         if albedo is not None:
             g = g * albedo
-        if basis is not None:
-            return self._A[:, None] * (basis.T @ g)
-        kern = compiled_kernels()
-        if kern is not None:
-            N = _as_normals(normals)
-            out = np.zeros((len(self._A), self.channels))
-            kern.sh_lighting_vjp(N, np.ascontiguousarray(g).reshape(len(N), -1),
-                                 _kf(self.degree), out)
-            return self._A[:, None] * out
-        return self._A[:, None] * (sh_basis(normals, self.degree).T @ g)
+        if basis is None:
+            basis = self.basis(normals)
+        return self._A[:, None] * (basis.T @ g)
 
 
 def sh_render(V, F, camera: Camera, lighting, *, albedo=None, background: float = 0.0,
