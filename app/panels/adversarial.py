@@ -224,6 +224,7 @@ class AdversarialPanel(MethodPanel):
         self.preview_runner = JobRunner(self)
         self.preview_runner.finished.connect(self._on_preview_done)
         self.preview_runner.failed.connect(self._on_preview_failed)
+        self.preview_runner.cancelled.connect(lambda _m: self._restart_if_stale())
         self._preview_timer = QTimer(self)
         self._preview_timer.setSingleShot(True)
         self._preview_timer.setInterval(self.preview_debounce_ms)
@@ -711,10 +712,13 @@ class AdversarialPanel(MethodPanel):
 
     # -- the live classification ----------------------------------------------------------------
     def schedule_preview(self) -> None:
+        """Re-classify soon: at most one start per ``preview_debounce_ms`` while a slider moves
+        (a throttle, so a drag shows images as it goes), never cancelling one in progress."""
         self._preview_stale = True
         if self.window_.document.is_empty:
             return
-        self._preview_timer.start()
+        if not self._preview_timer.isActive():
+            self._preview_timer.start()
 
     def _attacking(self) -> bool:
         return self.window_.runner.busy and self._mine()
@@ -724,6 +728,8 @@ class AdversarialPanel(MethodPanel):
         state = self.window_.document.state
         if state is None or not self.is_shown() or self._attacking():
             return  # done when the panel comes to the front / the attack ends
+        if self.preview_runner.busy:
+            return  # the running one restarts this when it ends (still stale)
         self._preview_stale = False
         sc = self._scene(state, self.form.params())
         ref = self.classifier
@@ -764,7 +770,14 @@ class AdversarialPanel(MethodPanel):
             self.true_edit.setStyleSheet("")
         self.image_note.setText(f"{step.covered * 100:.0f} % of the image is the shape.")
         self.preview_count += 1
-        self.classified.emit()
+        if self._preview_stale:     # something changed meanwhile: shown, and computed again
+            self._restart_if_stale()
+        else:
+            self.classified.emit()
+
+    def _restart_if_stale(self) -> None:
+        if self._preview_stale and not self._attacking():
+            QTimer.singleShot(0, self.schedule_preview)
 
     def _on_preview_failed(self, message: str, _details: str) -> None:
         self.preview_error = message
@@ -775,7 +788,10 @@ class AdversarialPanel(MethodPanel):
         self.top5_view.set_entries([])
         self.image_note.setText("")
         self.status_label.setText(message)
-        self.classified.emit()
+        if self._preview_stale:
+            self._restart_if_stale()
+        else:
+            self.classified.emit()
 
     def show_classification(self, image, entries) -> None:
         self.shown_image = np.asarray(image)
