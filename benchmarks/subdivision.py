@@ -195,6 +195,13 @@ def main() -> int:
           f"{(data_200 + d.epochs * epoch) / 60:.1f} min if it runs all epochs; early stopping "
           f"(patience {d.patience}, {100 * d.min_improvement:g} %) ends it sooner: "
           f"{epoch * 100 / 60:.1f} min per 100 epochs")
+    # the same from this process's CPU time (what a core of its own would take; the wall
+    # times above include waiting for the CPU on a shared machine)
+    cpu_epoch = 200 * cpu_ep / k
+    cpu_data = 200 * cpu / k / 2  # two processes, each its own core
+    print(f"  CPU-time view: {cpu_epoch:.1f} s per epoch at 200 coarse meshes; data "
+          f"{cpu_data / 60:.1f} min with 2 busy cores; 700 epochs {700 * cpu_epoch / 60:.0f} min; "
+          f"{cpu_epoch * 100 / 60:.1f} min per 100 epochs")
     print(f"end: {_load()}", flush=True)
     if args.full:
         return full(shape, args)
