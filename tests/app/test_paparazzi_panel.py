@@ -167,3 +167,26 @@ def test_non_manifold_mesh_offers_clean_or_is_refused(window, dialogs, qtbot):
     assert "2-manifold" in title and "Clean" in text and "Clean, then run" in choices
     assert not window.runner.busy and "Not run" in panel.status_label.text()
     np.testing.assert_array_equal(window.document.F, F2)
+
+
+def test_another_panels_run_replacing_a_remeshed_preview_shows_the_document(window, dialogs,
+                                                                           qtbot):
+    panel = open_panel(window, "spot_lowres.obj")
+    doc = window.document
+    V0, F0 = np.array(doc.V), np.array(doc.F)
+    short_run(panel, iterations=5000)
+    remeshed = []
+    window.runner.preview.connect(
+        lambda s: remeshed.append(getattr(s, "F", None) is not None and len(s.V) != len(V0)))
+    panel.run_button.click()
+    qtbot.waitUntil(lambda: any(remeshed), timeout=60000)
+    assert window.viewport.poly.n_points != len(V0)  # the view shows the remeshed preview
+    smooth = window.panels["Smooth"]  # a positions job replaces it (the runner cancels ours)
+    smooth.form.set_value("iterations", 1)
+    with qtbot.waitSignal(window.job_committed, timeout=60000):
+        smooth.run_button.click()
+    np.testing.assert_array_equal(doc.F, F0)
+    assert window.viewport.poly.n_points == len(V0) == len(doc.V)
+    np.testing.assert_array_equal(window.viewport.points, doc.V)
+    assert window.undo_stack.count() == 1 and window.undo_stack.undoText() == "Smooth"
+    assert not dialogs.errors
