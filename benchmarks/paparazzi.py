@@ -2,7 +2,7 @@
 autograd through the same rasterization, and a whole guided-filter run with its time split.
 
     python benchmarks/paparazzi.py [--mesh fandisk.off] [--iterations 3000] [--skip-run]
-                                   [--learning-rate 0]
+                                   [--learning-rate 0] [--remesh-threshold 0.05]
 
 Prints sizes, medians and ratios measured in this run. The mesh is Loop-subdivided once
 (fandisk: 7,229 -> 28,910 vertices, the thesis's "26K" row).
@@ -67,6 +67,8 @@ def main() -> int:
     ap.add_argument("--skip-run", action="store_true")
     ap.add_argument("--learning-rate", type=float, default=0.0,
                     help="whole run's NAdam step (0 = the guided filter's default, as the CLI)")
+    ap.add_argument("--remesh-threshold", type=float, default=0.05,
+                    help="whole run's remesh_threshold (0 = remesh at every check, the thesis)")
     a = ap.parse_args()
     import torch
 
@@ -163,7 +165,7 @@ def main() -> int:
     t = time.perf_counter()
     run = Paparazzi(V, F, "guided", None, PaparazziParams(
         iterations=a.iterations, resolution=128, monitor_every=100,
-        learning_rate=a.learning_rate))
+        learning_rate=a.learning_rate, remesh_threshold=a.remesh_threshold))
     setup = time.perf_counter() - t
     last = None
     for last in run.steps():
