@@ -220,6 +220,7 @@ class AdversarialPanel(MethodPanel):
         self._attack_out: dict = {}
         self._attack_mode = "lighting"
         self._attack_lighting_before: np.ndarray | None = None
+        self._revert_to: tuple | None = None   # (lighting, environment) before the last attack
         self._preview_stale = True
         self.preview_runner = JobRunner(self)
         self.preview_runner.finished.connect(self._on_preview_done)
@@ -565,8 +566,9 @@ class AdversarialPanel(MethodPanel):
             self.load_lighting(path)
 
     def revert_lighting(self) -> None:
-        if self._attack_lighting_before is not None:
-            self.set_lighting(self._attack_lighting_before, self._attack_env_before)
+        if self._revert_to is not None:
+            self.set_lighting(*self._revert_to)
+            self._revert_to = None
             self.revert_button.setEnabled(False)
             self.status_label.setText("The lighting is back to how it was before the attack.")
 
@@ -921,6 +923,7 @@ class AdversarialPanel(MethodPanel):
             return
         self.last_result = res
         if self._attack_mode == "lighting":
+            self._revert_to = (self._attack_lighting_before, self._attack_env_before)
             self.lighting = np.array(res.lighting, dtype=np.float64)
             self.env_combo.setCurrentText(CUSTOM)
             self._sync_sliders()
