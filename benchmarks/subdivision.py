@@ -225,9 +225,15 @@ def full(shape, args) -> int:
     t1 = time.perf_counter()
     tr = Trainer(samples, TrainParams())
     t_prep = time.perf_counter() - t1
-    for step in tr.steps():
-        if step.iteration % 10 == 0 or step.iteration == 1:
-            print(f"  {step.message} ({step.metrics['seconds']:.1f} s) [{_load()}]", flush=True)
+    gen = tr.steps()
+    try:
+        for step in gen:
+            if step.iteration % 10 == 0 or step.iteration == 1:
+                print(f"  {step.message} ({step.metrics['seconds']:.1f} s) [{_load()}]",
+                      flush=True)
+    except KeyboardInterrupt:  # Ctrl-C: report (and save) what was trained so far
+        gen.close()
+        print("  interrupted: the best weights so far are kept", flush=True)
     t_train = time.perf_counter() - t1
     hs = tr.history
     tot = {k: sum(x[k] for x in hs) for k in ("seconds_forward", "seconds_backward",
