@@ -289,17 +289,24 @@ class PaparazziPanel(MethodPanel):
             self.filter_form_holder.addWidget(none)
 
     def _show_filter_defaults(self) -> None:
-        """Resolution, σ and view width at 0 mean "the filter's own": say which value that is."""
+        """Settings left at 0 mean "the filter's own" (resolution, σ, view width and, where
+        the filter has one, learning rate): say which value that is."""
         try:
             spec = get_filter(self.filter_name())
         except Stylize3DError:
             return
-        for name, value in (("resolution", spec.resolution), ("sigma", spec.sigma),
-                            ("view_width", spec.width)):
+        for name, attr in (("resolution", "resolution"), ("sigma", "sigma"),
+                           ("view_width", "width"), ("learning_rate", "learning_rate")):
             editor = self.form.editors.get(name)
-            if editor is not None:  # "auto" as elsewhere in the app (cubic, spectral)
-                editor.spin.setSpecialValueText(f"auto ({value:g})")
-                editor.spin.update()
+            value = getattr(spec, attr, None)
+            if editor is None or value is None or editor.spin.minimum() != 0:
+                continue
+            # "auto" as elsewhere in the app (cubic, spectral)
+            text = f"auto ({value:g})"
+            editor.spin.setSpecialValueText(text)
+            wide = editor.spin.fontMetrics().horizontalAdvance(text + "  ") + 34  # + arrows
+            editor.spin.setMinimumWidth(max(editor.spin.minimumWidth(), wide))
+            editor.spin.update()
 
     # -- files (target image, target mesh) -------------------------------------------------------
     def _choose_file(self, field: str) -> None:
