@@ -114,9 +114,11 @@ def test_lighting_attack_streams_then_stop_restores(window, qtbot, mug_path, tmp
     np.testing.assert_array_equal(np.array(doc["coefficients"]), panel.lighting)
     reclassified(panel, qtbot, panel.revert_lighting)
     np.testing.assert_array_equal(panel.lighting, U0)
+    assert not panel.revert_button.isEnabled()
     reclassified(panel, qtbot, lambda: panel.load_lighting(str(out)))
     np.testing.assert_array_equal(panel.lighting, np.array(doc["coefficients"]))
-    reclassified(panel, qtbot, panel.revert_lighting)
+    reclassified(panel, qtbot, lambda: panel.set_environment("Grace Cathedral"))
+    np.testing.assert_array_equal(panel.lighting, U0)
 
     # a long targeted attack, stopped after the first streamed image: all as it was
     panel.form.set_value("iterations", 30)
