@@ -167,9 +167,11 @@ def test_bad_inputs_give_plain_messages(window, qtbot, mug_path, tmp_path):
     assert "spherical-harmonics coefficient" in panel.sh_sliders[4][2].toolTip()
     assert "Top-5" in panel.top5_view.toolTip()
     # a weights file that is not a model: refused unexecuted, the classifier stays
-    class Boom:
+    marker = tmp_path / "executed"
+
+    class Boom:  # unpickling it would create the marker file
         def __reduce__(self):
-            return (print, ("executed!",))
+            return (open, (str(marker), "w"))
 
     bad = tmp_path / "evil.pt"
     torch.save({"x": Boom()}, bad)
@@ -180,6 +182,7 @@ def test_bad_inputs_give_plain_messages(window, qtbot, mug_path, tmp_path):
         msg = panel.status_label.text()
         assert "not a model file" in msg and "not changed" in msg and "Traceback" not in msg
         assert panel.classifier is None and "default" in panel.classifier_label.text()
+    assert not marker.exists()
     # an unknown label: close names suggested, no job
     panel.target_edit.setText("cofee mug")
     assert not panel.attack("lighting")
