@@ -53,6 +53,34 @@ def test_guided_filter_matches_an_independent_implementation_away_from_the_borde
     assert np.abs(np.diff(q, axis=0)).mean() < 0.7 * np.abs(np.diff(I, axis=0)).mean()
 
 
+def test_compiled_guided_filter_matches_the_numpy_one():
+    from algorithms.mesh import icosphere
+    from algorithms.paparazzi import Paparazzi, PaparazziParams
+    from algorithms.paparazzi import filters as flt
+    from algorithms.render import render
+
+    if flt._KERNELS.get() is None:
+        pytest.skip("Numba is not available or switched off")
+    V, F = icosphere(3)
+    run = Paparazzi(V * [1.0, 0.7, 0.5], F, "guided", None, PaparazziParams(iterations=1))
+    rng = np.random.default_rng(3)
+    images = [render(run.V0, run.F0, run.camera(rng), run.shading).image for _ in range(2)]
+    images.append(rng.random((50, 50, 3)))
+    for img in images:
+        for r, eps, sub in ((15, 1e-8, 4), (4, 0.02, 1), (3, 0.05, 3)):
+            fast = flt.guided_filter(img, img, r, eps, sub)
+            previous = flt._KERNELS.set(False)
+            try:
+                ref = flt.guided_filter(img, img, r, eps, sub)
+            finally:
+                flt._KERNELS.set(previous)
+            assert fast.shape == ref.shape
+            # LU of nearly singular 3x3 windows (eps 1e-8): equal to ~1e-10
+            np.testing.assert_allclose(fast, ref, atol=1e-9)
+            if eps >= 0.02:                              # (1e-8 keeps a noisy image as it is)
+                assert np.abs(fast - img).max() > 1e-3   # and it did filter
+
+
 def test_l0_smoothing_flattens_noise_and_keeps_a_step_edge():
     rng = np.random.default_rng(1)
     clean = np.zeros((64, 64, 3))
