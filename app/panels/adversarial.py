@@ -97,6 +97,16 @@ def _read_face_colors(key, F):
     return C[np.asarray(F)].mean(axis=1) if kind == "vertex" else C
 
 
+def _exact_moves(steps, V, scene):
+    """The geometry attack's steps with ``V + (moved - unmoved)`` as positions: a vertex the
+    attack did not move keeps its coordinates bit for bit (the unit-box round trip
+    ``(V - c) / s * s + c`` alone changes the last bits of about 40 % of them)."""
+    base = scene.to_original(scene.V)
+    for step in steps:
+        step.V = V + (step.V - base)
+        yield step
+
+
 def image_to_pixmap(img: np.ndarray, size: int | None = None) -> QPixmap:
     """A QPixmap of an ``(H, W, 3)`` image with values in [0, 1] (scaled to ``size`` pixels)."""
     a = np.ascontiguousarray((np.clip(np.asarray(img, np.float64), 0, 1) * 255 + 0.5)
@@ -874,8 +884,9 @@ class AdversarialPanel(MethodPanel):
             scene = prepare_scene(sc.V, sc.F, albedo=sc.albedo, lighting=sc.lighting)
             cams = orbit_cameras(sc.azimuths, elevation=sc.elevation, width=sc.width,
                                  resolution=sc.resolution * sc.supersample)
-            return attack_iter(scene, clf, cams, params, decrease=true, increase=target,
-                               _out=out)
+            steps = attack_iter(scene, clf, cams, params, decrease=true, increase=target,
+                                _out=out)
+            return steps if mode == "lighting" else _exact_moves(steps, sc.V, scene)
 
         self.plot.clear()
         what = "lighting" if mode == "lighting" else "shape"
