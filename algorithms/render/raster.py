@@ -61,14 +61,18 @@ class Raster:
         self.depth = depth
         self._bary = bary
         self.camera = camera
-        self._lazy = _lazy_bary          # (kernel module, P, F) while bary is not computed
+        self._lazy = _lazy_bary          # (P, F) while bary is not computed
 
     @property
     def bary(self) -> np.ndarray:
         if self._bary is None:
-            kern, P, F = self._lazy
-            b = np.empty(self.face_id.shape + (3,))
-            kern.barycentrics(P, F, self.face_id, self.camera.perspective, b)
+            P, F = self._lazy
+            kern = compiled_kernels()
+            if kern is not None:
+                b = np.empty(self.face_id.shape + (3,))
+                kern.barycentrics(P, F, self.face_id, self.camera.perspective, b)
+            else:
+                b = _barycentrics_numpy(P, F, self.face_id, self.camera.perspective)
             self._bary, self._lazy = b, None
         return self._bary
 
@@ -111,7 +115,7 @@ def rasterize(V, F, camera: Camera, *, backend: str = "auto") -> Raster:
                      camera.projection_scale, res, P)
         kern.rasterize(P, F, res, camera.perspective, camera.near, face_id, depth,
                        np.empty((0, 0, 3)))
-        return Raster(face_id, depth, None, camera, _lazy_bary=(kern, P, F))
+        return Raster(face_id, depth, None, camera, _lazy_bary=(P, F))
     else:
         face_id = np.full((res, res), -1, dtype=np.int64)
         depth = np.full((res, res), np.inf)
@@ -119,6 +123,27 @@ def rasterize(V, F, camera: Camera, *, backend: str = "auto") -> Raster:
         P = camera.to_pixels(V)
         _rasterize_numpy(P, F, res, camera.perspective, camera.near, face_id, depth, bary)
     return Raster(face_id, depth, bary, camera)
+
+
+def _barycentrics_numpy(P, F, face_id, perspective) -> np.ndarray:
+    """``(H, W, 3)`` barycentrics of the faces ``face_id`` seen, by the z-test's formulas."""
+    bary = np.zeros(face_id.shape + (3,))
+    seen = face_id >= 0
+    if not seen.any():
+        return bary
+    py, px = (a.astype(np.float64) for a in np.nonzero(seen))
+    X = P[F[face_id[seen]]]
+    xs, ys = X[..., 0], X[..., 1]
+    inv = 1.0 / ((xs[:, 1] - xs[:, 0]) * (ys[:, 2] - ys[:, 0])
+                 - (xs[:, 2] - xs[:, 0]) * (ys[:, 1] - ys[:, 0]))
+    w0 = ((xs[:, 1] - px) * (ys[:, 2] - py) - (xs[:, 2] - px) * (ys[:, 1] - py)) * inv
+    w1 = ((xs[:, 2] - px) * (ys[:, 0] - py) - (xs[:, 0] - px) * (ys[:, 2] - py)) * inv
+    W = np.stack([w0, w1, 1.0 - w0 - w1], 1)
+    if perspective:
+        q = W / X[..., 2]
+        W = q * (1.0 / ((q[:, 0] + q[:, 1]) + q[:, 2]))[:, None]
+    bary[seen] = W
+    return bary
 
 
 def _rasterize_numpy(P, F, res, perspective, near, face_id, depth, bary) -> None:

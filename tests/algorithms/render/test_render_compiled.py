@@ -70,6 +70,12 @@ def test_lazy_and_eager_barycentrics_are_identical(name):
     np.testing.assert_array_equal(fid, r.face_id)
     np.testing.assert_array_equal(depth, r.depth)
     np.testing.assert_array_equal(bary, r.bary)
+    r2 = rasterize(V, F, cam, backend="compiled")
+    prev = set_compiled_kernels(False)           # read after switching off: the NumPy formulas
+    try:
+        np.testing.assert_allclose(r2.bary, bary, rtol=0, atol=1e-12)
+    finally:
+        set_compiled_kernels(prev)
     assert (fid >= 0).sum() > 300 and np.all(bary[fid < 0] == 0)
     np.testing.assert_allclose(bary[fid >= 0].sum(1), 1.0, atol=1e-12)
 
