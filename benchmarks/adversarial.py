@@ -56,8 +56,9 @@ def speed():
     import os
 
     print("== speed (1 thread) ==")
-    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; times: medians of wall "
-          f"time, and [in brackets] of this process's CPU time (not inflated by other processes)")
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; times: medians of "
+          f"wall time, and [in brackets] of this process's CPU time (not inflated by other "
+          f"processes)")
 
     def timed(fn, repeat=7):
         fn()

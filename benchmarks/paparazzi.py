@@ -92,8 +92,8 @@ def main() -> int:
     print(f"one thread; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; times are "
           "medians over the views of the wall time and [in brackets] of this process's CPU time; "
           "ratios are of medians measured in this run")
-    print("peer: the same raster (face ids from our rasterizer), then PyTorch autograd (float64, one "
-          "thread): face normals, (n.l + 1)/2 per pixel, backward of <G, image>")
+    print("peer: the same raster (face ids from our rasterizer), then PyTorch autograd (float64, "
+          "one thread): face normals, (n.l + 1)/2 per pixel, backward of <G, image>")
     from algorithms.render import rasterize
 
     for res in (128, 256):
@@ -153,9 +153,10 @@ def main() -> int:
         print(f"{res}^2 ({n_seen} faces seen, median): ours render+VJP {ms(t_ours)} (render "
               f"{ms(t_render)} of which rasterize {ms(t_raster)}; VJP {ms(t_vjp)}) "
               f"[target <= 10 ms]; max rel. difference to the peer {err:.1e}")
-        print(f"  peer, normals of all faces: VJP (torch forward + backward) {ms(t_peer)}, with the "
-              f"rasterization {ms(t_full)}; peer VJP / our VJP {ratio(t_peer, t_vjp)}; peer (raster "
-              f"+ torch shading + backward) / our render+VJP {ratio(t_full, t_ours)} [target >= 10x]")
+        print(f"  peer, normals of all faces: VJP (torch forward + backward) {ms(t_peer)}, with "
+              f"the rasterization {ms(t_full)}; peer VJP / our VJP {ratio(t_peer, t_vjp)}; peer "
+              f"(raster + torch shading + backward) / our render+VJP {ratio(t_full, t_ours)} "
+              f"[target >= 10x]")
         print(f"  peer, normals of the seen faces only: VJP {ms(t_peer_s)}, with the rasterization "
               f"{ms(t_full_s)}; peer VJP / our VJP {ratio(t_peer_s, t_vjp)}; peer (raster + torch "
               f"shading + backward) / our render+VJP {ratio(t_full_s, t_ours)}")

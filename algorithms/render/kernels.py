@@ -19,8 +19,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["project", "rasterize", "barycentrics", "seen_faces", "face_normals", "paint", "face_sums",
-           "normal_vjp", "sh_values_t", "sh_normal_vjp"]
+__all__ = ["project", "rasterize", "barycentrics", "seen_faces", "face_normals", "paint",
+           "face_sums", "normal_vjp", "sh_values_t", "sh_normal_vjp"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
