@@ -55,7 +55,8 @@ def per_call(repeat: int) -> None:
           f"(built-in / guided = {t128 / tgf:.2f})")
 
 
-def run(mesh: str, iterations: int, style: int, control: int, upsample: int = 0) -> None:
+def run(mesh: str, iterations: int, style: int, control: int, upsample: int = 0,
+        **overrides) -> None:
     from algorithms.mesh import read_mesh
     from algorithms.mesh.topology import euler_characteristic, is_manifold
     from algorithms.paparazzi import Paparazzi, PaparazziParams, count_self_intersections
@@ -67,7 +68,8 @@ def run(mesh: str, iterations: int, style: int, control: int, upsample: int = 0)
         print(f"{mesh} not found; skipping the run")
         return
     data = read_mesh(path)
-    params = PaparazziParams(iterations=iterations, upsample_vertices=upsample)
+    params = PaparazziParams(iterations=iterations, upsample_vertices=upsample,
+                             **{k: v for k, v in overrides.items() if v is not None})
     fp = NeuralStyleParams(style=style)
     other = NeuralStyleParams(style=control)
     t0 = time.perf_counter()
@@ -87,7 +89,8 @@ def run(mesh: str, iterations: int, style: int, control: int, upsample: int = 0)
     first = losses(R0)
     print(f"{path.name}: {len(data.V)} vertices ({len(pz.V0)} optimized), {len(data.F)} faces; "
           f"{iterations} iterations, "
-          f"{pz.resolution} px, view width {pz.width}, sigma {pz.sigma}, style {style} "
+          f"{pz.resolution} px, view width {pz.width}, sigma {pz.sigma}, learning rate "
+          f"{params.learning_rate:g}, style {style} "
           f"(control style {control}); setup {time.perf_counter() - t0:.1f} s")
     print(f"  it     0: Gram(R, f(R)) {first[0]:9.2f}  Gram(R, f(R0)) {first[1]:9.2f}  "
           f"Gram(R, style {control}) {first[2]:9.2f}")
@@ -119,12 +122,17 @@ def main() -> None:
     ap.add_argument("--control-style", type=int, default=7)
     ap.add_argument("--upsample-vertices", type=int, default=0,
                     help="Loop-subdivide to at least this many vertices (the CLI's default: 0)")
+    ap.add_argument("--view-width", type=float, default=None, help="default: the filter's (0.1)")
+    ap.add_argument("--sigma", type=float, default=None, help="default: the filter's (0.02)")
+    ap.add_argument("--learning-rate", type=float, default=None, help="default: the CLI's (2e-4)")
     ap.add_argument("--repeat", type=int, default=15)
     ap.add_argument("--skip-run", action="store_true")
     a = ap.parse_args()
-    per_call(a.repeat)
+    if a.repeat > 0:
+        per_call(a.repeat)
     if not a.skip_run:
-        run(a.mesh, a.iterations, a.style, a.control_style, a.upsample_vertices)
+        run(a.mesh, a.iterations, a.style, a.control_style, a.upsample_vertices,
+            view_width=a.view_width, sigma=a.sigma, learning_rate=a.learning_rate)
 
 
 if __name__ == "__main__":
