@@ -79,7 +79,7 @@ def main() -> int:
 
     print(f"{'mesh':<16}{'filter':<13}{'V in':>7}{'V out':>7}{'sec':>8}  {'measure':<10}"
           f"{'before':>10} -> {'after':<10}{'ok':<4}{'manifold':<9}{'topology':<9}"
-          f"{'crossings':>9}", flush=True)
+          f"{'crossings in->out':>18}", flush=True)
     for mesh in a.meshes:
         p = mesh_path(mesh)
         if not p.exists():
@@ -108,10 +108,11 @@ def main() -> int:
             ok = (after - before) * sign > 0
             same = (euler_characteristic(Fo), len(boundary_loops(Fo))) == topo
             crossings = count_self_intersections(Vo, Fo)
+            crossings_in = run.input_intersections
             print(f"{mesh:<16}{name:<13}{len(V):>7}{len(Vo):>7}{sec:>8.1f}  {label:<10}"
                   f"{before:>10.4g} -> {after:<10.4g}{'yes' if ok else 'NO':<4}"
                   f"{'yes' if is_manifold(Fo) else 'NO':<9}{'same' if same else 'CHANGED':<9}"
-                  f"{crossings:>9}   (remeshes {int(last.metrics['remeshes'])}, rollbacks "
+                  f"{crossings_in:>12} -> {crossings:<3}  (remeshes {int(last.metrics['remeshes'])}, rollbacks "
                   f"{int(last.metrics['rollbacks'])})", flush=True)
     return 0
 

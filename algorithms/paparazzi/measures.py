@@ -4,9 +4,11 @@
   the 20 icosahedron face normals (quantization).
 * :func:`planar_area_fraction` -- area fraction of faces whose dihedral angles with all their
   edge neighbours are below ``degrees`` (L0, SLIC: piecewise-planar shapes).
-* :func:`bending_energy` -- ``sum_i |(L V)_i|^2 / M_ii`` (squared mean-curvature normal, cotangent
-  Laplacian and barycentric mass of :mod:`algorithms.mesh.operators`; a discrete Willmore energy,
-  invariant to scale; guided-filter smoothing lowers it).
+* :func:`bending_energy` -- ``sum_i |(L V)_i|^2 / M_ii`` over the interior vertices (squared
+  mean-curvature normal, cotangent Laplacian and barycentric mass of
+  :mod:`algorithms.mesh.operators`; a discrete Willmore energy, invariant to scale; guided-filter
+  smoothing lowers it). Boundary vertices are left out: there ``(L V)_i`` is not a curvature of
+  the surface but mostly the turning of the boundary curve, which Paparazzi keeps fixed.
 """
 
 from __future__ import annotations
@@ -46,4 +48,10 @@ def bending_energy(V, F) -> float:
     L = cotangent_laplacian_psd(V, F)
     M = mass_matrix(V, F).diagonal()
     LV = L @ V
-    return float(((LV ** 2).sum(1) / np.maximum(M, 1e-300)).sum())
+    e = (LV ** 2).sum(1) / np.maximum(M, 1e-300)
+    from ..mesh.topology import boundary_edges
+
+    b = boundary_edges(F)
+    if len(b):
+        e[np.unique(b.ravel())] = 0.0
+    return float(e.sum())

@@ -17,21 +17,25 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   ε = 1e-8, step ``lr (β1 m̂ + (1-β1) g / (1-β1^t)) / (sqrt(v̂) + ε)``; the learning rate is
   divided by 5 at 90 % of the iterations (the authors' schedule).
 * Mesh quality without El Topo: every ``remesh_every`` iterations (default 30, the thesis's) the
-  mesh is checked. If more than ``remesh_threshold`` (default 5 %) of its edges lie outside
-  Botsch and Kobbelt's band ``[4/5 h, 4/3 h]`` (``h`` = the input's mean edge length; an edge
-  outside it is one remeshing would split or collapse), it is remeshed isotropically
-  (``gpytoolbox.remesh_botsch``'s C++ core, ``remesh_iterations`` passes (default 1), target
-  ``h``, boundary vertices fixed as features, reprojection on) and the remeshed mesh is accepted only if it is still a 2-manifold
+  mesh is remeshed isotropically (``gpytoolbox.remesh_botsch``'s C++ core, ``remesh_iterations``
+  passes (default 1), target ``h`` = the input's mean edge length, boundary vertices fixed as
+  features, reprojection on) and the remeshed mesh is accepted only if it is still a 2-manifold
   with the input's Euler characteristic and boundary-loop count and no new self-intersections
-  (``igl.predicates.find_self_intersections``, exact predicates). Otherwise (not remeshed, or the
-  remeshed mesh rejected) the current mesh is checked for self-intersections; if the steps since
-  the last check created any, the mesh is rolled back to the last checked state and the learning
-  rate is halved (step shrinking). ``remesh_threshold = 0`` remeshes at every check (the thesis).
-  Why the threshold: a mesh whose edges all lie in the band has no angle below about 33 degrees,
-  so remeshing it again changes nothing that matters while it costs a second on 29k vertices;
-  measured on fandisk (28,910 V, guided filter), 2-3 % of the edges lie outside the band right
-  after a remeshing pass and stay there for hundreds of iterations, so the threshold turns most
-  of the thesis's 100 remeshings of a 3000-iteration run into one self-intersection check each.
+  (``igl.predicates.find_self_intersections``, exact predicates). Otherwise (remeshed mesh
+  rejected, or not remeshed, see below) the current mesh is checked for self-intersections; if the
+  steps since the last check created any, the mesh is rolled back to the last checked state and
+  the learning rate is halved (step shrinking). So a cycle costs one remeshing pass and one
+  self-intersection check (about 0.4 s + 0.3 s on 29k vertices on an idle core); the core is
+  called directly because ``remesh_botsch``'s Python wrapper spent another 0.85 s re-deriving
+  boundary vertices and re-checking manifoldness, which the loop keeps as invariants.
+  ``remesh_threshold`` > 0 skips the remeshing (not the check) while no more than that share of
+  the edges lies outside Botsch and Kobbelt's band ``[4/5 h, 4/3 h]`` (the edges a pass would
+  split or collapse; a mesh with all its edges in the band has no angle below about 33 degrees).
+  It is off by default: remeshing also resamples away the optimizer's high-frequency noise, and
+  without it the guided filter roughens a regular mesh (spot Loop-subdivided twice, 13,234 V,
+  1000 iterations: bending energy 369 -> 543 with the threshold 0.05, which never remeshed it,
+  369 -> 354 after 500 iterations remeshing every 30). With 0.05 a 3000-iteration guided run on
+  fandisk (28,910 V) remeshes 4 times instead of 99 (benchmarks/paparazzi.py).
   A remeshing resets the optimizer moments (the authors' practice; vertices are new), and so does
   a rollback. The output is checked the same way; if the last steps created intersections, the
   last checked state is returned. "No self-intersections" means no more intersecting face pairs
@@ -98,12 +102,13 @@ class PaparazziParams:
     remesh_every: int = param(30, label="Remesh every", minimum=0, maximum=10000, step=10,
                               tooltip="Remesh and check for self-intersections every this many "
                                       "iterations (0 = only check at the end).")
-    remesh_threshold: float = param(0.05, label="Remesh threshold", minimum=0.0, maximum=1.0,
+    remesh_threshold: float = param(0.0, label="Remesh threshold", minimum=0.0, maximum=1.0,
                                     decimals=3, advanced=True,
-                                    tooltip="At each check, remesh only when more than this "
-                                            "share of the edges is too long or too short (outside "
-                                            "4/5-4/3 of the target length). 0 = remesh at every "
-                                            "check, as the thesis does.")
+                                    tooltip="0 = remesh at every check, as the thesis does. "
+                                            "Above 0: remesh only when more than this share of "
+                                            "the edges is too long or too short (outside 4/5-4/3 "
+                                            "of the target length); faster, but the result is "
+                                            "rougher (e.g. 0.05).")
     remesh_iterations: int = param(1, label="Remesh passes", minimum=1, maximum=20, advanced=True,
                                    tooltip="Split/collapse/flip/relax passes per remeshing.")
     monitor_every: int = param(10, label="Monitor every", minimum=0, maximum=10000,
