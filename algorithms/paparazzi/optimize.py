@@ -294,7 +294,7 @@ class Paparazzi:
         tm = time.perf_counter()
         monitor0 = monitor = self.evaluate(V, F, monitor_cam)[0]
         secs["monitor"] += time.perf_counter() - tm
-        free = self._free_mask(F)
+        free = self._free_mask(F, len(V))
         N = p.iterations
         for it in range(1, N + 1):
             cam = self.camera(rng)
@@ -326,7 +326,7 @@ class Paparazzi:
                     if self._acceptable(U, Gf):
                         V, F = U, Gf
                         checked = True
-                        free = self._free_mask(F)
+                        free = self._free_mask(F, len(V))
                         m = np.zeros_like(V)
                         v = np.zeros_like(V)
                         t_adam = 0
@@ -342,7 +342,7 @@ class Paparazzi:
                             "Paparazzi could not keep the mesh free of self-intersections even "
                             "with a 1000 times smaller step; try a smaller learning rate or a "
                             "larger remeshing frequency.")
-                    free = self._free_mask(F)
+                    free = self._free_mask(F, len(V))
                     m = np.zeros_like(V)
                     v = np.zeros_like(V)
                     t_adam = 0
@@ -391,10 +391,10 @@ class Paparazzi:
                                "values.")
         return E, G, r, filtered
 
-    def _free_mask(self, F) -> np.ndarray:
+    def _free_mask(self, F, n: int | None = None) -> np.ndarray:
         from ..mesh.topology import boundary_edges
 
-        n = int(F.max()) + 1
+        n = max(int(F.max()) + 1, n or 0)
         free = np.ones(n, dtype=bool)
         if self.topology[1]:
             free[np.unique(boundary_edges(F).ravel())] = False

@@ -231,3 +231,12 @@ def test_each_filter_changes_the_shape_in_its_own_way(name, subdivide, iteration
         assert after > factor * before, (before, after)
     assert is_manifold(last.F) and euler_characteristic(last.F) == euler_characteristic(F)
     assert count_self_intersections(last.V, last.F) == 0
+
+
+def test_an_unreferenced_vertex_does_not_stop_the_run():
+    V, F = icosphere(2)
+    V2 = np.vstack([V * 0.5, [[0.6, 0.6, 0.6]]])           # last vertex in no face
+    steps = list(paparazzi_iter(V2, F, "guided", None, PaparazziParams(
+        iterations=35, resolution=32, monitor_every=0)))
+    assert len(steps[0].V) == len(V2) and steps[-1].metrics["remeshes"] == 1
+    assert is_manifold(steps[-1].F) and count_self_intersections(steps[-1].V, steps[-1].F) == 0
