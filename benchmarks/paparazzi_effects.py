@@ -16,6 +16,9 @@ Measures (algorithms/paparazzi/measures.py):
   slic, l0      area fraction of faces whose dihedral angles to all neighbours are < 3 deg (up)
   guided        bending energy sum |L V|^2 / M (discrete Willmore energy; down)
   neural-style  Gram (style) loss between the monitor view and its stylization (down)
+  identity      (--filters identity) the control run of the guided row: f(R) = R, so the
+                gradient is 0 and only the remeshing every 30 iterations acts; its bending
+                energy says how much of the guided row's change is the remeshing's
 A filter that is not registered (neural-style needs its optional packages) is skipped with a
 message.
 """
@@ -57,7 +60,7 @@ def measure(name, run, V, F):
         return "palette15", palette_fraction(V, F), +1
     if name in ("slic", "l0"):
         return "planar3", planar_area_fraction(V, F), +1
-    if name == "guided":
+    if name in ("guided", "identity"):
         return "bending", bending_energy(V, F), -1
     if name == "neural-style":
         return "gram", _gram_monitor(run, V, F), -1
@@ -75,7 +78,11 @@ def main() -> int:
     from algorithms.mesh import loop_subdivide, read_mesh
     from algorithms.mesh.topology import boundary_loops, euler_characteristic, is_manifold
     from algorithms.paparazzi import (Paparazzi, PaparazziParams, count_self_intersections,
-                                      filter_names, get_filter)
+                                      filter_names, get_filter, register_filter)
+
+    if "identity" in a.filters and "identity" not in filter_names():
+        register_filter("identity", kind="iterative",
+                        description="control: the image itself")(lambda image, params, ctx: image)
 
     print(f"{'mesh':<16}{'filter':<13}{'V in':>7}{'V out':>7}{'sec':>8}  {'measure':<10}"
           f"{'before':>10} -> {'after':<10}{'ok':<4}{'manifold':<9}{'topology':<9}"
