@@ -1234,7 +1234,8 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
     manifold = bool(is_manifold(F))
     same_topology = euler_characteristic(F) == euler_characteristic(data.F)
     crossings = count_self_intersections(V, F)
-    if not manifold or not same_topology or crossings > run.input_intersections:
+    new_crossings = run.new_self_intersections(V, F) if crossings else 0
+    if not manifold or not same_topology or new_crossings:
         raise Stylize3DError("Paparazzi failed: the result is not a clean 2-manifold with the "
                              "input's topology; nothing was written. Try a smaller learning rate.")
     write_mesh(args.output, V, F)
@@ -1255,6 +1256,7 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
             "manifold": manifold, "same_topology": bool(same_topology),
             "self_intersecting_pairs": crossings,
             "input_self_intersecting_pairs": run.input_intersections,
+            "new_self_intersecting_pairs": new_crossings,
             "self_intersections": crossings > 0,
             "remeshes": int(last.metrics["remeshes"]),
             "rollbacks": int(last.metrics["rollbacks"])})

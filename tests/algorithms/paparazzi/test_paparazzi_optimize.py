@@ -240,3 +240,27 @@ def test_an_unreferenced_vertex_does_not_stop_the_run():
         iterations=35, resolution=32, monitor_every=0)))
     assert len(steps[0].V) == len(V2) and steps[-1].metrics["remeshes"] == 1
     assert is_manifold(steps[-1].F) and count_self_intersections(steps[-1].V, steps[-1].F) == 0
+
+
+def test_an_input_that_intersects_itself_may_keep_but_not_add_intersections():
+    # two interpenetrating spheres: remeshing resamples the intersection curve (its pair count
+    # changes) but adds none elsewhere, so it is accepted; the output's crossings are all where
+    # the input's were
+    V, F = icosphere(3)
+    c2 = np.array([1.2, 0.0, 0.0])
+    V2 = np.vstack([V, V * 0.8 + c2])
+    F2 = np.vstack([F, F + len(V)])
+    run = Paparazzi(V2, F2, "guided", None, PaparazziParams(
+        iterations=12, resolution=32, remesh_every=6, monitor_every=0))
+    assert run.input_intersections > 0
+    last = run_to_end(run.steps())
+    assert last.metrics["remeshes"] == 1 and last.metrics["remesh_rejected"] == 0
+    assert count_self_intersections(last.V, last.F) > 0
+    assert run.new_self_intersections(last.V, last.F) == 0
+    # the first sphere moved 1 down: the spheres still cross, but along another circle, 1 away
+    first = (np.abs(np.linalg.norm(last.V, axis=1) - 1.0)
+             < np.abs(np.linalg.norm(last.V - c2, axis=1) - 0.8))
+    moved = last.V.copy()
+    moved[first] -= [0.0, 1.0, 0.0]
+    assert count_self_intersections(moved, last.F) > 0
+    assert run.new_self_intersections(moved, last.F) > 0
