@@ -33,9 +33,10 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   split or collapse; a mesh with all its edges in the band has no angle below about 33 degrees).
   It is off by default: remeshing also resamples away the optimizer's high-frequency noise, and
   without it the guided filter roughens a regular mesh (spot Loop-subdivided twice, 13,234 V,
-  1000 iterations: bending energy 369 -> 543 with the threshold 0.05, which never remeshed it,
-  369 -> 354 after 500 iterations remeshing every 30). With 0.05 a 3000-iteration guided run on
-  fandisk (28,910 V) remeshes 4 times instead of 99 (benchmarks/paparazzi.py).
+  1000 iterations: bending energy 369 -> 543 with the threshold 0.05, which never remeshed it;
+  remeshing alone, every 30 iterations with an identity filter, gives 369 -> 339). With 0.05 a
+  3000-iteration guided run on fandisk (28,910 V) remeshes 4 times instead of 99
+  (benchmarks/paparazzi.py).
   A remeshing resets the optimizer moments (the authors' practice; vertices are new), and so does
   a rollback. The output is checked the same way; if the last steps created intersections, the
   last checked state is returned. "No self-intersections" means no new intersecting face pairs:
