@@ -18,7 +18,8 @@ Measures (algorithms/paparazzi/measures.py):
   neural-style  Gram (style) loss between the monitor view and its stylization (down)
   identity      (--filters identity) the control run of the guided row: f(R) = R, so the
                 gradient is 0 and only the remeshing every 30 iterations acts; its bending
-                energy says how much of the guided row's change is the remeshing's
+                energy says how much of the guided row's change is the remeshing's;
+                identity-planar: the same run measured like the L0 / SLIC rows
 A filter that is not registered (neural-style needs its optional packages) is skipped with a
 message.
 """
@@ -58,7 +59,7 @@ def measure(name, run, V, F):
 
     if name == "quantize":
         return "palette15", palette_fraction(V, F), +1
-    if name in ("slic", "l0"):
+    if name in ("slic", "l0", "identity-planar"):
         return "planar3", planar_area_fraction(V, F), +1
     if name in ("guided", "identity"):
         return "bending", bending_energy(V, F), -1
@@ -80,9 +81,11 @@ def main() -> int:
     from algorithms.paparazzi import (Paparazzi, PaparazziParams, count_self_intersections,
                                       filter_names, get_filter, register_filter)
 
-    if "identity" in a.filters and "identity" not in filter_names():
-        register_filter("identity", kind="iterative",
-                        description="control: the image itself")(lambda image, params, ctx: image)
+    for control in ("identity", "identity-planar"):
+        if control in a.filters and control not in filter_names():
+            register_filter(control, kind="iterative", resolution=256 if "planar" in control
+                            else 128, description="control: the image itself"
+                            )(lambda image, params, ctx: image)
 
     print(f"{'mesh':<16}{'filter':<13}{'V in':>7}{'V out':>7}{'sec':>8}  {'measure':<10}"
           f"{'before':>10} -> {'after':<10}{'ok':<4}{'manifold':<9}{'topology':<9}"
