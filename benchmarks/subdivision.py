@@ -129,11 +129,16 @@ def main() -> int:
           f"{split['seconds_map'] / k:.3f} s, Loop topology + target points "
           f"{split['seconds_topology'] / k:.3f} s", flush=True)
     # ---- 1 worker vs 2 workers (generate_dataset, no cache; the pool's start-up included)
+    import resource
+
     res = {}
     for w in (1, 2):
+        c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t = time.perf_counter()
         generate_dataset([(shape.V, shape.F)], p, workers=w, use_cache=False)
         res[w] = time.perf_counter() - t
+        c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        res[f"cores{w}"] = ((c1.ru_utime + c1.ru_stime) - (c0.ru_utime + c0.ru_stime)) / res[w]
     # a warm pool (processes started, modules and compiled kernels loaded): the steady state
     # of a long run such as the default 200 coarse meshes
     import concurrent.futures as cf
@@ -156,7 +161,8 @@ def main() -> int:
         pool.shutdown()
     print(f"  generate_dataset, workers=1: {res[1] / k:7.2f} s per coarse mesh")
     print(f"  generate_dataset, workers=2: {res[2] / k:7.2f} s per coarse mesh   speed-up "
-          f"{res[1] / res[2]:.2f}x (2 processes started and loaded in the run)")
+          f"{res[1] / res[2]:.2f}x (2 processes started and loaded in the run; the two "
+          f"got {res['cores2']:.2f} cores on average)")
     print(f"  warm 2-process pool:         {res['warm'] / k:7.2f} s per coarse mesh   speed-up "
           f"{res[1] / res['warm']:.2f}x (start-up + first 2 meshes took {t_start:.1f} s)  "
           f"[{_load()}]")
@@ -168,10 +174,13 @@ def main() -> int:
     t = time.perf_counter()
     tr = Trainer(samples, TrainParams(epochs=3, validation_fraction=0.0, patience=0))
     t_prep = time.perf_counter() - t  # one-time: network, optimizer, index tensors
+    cpu_eps = []
     c0 = time.process_time()
-    steps = list(tr.steps())
-    cpu_ep = (time.process_time() - c0) / len(steps)
+    for _ in tr.steps():
+        cpu_eps.append(time.process_time() - c0)
+        c0 = time.process_time()
     h = tr.history[1:]  # the first epoch warms up
+    cpu_ep = statistics.median(cpu_eps[1:])
     fwd = statistics.median(x["seconds_forward"] for x in h) / k
     bwd = statistics.median(x["seconds_backward"] for x in h) / k
     val = statistics.median(x["seconds_validation"] for x in h) / k  # all k in one batch
@@ -197,7 +206,7 @@ def main() -> int:
           f"{epoch * 100 / 60:.1f} min per 100 epochs")
     # the same from this process's CPU time (what a core of its own would take; the wall
     # times above include waiting for the CPU on a shared machine)
-    cpu_epoch = 200 * cpu_ep / k
+    cpu_epoch = epoch * cpu_ep / statistics.median(x["seconds"] for x in h)
     cpu_data = 200 * cpu / k / 2  # two processes, each its own core
     print(f"  CPU-time view: {cpu_epoch:.1f} s per epoch at 200 coarse meshes; data "
           f"{cpu_data / 60:.1f} min with 2 busy cores; 700 epochs {700 * cpu_epoch / 60:.0f} min; "
