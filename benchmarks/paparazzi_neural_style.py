@@ -90,7 +90,7 @@ def run(mesh: str, iterations: int, style: int, control: int, upsample: int = 0,
     print(f"{path.name}: {len(data.V)} vertices ({len(pz.V0)} optimized), {len(data.F)} faces; "
           f"{iterations} iterations, "
           f"{pz.resolution} px, view width {pz.width}, sigma {pz.sigma}, learning rate "
-          f"{params.learning_rate:g}, style {style} "
+          f"{getattr(pz, 'learning_rate', params.learning_rate):g}, style {style} "
           f"(control style {control}); setup {time.perf_counter() - t0:.1f} s")
     print(f"  it     0: Gram(R, f(R)) {first[0]:9.2f}  Gram(R, f(R0)) {first[1]:9.2f}  "
           f"Gram(R, style {control}) {first[2]:9.2f}")
