@@ -66,6 +66,9 @@ def main() -> int:
     ap.add_argument("--full", action="store_true",
                     help="also run the whole default training once (200 coarse meshes, "
                          "TrainParams() defaults incl. early stopping) and print its split")
+    ap.add_argument("--patience", type=int, default=None,
+                    help="with --full: early stopping patience (default: TrainParams' 0 = all "
+                         "700 epochs)")
     ap.add_argument("--save", default="", help="with --full: write the trained weights here")
     ap.add_argument("--cache-dir", default="",
                     help="with --full: data cache folder (default: a fresh temporary one, so "
@@ -201,8 +204,8 @@ def main() -> int:
           f"{nval} validated)")
     print(f"  whole default training, extrapolated: data {data_200 / 60:.1f} min (2 workers) + "
           f"{d.epochs} epochs {d.epochs * epoch / 60:.1f} min = "
-          f"{(data_200 + d.epochs * epoch) / 60:.1f} min if it runs all epochs; early stopping "
-          f"(patience {d.patience}, {100 * d.min_improvement:g} %) ends it sooner: "
+          f"{(data_200 + d.epochs * epoch) / 60:.1f} min (patience {d.patience}); with early "
+          f"stopping (e.g. --patience 60, which stopped at epoch 137 on armadillo): "
           f"{epoch * 100 / 60:.1f} min per 100 epochs")
     # the same from this process's CPU time (what a core of its own would take; the wall
     # times above include waiting for the CPU on a shared machine)
@@ -232,7 +235,8 @@ def full(shape, args) -> int:
     print(f"  data: {len(samples)} coarse meshes in {t_data:.0f} s "
           f"({t_data / len(samples):.2f} s each, 2 workers) [{_load()}]", flush=True)
     t1 = time.perf_counter()
-    tr = Trainer(samples, TrainParams())
+    tp = TrainParams() if args.patience is None else TrainParams(patience=args.patience)
+    tr = Trainer(samples, tp)
     t_prep = time.perf_counter() - t1
     gen = tr.steps()
     try:
