@@ -106,7 +106,13 @@ class FilterSpec:
     ``single_view`` fixes the camera to :func:`front_camera`; ``shading(params)`` builds the
     shading (default: R, G, B lights along the camera axes); ``prepare(params, info)`` builds the
     state once (``info``: dict with ``normalize`` (a function mapping world points into the
-    optimizer's frame), ``resolution``).
+    optimizer's frame), ``resolution``);
+    ``file_readers`` maps a file field of ``params`` (a ``str`` path) to the function that reads
+    it as ``prepare`` will (``reader(path)``, raising a :class:`~algorithms.errors.Stylize3DError`
+    with a plain message for a file it cannot use): the GUI checks a chosen file with it. A file
+    field without one is checked like a target image (:func:`read_image`) or a mesh;
+    ``optional_files``: the file fields that may stay empty (the GUI runs without them; the
+    others it asks for before a run).
     """
 
     name: str
@@ -121,6 +127,9 @@ class FilterSpec:
     single_view: bool | Callable[[Any], bool] = False
     learning_rate: float = 2e-4
     description: str = ""
+    file_readers: dict[str, Callable[[str], Any]] = field(default_factory=dict, compare=False,
+                                                          hash=False)
+    optional_files: tuple[str, ...] = ()
 
     def make_shading(self, params) -> Shading:
         return self.shading(params) if self.shading is not None else LambertianShading()

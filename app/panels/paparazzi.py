@@ -264,7 +264,9 @@ class PaparazziPanel(MethodPanel):
             for s in files:
                 kind = _file_kind(s)
                 edit = QLineEdit(self._paths.get((name, s.name), ""))
-                edit.setPlaceholderText(f"choose {article(kind)}…")
+                optional = s.name in spec.optional_files
+                edit.setPlaceholderText(f"{'optional: ' if optional else ''}"
+                                        f"choose {article(kind)}…")
                 edit.setToolTip(s.tooltip)
                 edit.editingFinished.connect(
                     lambda s=s, e=edit: e.isModified() and self.set_filter_file(s.name, e.text()))
@@ -332,8 +334,21 @@ class PaparazziPanel(MethodPanel):
         kind = self._path_kinds.get(field, "file")
         edit = self._path_edits.get(field)
         old = self._paths.get((name, field), "")
+        if not str(path).strip() and name and field in get_filter(name).optional_files:
+            # an optional file (the neural-style painting) can be cleared again
+            self._paths.pop((name, field), None)
+            if edit is not None:
+                edit.setText("")
+                edit.setModified(False)
+            label = next((s.label for s in describe(get_filter(name).params)
+                          if s.name == field), field)
+            self.status_label.setText(f"{label}: none; the '{name}' filter runs without one.")
+            self._on_params_changed(None)
+            return True
         try:
-            note = self._check_file(kind, path)
+            reader = get_filter(name).file_readers.get(field) if name else None
+            note = (self._check_with_reader(reader, kind, path) if reader is not None
+                    else self._check_file(kind, path))
         except Stylize3DError as e:
             if edit is not None:
                 edit.setText(old)
@@ -349,6 +364,35 @@ class PaparazziPanel(MethodPanel):
         self.status_label.setText(f"{Path(path).name}: {note}.")
         self._on_params_changed(None)
         return True
+
+    @staticmethod
+    def _check_with_reader(reader, kind: str, path: str) -> str:
+        """Check a file with the filter's own reader (``FilterSpec.file_readers``: e.g. the
+        neural-style painting, which may have any shape, since its reader crops the central
+        square); a short description. A reader that fails without a Stylize3DError still gives
+        a plain message."""
+        try:
+            data = reader(str(path))
+        except Stylize3DError:
+            raise
+        except Exception as e:  # noqa: BLE001 - a reader's own defect: still a plain message
+            raise ImageReadError(f"{path} cannot be used ({type(e).__name__}: {e}).") from None
+        if kind != "image":
+            return "file chosen"
+        from PIL import Image
+
+        try:
+            with Image.open(path) as im:
+                w, h = im.size
+        except Exception:  # noqa: BLE001 - the filter's reader reads what PIL cannot: fine
+            return "file chosen"
+        note = f"{w} × {h} pixels"
+        shape = getattr(data, "shape", None)
+        if shape is not None and len(shape) in (2, 3) and tuple(shape[:2]) != (h, w):
+            note += f", used as {shape[1]} × {shape[0]}"
+            if len(shape) == 2 or shape[2] == 1:
+                note += " grey"
+        return note
 
     @staticmethod
     def _check_file(kind: str, path: str) -> str:
@@ -407,8 +451,9 @@ class PaparazziPanel(MethodPanel):
             return
         if not self._mesh_is_usable():
             return
+        optional = get_filter(self.filter_name()).optional_files
         missing = [s for s in self._path_edits
-                   if not self._paths.get((self.filter_name(), s), "")]
+                   if s not in optional and not self._paths.get((self.filter_name(), s), "")]
         if missing:
             kind = self._path_kinds[missing[0]]
             self.status_label.setText(f"The '{self.filter_name()}' filter needs "

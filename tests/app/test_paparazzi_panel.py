@@ -21,10 +21,10 @@ def open_panel(window, name="hand_lowres.obj"):
     return panel
 
 
-def short_run(panel, iterations=30):
+def short_run(panel, iterations=30, monitor_every=5):
     p = panel.form.params()
     panel.form.set_params(p.__class__(iterations=iterations, resolution=64, remesh_every=10,
-                                      monitor_every=5, learning_rate=1e-3))
+                                      monitor_every=monitor_every, learning_rate=1e-3))
 
 
 def test_run_streams_mesh_images_and_monitor_then_one_undo_step(window, dialogs, qtbot):
@@ -32,7 +32,9 @@ def test_run_streams_mesh_images_and_monitor_then_one_undo_step(window, dialogs,
     doc = window.document
     V0, F0 = np.array(doc.V), np.array(doc.F)
     assert panel.filter_name() == "guided"
-    short_run(panel)
+    # long enough (a few hundred ms even on a fast machine) that the runner, which publishes at
+    # most ~30 times a second, streams more than the final step
+    short_run(panel, iterations=120, monitor_every=20)
     seen = []  # (faces carried, vertices shown on the 3D view, vertices of the step)
 
     def on_preview(step):
@@ -48,7 +50,7 @@ def test_run_streams_mesh_images_and_monitor_then_one_undo_step(window, dialogs,
     for lab in (panel.render_label, panel.filtered_label):
         pix = lab.pixmap()
         assert not pix.isNull() and pix.width() == THUMB and pix.height() == THUMB
-    # the monitor plot: the start, every 5 iterations (5, ..., 30)
+    # the monitor plot: the start, every 20 iterations (20, ..., 120)
     mon = panel.plot.series["monitor_energy"]
     assert len(mon) == 7 and all(np.isfinite(mon)) and mon[-1] != mon[0]
     # one undoable command with the remeshed faces; the border stayed where it was
@@ -122,6 +124,51 @@ def test_target_image_that_cannot_be_used_changes_nothing(window, dialogs, qtbot
     panel.set_filter("target-image")
     assert panel._path_edits["image"].text() == str(grey)
     assert len(dialogs.errors) == 2
+
+
+def test_neural_style_takes_a_painting_of_any_shape_and_runs_without_one(window, dialogs,
+                                                                         qtbot, tmp_path):
+    from PIL import Image
+
+    panel = open_panel(window, "spot_lowres.obj")
+    panel.set_filter("neural-style")
+    assert "style_image" in panel._path_edits
+    assert panel._path_edits["style_image"].placeholderText().startswith("optional")
+    # its learning rate left at 0 is the filter's own, shown as such
+    lr = panel.form.editors["learning_rate"].spin
+    assert lr.value() == 0 and lr.text() == lr.specialValueText() == "auto (0.001)"
+    # a painting that is not square is read as the filter reads it (central square), not refused
+    wide = tmp_path / "wide.png"
+    Image.new("RGB", (400, 200), (200, 10, 10)).save(wide)
+    assert panel.set_filter_file("style_image", str(wide))
+    assert not dialogs.errors
+    assert "400 × 200 pixels, used as 256 × 256 grey" in panel.status_label.text()
+    assert panel.filter_params().style_image == str(wide)
+    # files it cannot use still get plain messages, and the chosen painting stays
+    bad = tmp_path / "notes.png"
+    bad.write_text("not a picture")
+    dialogs.open_paths.append(str(bad))
+    panel._path_buttons["style_image"].click()
+    assert dialogs.errors[-1][0] == "Cannot use this image"
+    assert "cannot be read" in dialogs.errors[-1][1] and "PNG or JPEG" in dialogs.errors[-1][1]
+    tiny = tmp_path / "tiny.png"
+    Image.new("L", (10, 5), 0).save(tiny)
+    assert not panel.set_filter_file("style_image", str(tiny))
+    assert "10 x 5" in dialogs.errors[-1][1] and len(dialogs.errors) == 2
+    assert panel._path_edits["style_image"].text() == str(wide)
+    assert panel.filter_params().style_image == str(wide)
+    # the painting is optional: cleared again, the filter uses its built-in style
+    assert panel.set_filter_file("style_image", "")
+    assert panel.filter_params().style_image == "" and len(dialogs.errors) == 2
+    # ... and Run does not ask for one: a short run with the built-in style is one undo step
+    short_run(panel, iterations=3, monitor_every=0)
+    with qtbot.waitSignal(window.job_committed, timeout=60000):
+        panel.run_button.click()
+    assert window.undo_stack.count() == 1 and len(dialogs.errors) == 2
+    # the target image still has to be square (its reader is the plain one)
+    panel.set_filter("target-image")
+    assert not panel.set_filter_file("image", str(wide))
+    assert "square" in dialogs.errors[-1][1]
 
 
 def test_a_filter_that_raises_stops_the_job_and_leaves_the_document(window, dialogs, qtbot):
