@@ -13,7 +13,7 @@ from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
-__all__ = ["Step", "run_to_end", "Cancelled", "with_progress"]
+__all__ = ["Step", "run_to_end", "Cancelled", "with_progress", "isolated_iter", "IsolatedProcessError"]
 
 
 @dataclass
@@ -107,3 +107,83 @@ def with_progress(work: Callable[[Callable[[float, str], None]], Any], V: np.nda
         stop.set()
     if state["error"] is not None:
         raise state["error"]
+
+
+class IsolatedProcessError(RuntimeError):
+    """The child process of :func:`isolated_iter` died without a result (killed, crashed)."""
+
+
+def _isolated_main(conn, gen_fn, args, kwargs) -> None:  # pragma: no cover - runs in the child
+    import os
+
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    try:
+        gen = gen_fn(*args, **kwargs)
+        while True:
+            try:
+                item = next(gen)
+            except StopIteration as stop:
+                conn.send(("return", stop.value))
+                return
+            conn.send(("item", item))
+    except BaseException as exc:  # noqa: BLE001 - handed to the parent
+        import pickle
+
+        try:
+            pickle.dumps(exc)
+            conn.send(("error", exc))
+        except Exception:  # noqa: BLE001 - an exception that does not pickle
+            conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
+    finally:
+        conn.close()
+
+
+def isolated_iter(gen_fn: Callable[..., Iterator], *args, poll_seconds: float = 0.05,
+                  **kwargs) -> Iterator:
+    """Run the generator ``gen_fn(*args, **kwargs)`` in a child process and yield its items;
+    return its return value (``result = yield from isolated_iter(...)``).
+
+    Why: compiled library calls that hold Python's GIL for seconds (ARPACK's restarts and
+    Ritz vectors, SciPy's sparse products, PyAMG) freeze a GUI thread even when they run on a
+    worker thread; in a child process they cannot. ``gen_fn`` must be importable (a module-level
+    function) and its arguments, items and result picklable. The child is started with
+    "spawn" (never "fork": the parent may be a multi-threaded Qt process) and one BLAS thread.
+    An exception in the child is re-raised here; closing this generator (a cancelled job)
+    terminates the child. Costs a process start (about a second: imports) per call.
+    """
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    recv, send = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_isolated_main, args=(send, gen_fn, args, kwargs),
+                       name="stylize3d-isolated", daemon=True)
+    proc.start()
+    send.close()
+    try:
+        while True:
+            if not recv.poll(poll_seconds):
+                if proc.is_alive():
+                    continue
+                if not recv.poll(0):
+                    raise IsolatedProcessError(
+                        f"the computation's process ended without a result (exit code "
+                        f"{proc.exitcode}); it may have run out of memory")
+            try:
+                kind, payload = recv.recv()
+            except EOFError:
+                proc.join(5)
+                raise IsolatedProcessError(
+                    f"the computation's process ended without a result (exit code "
+                    f"{proc.exitcode}); it may have run out of memory") from None
+            if kind == "item":
+                yield payload
+            elif kind == "return":
+                return payload
+            else:
+                raise payload
+    finally:
+        if proc.is_alive():
+            proc.terminate()
+        proc.join(5)
+        recv.close()

@@ -19,4 +19,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
+    import multiprocessing
+
+    multiprocessing.freeze_support()  # child processes (algorithms.steps.isolated_iter) of a frozen app
     sys.exit(main())

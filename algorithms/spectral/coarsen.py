@@ -203,7 +203,7 @@ def _check_L(L) -> sp.csr_matrix:
     return L
 
 
-def generalized_eigs(L, M, k: int, sigma: float | None = None):
+def generalized_eigs(L, M, k: int, sigma: float | None = None, progress=None):
     """First ``k`` eigenpairs of ``L x = lam M x`` (ascending), eigenvectors M-orthonormal.
 
     Large problems use ARPACK in shift-invert mode around ``sigma``; the default shift is
@@ -212,6 +212,13 @@ def generalized_eigs(L, M, k: int, sigma: float | None = None):
     vanished in round-off on a scan stored in metres with 1e-8 m^2 vertex areas: "Factor is
     exactly singular"). Failures of the factorization or of ARPACK become a
     :class:`~algorithms.errors.ParameterError` with a plain message.
+
+    ``progress(fraction, message)``, when given, is called at every Lanczos step (one solve
+    with the factor of ``L - sigma M``; ARPACK asks for ``ncv = max(2k + 1, 20)`` of them,
+    then about ``(ncv - k) / 2`` more per implicit restart). A Lanczos step's cost grows with
+    the basis it is orthogonalized against, so the reported fraction is
+    ``0.9 (steps / expected steps)^2``: the work done, not the step count. An exception it
+    raises (e.g. :class:`~algorithms.steps.Cancelled`) stops ARPACK and propagates.
     """
     n = L.shape[0]
     k = int(min(k, n - 1))
@@ -241,9 +248,12 @@ def generalized_eigs(L, M, k: int, sigma: float | None = None):
         # fixed start vector: ARPACK's random one makes results (and everything optimized
         # from them) differ from run to run
         v0 = np.random.default_rng(0).uniform(0.5, 1.5, n)
+        OPinv = None
+        if progress is not None:
+            OPinv = _counting_shift_invert(Ld, Ms, sigma, k, progress)
         try:
             lam, phi = eigsh(sp.csc_matrix(Ld), k=k, M=sp.csc_matrix(Ms), sigma=sigma,
-                             which="LM", v0=v0)
+                             which="LM", v0=v0, OPinv=OPinv)
         except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
             # SuperLU "Factor is exactly singular", ARPACK no convergence (a RuntimeError)
             raise ParameterError(f"the eigenvectors of the operator could not be computed "
@@ -266,6 +276,31 @@ def generalized_eigs(L, M, k: int, sigma: float | None = None):
         raise ParameterError("the eigenvectors of the operator came out non-finite; the mesh "
                              "probably has degenerate triangles: run Clean and try again.")
     return lam, phi
+
+
+def _counting_shift_invert(L, M, sigma: float, k: int, progress):
+    """``(L - sigma M)^-1`` as a LinearOperator (SuperLU, as eigsh builds it itself) that
+    reports every application to ``progress`` (see :func:`generalized_eigs`)."""
+    from scipy.sparse.linalg import LinearOperator, splu
+
+    n = L.shape[0]
+    try:
+        lu = splu(sp.csc_matrix(L - sigma * M))
+    except RuntimeError as exc:   # "Factor is exactly singular": eigsh's own message path
+        raise ValueError(str(exc)) from None
+    ncv = min(n, max(2 * k + 1, 20))
+    expected = ncv + (ncv - k) // 2
+    count = [0]
+
+    def solve(x):
+        count[0] += 1
+        c = count[0]
+        if c == 1 or c % 5 == 0:
+            progress(0.9 * min(1.0, c / expected) ** 2,
+                     f"Lanczos step {c} of about {expected}")
+        return lu.solve(np.asarray(x, dtype=np.float64).reshape(n))
+
+    return LinearOperator((n, n), matvec=solve, dtype=np.float64)
 
 
 def suggested_coarse_size(n: int, m: int = 500) -> int:

@@ -10,7 +10,8 @@ import scipy.sparse as sp
 
 from ..errors import ParameterError, Stylize3DError
 from .baselines import amg_baseline, qslim_baseline
-from .coarsen import CoarsenParams, coarsen, generalized_eigs
+from ..steps import with_progress
+from .coarsen import CoarsenParams, CoarsenStep, coarsen, generalized_eigs
 from .metrics import spectral_metrics
 from .operators import build_operator
 
@@ -74,10 +75,16 @@ def compare_coarsenings(V, F, operator: str = "cotangent", m: int = 500, k: int 
 
 def compare_coarsenings_iter(V, F, operator: str = "cotangent", m: int = 500,
                              k: int | None = None, params: CoarsenParams | None = None, *,
-                             methods=("ours", "qslim", "amg"), alpha: float = 10.0):
+                             methods=("ours", "qslim", "amg"), alpha: float = 10.0,
+                             eig_progress: bool = False):
     """Generator form of :func:`compare_coarsenings` for the GUI: yields every optimizer
     :class:`~algorithms.spectral.coarsen.CoarsenStep` of ours and *returns* the
-    :class:`Comparison` (``result = yield from compare_coarsenings_iter(...)``)."""
+    :class:`Comparison` (``result = yield from compare_coarsenings_iter(...)``).
+
+    With ``eig_progress=True`` the eigendecomposition of the fine operator (the long first
+    stage) also streams: it runs on a helper thread and yields ``CoarsenStep``s with
+    ``total=1000``, ``iteration`` = per-mille of its work done, ``energy`` NaN and the Lanczos
+    step in ``message``; closing the generator then stops ARPACK at its next step."""
     params = params or CoarsenParams()
     k = int(k if k else round(m / 3))
     timings: dict[str, float] = {}
@@ -94,7 +101,17 @@ def compare_coarsenings_iter(V, F, operator: str = "cotangent", m: int = 500,
     if not 1 <= k < m < n:
         raise ParameterError(f"need 1 <= k < m < n (here n = {n}, m = {m}, k = {k}); the "
                              "thesis recommends m > 2k.")
-    eigs = generalized_eigs(L, M, min(k + nnull, n - 1))
+    ke = min(k + nnull, n - 1)
+    if eig_progress:
+        box: dict = {}
+        yield CoarsenStep(0, 1000, float("nan"), message="Eigenvectors of the fine operator")
+        for st in with_progress(lambda progress: generalized_eigs(L, M, ke, progress=progress),
+                                V, box):
+            yield CoarsenStep(st.iteration, st.total, float("nan"),
+                              message=f"Eigenvectors of the fine operator: {st.message}")
+        eigs = box["value"]
+    else:
+        eigs = generalized_eigs(L, M, ke)
     timings["eigendecomposition"] = time.perf_counter() - t
     out: dict[str, MethodResult] = {}
     if "ours" in methods:

@@ -15,7 +15,7 @@ from PySide6.QtWidgets import (QComboBox, QGridLayout, QGroupBox, QHBoxLayout, Q
 from algorithms.errors import Stylize3DError
 from algorithms.spectral.coarsen import CoarsenParams, generalized_eigs, suggested_coarse_size
 from algorithms.spectral.compare import compare_coarsenings_iter
-from algorithms.steps import Step
+from algorithms.steps import Step, isolated_iter
 from app.panels.base import MethodPanel
 from app.widgets import LinePlot
 
@@ -149,8 +149,10 @@ class SpectralPanel(MethodPanel):
         holder = self._holder = {}
 
         def steps():
-            gen = compare_coarsenings_iter(state.V, state.F, op, params.m, params.k or None,
-                                           params, alpha=alpha)
+            # in a child process: ARPACK, SciPy's sparse products and PyAMG hold the GIL for
+            # seconds, which would freeze the window even from the worker thread
+            gen = isolated_iter(compare_coarsenings_iter, state.V, state.F, op, params.m,
+                                params.k or None, params, alpha=alpha, eig_progress=True)
             while True:
                 try:
                     cs = next(gen)
@@ -159,6 +161,9 @@ class SpectralPanel(MethodPanel):
                     holder["state"] = state
                     yield Step(holder.get("it", 0) + 1, None, state.V, {}, "done")
                     return
+                if np.isnan(cs.energy):      # the eigenvector stage: its own progress
+                    yield Step(cs.iteration, cs.total, state.V, {}, cs.message)
+                    continue
                 holder["it"] = cs.iteration
                 yield Step(cs.iteration, cs.total, state.V, {"energy": cs.energy},
                            f"iteration {cs.iteration}")

@@ -58,3 +58,51 @@ def test_closing_the_generator_cancels_the_work():
     gen.close()
     assert ended.wait(2.0), "the work did not stop after the consumer went away"
     assert len(calls) < 1000 and "value" not in out
+
+
+# -- isolated_iter: a generator in a child process ------------------------------------------------
+def test_isolated_iter_streams_items_and_returns_the_value():
+    from algorithms.spectral.compare import compare_coarsenings_iter
+    from algorithms.steps import isolated_iter
+    from algorithms.mesh.primitives import icosphere
+
+    V, F = icosphere(2)
+    gen = isolated_iter(compare_coarsenings_iter, V, F, "cotangent", 40, 10, None,
+                        methods=("ours",))
+    items = []
+    while True:
+        try:
+            items.append(next(gen))
+        except StopIteration as stop:
+            result = stop.value
+            break
+    assert len(items) >= 2 and items[-1].done
+    assert result.n == len(V) and result.m == 40 and "ours" in result.methods
+    # the same computation in this process gives the same numbers
+    from algorithms.spectral.compare import compare_coarsenings
+
+    here = compare_coarsenings(V, F, "cotangent", 40, 10, None, methods=("ours",))
+    assert np.allclose(here.methods["ours"].metrics["c_diag_score"],
+                       result.methods["ours"].metrics["c_diag_score"], rtol=0, atol=1e-12)
+
+
+def test_isolated_iter_reraises_the_childs_error_and_reports_a_dead_child():
+    import itertools
+    import multiprocessing as mp
+    import os
+
+    from algorithms.errors import ParameterError
+    from algorithms.mesh.primitives import icosphere
+    from algorithms.spectral.compare import compare_coarsenings_iter
+    from algorithms.steps import IsolatedProcessError, isolated_iter
+
+    V, F = icosphere(1)
+    with pytest.raises(ParameterError, match="need 1 <= k < m < n"):
+        list(isolated_iter(compare_coarsenings_iter, V, F, "cotangent", 20, 30))
+    with pytest.raises(IsolatedProcessError, match="exit code 3"):
+        list(isolated_iter(os._exit, 3))
+    # closing the generator (a cancelled job) ends the child
+    gen = isolated_iter(itertools.count, 5)
+    assert [next(gen) for _ in range(3)] == [5, 6, 7]
+    gen.close()
+    assert not [p for p in mp.active_children() if p.name == "stylize3d-isolated"]

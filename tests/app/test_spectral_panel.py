@@ -84,6 +84,10 @@ def test_failure_shows_a_plain_message_and_leaves_the_document(window, dialogs, 
     def boom(*a, **k):
         raise RuntimeError("Factor is exactly singular")
     monkeypatch.setattr(co, "eigsh", boom)
+    # the patch lives in this process: run the computation here, not in the panel's child
+    # process (that errors cross the process boundary is tested in tests/algorithms/test_steps.py)
+    monkeypatch.setattr(sys.modules["app.panels.spectral"], "isolated_iter",
+                        lambda fn, *a, **k: fn(*a, **k))
     assert window.open_path(SAMPLES / "blob.obj")
     V0, F0 = window.document.V.copy(), window.document.F.copy()
     count = window.undo_stack.count()

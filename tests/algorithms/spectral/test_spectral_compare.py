@@ -135,3 +135,47 @@ def test_point_cloud_coarsening_beats_amg():
     amg = spectral_metrics(L, M, a.L, a.M, a.P, 20)
     assert ours.c_diag_score > 0.9 and ours.c_diag_score > amg.c_diag_score
     assert ours.eig_rel_error_mean < amg.eig_rel_error_mean
+
+
+def test_eigenvector_stage_reports_real_progress_and_can_be_cancelled():
+    """Issue 11: the fine operator's eigendecomposition (ARPACK) reports its Lanczos steps,
+    gives the same eigenpairs as without a callback, and stops when the callback raises."""
+    import numpy as np
+
+    from algorithms.mesh.primitives import icosphere
+    from algorithms.spectral.coarsen import generalized_eigs
+    from algorithms.spectral.compare import compare_coarsenings_iter
+    from algorithms.spectral.operators import build_operator
+    from algorithms.steps import Cancelled
+
+    V, F = icosphere(3)                       # 642 vertices: the ARPACK path
+    L, M, _, _ = build_operator(V, F, "cotangent")
+    seen = []
+    lam_p, phi_p = generalized_eigs(L, M, 40, progress=lambda f, m: seen.append((f, m)))
+    lam, phi = generalized_eigs(L, M, 40)
+    assert np.allclose(lam_p, lam, rtol=1e-10, atol=1e-12)
+    assert len(seen) >= 10
+    fr = [f for f, _ in seen]
+    assert fr == sorted(fr) and 0 <= fr[0] < 0.1 and 0.3 < fr[-1] <= 0.9
+    assert "Lanczos step" in seen[-1][1] and "of about" in seen[-1][1]
+
+    def stop(f, m):
+        if f > 0.2:
+            raise Cancelled()
+    with pytest.raises(Cancelled):
+        generalized_eigs(L, M, 40, progress=stop)
+
+    # the generator streams the stage (NaN energy, per-mille progress) before the optimizer
+    gen = compare_coarsenings_iter(V, F, "cotangent", 150, 40, None, methods=("ours",),
+                                   eig_progress=True)
+    first = []
+    for st in gen:
+        first.append(st)
+        if not np.isnan(st.energy):
+            break
+    gen.close()
+    stage = [s for s in first if np.isnan(s.energy)]
+    # the stage is announced at once; Lanczos steps follow when it lasts longer than a poll
+    assert stage and all(s.total == 1000 for s in stage)
+    assert all(s.message.startswith("Eigenvectors of the fine operator") for s in stage)
+    assert all("Lanczos step" in s.message for s in stage[1:])
