@@ -81,6 +81,24 @@ def warm_up_in_background() -> "threading.Thread":
                 DataSmoother(V, F, mg=mg, energy=energy).smooth(V[:, 0], 1e-3)
         except Exception:  # a warm-up never stops the app; the first run will say what is wrong
             pass
+        try:  # the renderer's kernels (Paparazzi, adversarial lighting: ~10 s to compile)
+            import numpy as np
+
+            from algorithms.mesh.primitives import icosphere
+            from algorithms.paparazzi.filters import guided_filter
+            from algorithms.render import (environment, image_vjp, look_at, render,
+                                           sh_image_vjp, sh_render)
+
+            V, F = icosphere(2)
+            cam = look_at((0.0, 0.0, 3.0), (0.0, 0.0, 0.0), width=2.5, resolution=32)
+            r = render(V, F, cam)
+            image_vjp(V, F, r, np.ones_like(r.image))
+            guided_filter(r.image, r.image, 2, 1e-8, 2)
+            s = sh_render(V, F, cam, environment())
+            sh_image_vjp(V, F, s, np.ones_like(s.image))
+            import torch  # noqa: F401 - the classifier's first use would import it (~1 s)
+        except Exception:
+            pass
 
     t = threading.Thread(target=work, name="warm-up", daemon=True)
     t.start()

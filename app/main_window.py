@@ -119,8 +119,10 @@ class MainWindow(QMainWindow):
         if geo is not None:
             self.restoreGeometry(geo)
         state = self.settings.value("window/state")
+        self._layout_restored = False
         if state is not None:  # a layout saved with another set of panels is ignored
-            self.restoreState(state, self._layout_version())
+            self._layout_restored = bool(self.restoreState(state, self._layout_version()))
+        self._panel_tabs_fitted = False
         self._update_title()
         self._update_stats()
 
@@ -352,6 +354,29 @@ class MainWindow(QMainWindow):
         for other in docks[1:]:
             self.tabifyDockWidget(docks[0], other)
         docks[0].raise_()
+
+    def showEvent(self, event) -> None:  # noqa: N802 - Qt override
+        super().showEvent(event)
+        if not self._panel_tabs_fitted:
+            self._panel_tabs_fitted = True
+            self._fit_panel_tabs()
+
+    def _fit_panel_tabs(self) -> None:
+        """The panels' tab bar would be as wide as all eight titles (~820 px) and squeeze the
+        3D view: it scrolls instead (full titles, arrows at its end; View > Panels lists them
+        all), and the panels take at most ~45 % of the window unless a saved layout says
+        otherwise."""
+        from PySide6.QtWidgets import QTabBar
+
+        docks = list(self.panels.values())
+        for bar in self.findChildren(QTabBar):
+            if bar.count() and bar.tabText(0) in self.panels:
+                bar.setUsesScrollButtons(True)
+                bar.setElideMode(Qt.TextElideMode.ElideNone)
+        if not self._layout_restored:
+            need = max(d.minimumSizeHint().width() for d in docks)
+            width = max(need, min(int(0.45 * self.width()), 820))
+            self.resizeDocks([docks[0]], [width], Qt.Orientation.Horizontal)
 
     # ------------------------------------------------------------------------------ files
     def _last_dir(self) -> str:
@@ -840,9 +865,9 @@ class MainWindow(QMainWindow):
         dialogs.info(self, "About Stylize3D",
                      "Stylize3D — stylize and process 3D surface meshes.\n\n"
                      "In this app: cubic stylization, shape analogies, neural subdivision, "
-                     "smoothing, surface multigrid and spectral coarsening; Paparazzi image "
-                     "filters and parametric adversaries run from the command line "
-                     "(stylize3d paparazzi / adversary). After one PhD thesis on data-driven "
+                     "smoothing, surface multigrid, spectral coarsening, Paparazzi image "
+                     "filters and adversarial lighting; each also runs from the command line "
+                     "(stylize3d --help). After one PhD thesis on data-driven "
                      "geometric stylization and scalable geometry processing.\n\n"
                      f"Version {__version__}.")
 

@@ -237,6 +237,28 @@ def test_run_stays_visible_at_1024x700_and_rare_fields_fold_away(window, dialogs
     assert form.params().per_axis
 
 
+def test_panel_tabs_scroll_and_leave_the_3d_view_half_the_window(window, dialogs, qtbot):
+    """Eight panel tabs side by side are ~820 px wide: the tab bar scrolls instead of widening
+    the dock, so at 1280 x 800 the 3D view keeps at least half of the window."""
+    from PySide6.QtWidgets import QTabBar
+
+    window.resize(1280, 800)
+    qtbot.wait(100)
+    assert window.open_path(SAMPLES / "blob.obj")
+    bars = [b for b in window.findChildren(QTabBar) if b.count() == len(window.panels)]
+    assert bars and all(b.usesScrollButtons() for b in bars)
+    titles = [bars[0].tabText(i) for i in range(bars[0].count())]
+    assert set(titles) == set(window.panels)  # full titles, none elided
+    shown = window.viewport.plotter.interactor.width()
+    print(f"\n3D view {shown} px of a {window.width()} px window")
+    assert shown >= 0.5 * window.width()
+    # the last tab is still reachable: raising it shows it
+    last = window.panels[titles[-1]]
+    last.raise_()
+    qtbot.waitUntil(last.is_shown)
+    assert not last.run_button.visibleRegion().isEmpty()
+
+
 # -- defect 6: wording ------------------------------------------------------------------------------
 def test_counts_and_articles_read_right(window, dialogs, qtbot):
     from app.widgets import article, plural
