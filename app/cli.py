@@ -726,6 +726,19 @@ def cmd_study(args: argparse.Namespace) -> int:
     return 0 if not c.get("mismatch") and not c.get("failed") else 1
 
 
+def _lighting_arg(value: str):
+    """``--lighting``: a published environment's name, or a lighting .json file."""
+    from algorithms.adversarial.lighting_io import read_lighting
+    from algorithms.render.sh import ENVIRONMENTS
+
+    if value in ENVIRONMENTS:
+        return value
+    if value.lower().endswith(".json") or Path(value).exists():
+        return read_lighting(value)
+    raise ParameterError(f"Unknown lighting '{value}': use one of {', '.join(ENVIRONMENTS)} or "
+                         "a lighting .json file.")
+
+
 def cmd_adversary(args: argparse.Namespace) -> int:
     """Parametric adversary (thesis ch. 3): perturb the SH lighting or the vertices within an
     L-infinity ball until an image classifier misclassifies the views; random baseline of the
@@ -736,8 +749,8 @@ def cmd_adversary(args: argparse.Namespace) -> int:
                                         evaluate, find_recognized_views, load_classifier,
                                         orbit_cameras, prepare_scene, random_perturbation,
                                         resolve_label, short_name)
+    from algorithms.adversarial.lighting_io import write_lighting
     from algorithms.mesh import write_mesh
-    from algorithms.mesh.io import atomic_write
     from algorithms.render.sh import read_mesh_colors
 
     t0 = time.perf_counter()
@@ -754,7 +767,7 @@ def cmd_adversary(args: argparse.Namespace) -> int:
     data, _ = _read_valid(args.mesh, clean=args.clean, quiet=args.json)
     colours = read_mesh_colors(args.mesh, len(data.V), len(data.F))
     albedo = args.color if colours is None else colours[1]
-    scene = prepare_scene(data.V, data.F, albedo=albedo, lighting=args.lighting)
+    scene = prepare_scene(data.V, data.F, albedo=albedo, lighting=_lighting_arg(args.lighting))
     clf = load_classifier(args.classifier) if args.classifier else default_classifier()
     say = (lambda text: None) if args.json or args.quiet else (
         lambda text: print(text, file=sys.stderr, flush=True))
@@ -797,10 +810,7 @@ def cmd_adversary(args: argparse.Namespace) -> int:
         if params.mode == "geometry":
             write_mesh(args.output, result.V, data.F)
         else:
-            doc = {"format": "stylize3d spherical-harmonics lighting", "degree": 6,
-                   "order": "index l*l + l + m; columns R, G, B",
-                   "coefficients": result.lighting.tolist()}
-            atomic_write(args.output, lambda fh: fh.write(json.dumps(doc, indent=1).encode()))
+            write_lighting(args.output, result.lighting)
     report = {"views": [v.to_dict() for v in result.views],
               "success_rate": result.success_rate,
               "random_success_rate": float(np.mean(random_success)),
@@ -1011,8 +1021,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--classifier", metavar="FILE",
                    help="a TorchScript model or EfficientNet-lite0 weights (default: the "
                         "installed ImageNet EfficientNet-lite0)")
-    s.add_argument("--lighting", default="Grace Cathedral", choices=list(ENVIRONMENTS),
-                   help="the starting environment (Ramamoorthi & Hanrahan 2001)")
+    s.add_argument("--lighting", default="Grace Cathedral", metavar="NAME|FILE.json",
+                   help="the starting lighting: an environment of Ramamoorthi & Hanrahan 2001 ("
+                        + ", ".join(ENVIRONMENTS) + ") or a lighting .json file (written by "
+                        "-o of a lighting attack or saved by the app's panel). "
+                        "Default: Grace Cathedral.")
     s.add_argument("--color", type=float, nargs=3, default=(0.7, 0.7, 0.7), metavar=("R", "G", "B"),
                    help="surface colour when the mesh file has none. Default: 0.7 0.7 0.7.")
     s.add_argument("-o", "--output",

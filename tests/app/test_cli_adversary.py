@@ -38,6 +38,20 @@ def test_lighting_attack_json_and_lighting_file(mug, tmp_path, capsys):
     assert 0 < rep["norm"] <= 0.1 + 1e-12
     U = np.array(json.loads(out.read_text())["coefficients"])
     assert U.shape == (49, 3)
+    # the written lighting starts the next attack (--lighting FILE.json); 0 iterations: the
+    # views are classified under exactly that lighting
+    from algorithms.adversarial.lighting_io import read_lighting
+
+    np.testing.assert_array_equal(read_lighting(out), U)
+    code = main(["adversary", str(mug), "--mode", "lighting", "--views", "1", "--iterations", "1",
+                 "--lighting", str(out), "--label", "coffee mug", "--json"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert main(["adversary", str(mug), "--lighting", "Moonlight"]) == 5
+    err = capsys.readouterr().err
+    assert "Grace Cathedral" in err and "Traceback" not in err
+    assert main(["adversary", str(mug), "--lighting", str(tmp_path / "missing.json")]) == 2
+    assert "does not exist" in capsys.readouterr().err
 
 
 def test_geometry_attack_writes_a_mesh_with_the_same_vertex_order(mug, tmp_path, capsys):
