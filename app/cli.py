@@ -611,13 +611,16 @@ def cmd_subdivide_train(args: argparse.Namespace) -> int:
            "coarse_meshes": len(samples), "epochs": len(trainer.history),
            "best_epoch": trainer.best_epoch, "best_validation_loss": float(trainer.best_loss),
            "final_loss": trainer.history[-1]["loss"] if trainer.history else None,
+           "stopped_early": bool(trainer.stopped_early),
            "seconds_data": t_data, "seconds_training": t_train,
            "seconds_per_epoch": float(np.median(spe)) if spe else None}
     if args.json:
         _print_json(out)
     else:
+        stopped = (f" (stopped early: no progress in {tparams.patience} epochs)"
+                   if trainer.stopped_early else "")
         print(f"Wrote {args.output}: {len(samples)} coarse meshes ({t_data:.0f} s), "
-              f"{len(trainer.history)} epochs ({t_train:.0f} s); best validation loss "
+              f"{len(trainer.history)} epochs{stopped} ({t_train:.0f} s); best validation loss "
               f"{trainer.best_loss:.4g} at epoch {trainer.best_epoch}.")
     return 0
 

@@ -36,6 +36,7 @@ def weights(tmp_path_factory):
     out = json.loads(r.stdout)
     assert out["coarse_meshes"] == 2 and out["epochs"] == 2
     assert out["best_epoch"] in (1, 2) and out["best_validation_loss"] > 0
+    assert out["stopped_early"] is False and out["seconds_data"] >= 0
     assert "Traceback" not in r.stderr
     return w
 
