@@ -137,50 +137,121 @@ def speed():
           f"{t_attack / max(res.iterations, 1) * 1e3:.0f} ms per iteration")
 
 
-def acceptance(n_views: int, iterations: int):
-    print(f"\n== success rates: {len(SUBJECTS)} shapes x {n_views} recognized views, "
-          f"<= {iterations} iterations ==")
+def _views_fooled(scene, clf, k, azimuths, mode, x):
+    """How many of the views ``azimuths`` no longer see class ``k`` with the perturbed
+    lighting / unit-box vertices ``x``."""
+    if not len(azimuths):
+        return 0
+    top, _ = evaluate(scene, clf, orbit_cameras(list(azimuths)),
+                      **({"lighting": x} if mode == "lighting" else {"V": x}))
+    return int((top != k).sum())
+
+
+def acceptance(n_views: int, iterations: int, names=None):
+    """Fig. 3.10: single-view attacks against the random baseline, per shape and in total."""
+    names = list(SUBJECTS) if names is None else names
+    print(f"\n== success rates (Fig. 3.10): {len(names)} shapes x {n_views} recognized views "
+          f"(the most confident of 24 azimuths), <= {iterations} iterations, step 0.05 ==")
     clf = default_classifier()
     totals = {m: [0, 0, 0] for m in ("lighting", "geometry")}   # adversarial, random, views
-    for name, make in SUBJECTS.items():
-        V, F, A = make()
+    better = {m: [] for m in totals}
+    for name in names:
+        V, F, A = SUBJECTS[name]()
         scene = prepare_scene(V, F, albedo=A)
         k = resolve_label(name, clf.class_names)
-        views = find_recognized_views(scene, clf, name, candidates=24)[:n_views]
-        print(f"{name}: {len(V)} vertices, {len(F)} faces; recognized in "
-              f"{len(find_recognized_views(scene, clf, name, candidates=24))}/24 azimuths, "
-              f"using {len(views)}")
+        recognized = find_recognized_views(scene, clf, name, candidates=24)
+        views = recognized[:n_views]
+        print(f"{name}: {len(V)} vertices, {len(F)} faces; recognized in {len(recognized)}/24 "
+              f"azimuths, using {len(views)} (confidence {views[-1][1]:.2f}-{views[0][1]:.2f})")
         for mode in ("lighting", "geometry"):
             adv = rnd = 0
+            its = []
             t = time.perf_counter()
             for i, (az, p) in enumerate(views):
                 cam = orbit_cameras([az])
                 res = attack(scene, clf, cam, AdversaryParams(mode=mode, iterations=iterations),
                              decrease=[k])
                 adv += res.views[0].success
+                its.append(res.iterations)
                 x = random_perturbation(scene, mode, DEFAULT_RADIUS[mode], seed=i)
-                top, _ = evaluate(scene, clf, cam, **({"lighting": x} if mode == "lighting"
-                                                      else {"V": x}))
-                rnd += int(top[0] != k)
+                rnd += _views_fooled(scene, clf, k, [az], mode, x)
             n = len(views)
             totals[mode][0] += adv
             totals[mode][1] += rnd
             totals[mode][2] += n
+            if adv > rnd:
+                better[mode].append(name)
             print(f"  {mode:8s} L-inf {DEFAULT_RADIUS[mode]}: adversarial {adv}/{n}, random "
-                  f"{rnd}/{n}  ({time.perf_counter() - t:.0f} s)", flush=True)
+                  f"{rnd}/{n}; iterations {its}  ({time.perf_counter() - t:.0f} s)", flush=True)
     for mode, (adv, rnd, n) in totals.items():
         print(f"TOTAL {mode:8s}: adversarial success {100 * adv / n:.1f} % ({adv}/{n}), random "
-              f"{100 * rnd / n:.1f} % ({rnd}/{n})")
+              f"{100 * rnd / n:.1f} % ({rnd}/{n}); adversarial > random on "
+              f"{len(better[mode])}/{len(names)} shapes: {', '.join(better[mode])}")
+
+
+def unseen_views(iterations: int, subsets=(1, 5), names=None, seed: int = 0):
+    """Table 3.4: attack a random subset of a shape's recognized views (one adversary for the
+    subset, Eq. 3.5), then evaluate the adversarial lighting / shape on the shape's *other*
+    recognized views (unseen by the attack); a random perturbation of the same norm on the same
+    unseen views is the baseline. #views 0 (no attack) fools no recognized view by definition."""
+    names = list(SUBJECTS) if names is None else names
+    print(f"\n== unseen views (Table 3.4): attack #views random recognized views, evaluate on "
+          f"the other recognized views of 24 azimuths, <= {iterations} iterations ==")
+    clf = default_classifier()
+    rng = np.random.default_rng(seed)
+    totals = {(m, s): [0, 0, 0, 0, 0] for m in ("lighting", "geometry") for s in subsets}
+    for name in names:
+        V, F, A = SUBJECTS[name]()
+        scene = prepare_scene(V, F, albedo=A)
+        k = resolve_label(name, clf.class_names)
+        az = np.array(sorted(a for a, _ in find_recognized_views(scene, clf, name,
+                                                                  candidates=24)))
+        for s in subsets:
+            if len(az) <= s:
+                print(f"{name}: only {len(az)} recognized views, none unseen by a {s}-view "
+                      f"attack")
+                continue
+            pick = np.zeros(len(az), bool)
+            pick[rng.choice(len(az), s, replace=False)] = True
+            seen, unseen = az[pick], az[~pick]
+            for mode in ("lighting", "geometry"):
+                t = time.perf_counter()
+                res = attack(scene, clf, orbit_cameras(list(seen)),
+                             AdversaryParams(mode=mode, iterations=iterations), decrease=k)
+                x = res.lighting if mode == "lighting" else (res.V - scene.center) / scene.scale
+                fooled = _views_fooled(scene, clf, k, unseen, mode, x)
+                xr = random_perturbation(scene, mode, DEFAULT_RADIUS[mode], seed=seed)
+                rnd = _views_fooled(scene, clf, k, unseen, mode, xr)
+                ok = sum(v.success for v in res.views)
+                tot = totals[(mode, s)]
+                for j, v in enumerate((ok, s, fooled, rnd, len(unseen))):
+                    tot[j] += v
+                print(f"{name}: {mode:8s} {s} view(s) {', '.join(f'{a:.0f}' for a in seen)} "
+                      f"(fooled {ok}/{s} in {res.iterations} iterations) -> unseen views fooled "
+                      f"{fooled}/{len(unseen)}, random {rnd}/{len(unseen)}  "
+                      f"({time.perf_counter() - t:.0f} s)", flush=True)
+    print("TOTAL unseen-view success (thesis Table 3.4: lighting 0/29.4/64.2 %, geometry "
+          "0/0.6/3.6 % for 0/1/5 views):")
+    for (mode, s), (ok, n_seen, fooled, rnd, n) in totals.items():
+        if n:
+            print(f"  {mode:8s} #views {s}: unseen {100 * fooled / n:.1f} % ({fooled}/{n}), "
+                  f"random {100 * rnd / n:.1f} % ({rnd}/{n}); attacked views fooled "
+                  f"{ok}/{n_seen}")
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="2 views, 5 iterations")
     ap.add_argument("--skip-speed", action="store_true")
+    ap.add_argument("--skip-unseen", action="store_true")
+    ap.add_argument("--shapes", nargs="+", metavar="CLASS", choices=list(SUBJECTS),
+                    help="subjects (ImageNet class names; default: all of shapes.SUBJECTS)")
     args = ap.parse_args()
     if not args.skip_speed:
         speed()
-    acceptance(2 if args.quick else 8, 5 if args.quick else 30)
+    acceptance(2 if args.quick else 8, 5 if args.quick else 30, args.shapes)
+    if not args.skip_unseen:
+        unseen_views(5 if args.quick else 30, names=args.shapes)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["revolve", "orange", "coffee_mug", "wine_bottle", "tennis_ball", "basketball",
-           "flowerpot", "lemon", "SUBJECTS", "subject"]
+           "flowerpot", "lemon", "golf_ball", "candle", "jack_o_lantern", "water_bottle",
+           "SUBJECTS", "subject"]
 
 
 def revolve(r, y, segments: int = 64):
@@ -148,12 +149,79 @@ def lemon():
     return V, F, A
 
 
-#: ImageNet class name -> model, for the models EfficientNet-lite0 recognizes top-1 from 30-degree
-#: views under Grace Cathedral lighting (16 azimuths: coffee mug 16, bucket 16, orange 10, wine
-#: bottle 8). The flower pot is seen as a bucket (0.9), so it stands for "bucket". The tennis
-#: ball (3/16), basketball (3/16) and lemon (0/16: "golf ball") were not recognized enough.
-SUBJECTS = {"coffee mug": coffee_mug, "bucket": flowerpot, "orange": orange,
-            "wine bottle": wine_bottle}
+def _combine(*parts):
+    """One ``(V, F, albedo)`` from several."""
+    Vs, Fs, As, offset = [], [], [], 0
+    for V, F, A in parts:
+        Vs.append(V)
+        Fs.append(F + offset)
+        As.append(A)
+        offset += len(V)
+    return np.concatenate(Vs), np.concatenate(Fs), np.concatenate(As)
+
+
+def _paint(F, colour):
+    return np.tile(np.asarray(colour, float), (len(F), 1))
+
+
+def golf_ball():
+    """A golf ball: a white sphere, its surface randomly dimpled (1 % of the radius)."""
+    V, F, _ = _sphere(bump=0.01, seed=2)
+    return V, F, _paint(F, [0.96, 0.96, 0.96])
+
+
+def candle():
+    """A candle: a cream wax cylinder with a black wick and a yellow flame."""
+    V, F, _ = revolve([0.0, 0.25, 0.25, 0.0], [0.0, 0.0, 1.3, 1.3], 48)
+    W, FW, _ = revolve([0.0, 0.015, 0.015, 0.0], [1.3, 1.3, 1.42, 1.42], 8)
+    th = np.linspace(0.1, np.pi - 0.1, 16)
+    r = np.concatenate([[0.0], 0.054 * np.sin(th) * (1 + np.cos(th)), [0.0]])
+    y = np.concatenate([[1.38], 1.38 + 0.18 * (1 - np.cos(th)), [1.75]])
+    L, FL, _ = revolve(r, y, 16)
+    return _combine((V, F, _paint(F, [0.95, 0.93, 0.85])), (W, FW, _paint(FW, [0.05] * 3)),
+                    (L, FL, _paint(FL, [1.0, 0.85, 0.3])))
+
+
+def jack_o_lantern():
+    """A jack-o'-lantern: a ribbed orange pumpkin (10 lobes) with a stem and a lit face (two
+    eyes, a mouth) carved on both sides, so that it is recognized from both (front only: 12 of
+    24 azimuths recognized, both sides: 9 but at higher confidence, 0.33-0.9)."""
+    V, F, _ = _sphere(n_lat=48, segments=64)
+    V[:, 1] *= 0.78
+    phi = np.arctan2(-V[:, 2], V[:, 0])
+    V[:, [0, 2]] *= (1 + 0.05 * np.cos(10 * phi))[:, None]
+    A = _paint(F, [0.95, 0.45, 0.02])
+    C = V[F].mean(1)
+    x, y = C[:, 0], C[:, 1]
+
+    def eye(cx):
+        return (y > 0.12) & (y < 0.38) & (np.abs(x - cx) < 0.16 - 0.33 * (y - 0.12))
+
+    mouth = (np.abs(x) < 0.5) & (y < -0.08) & (y > -0.28 - 0.12 * (1 - (x / 0.5) ** 2))
+    A[(np.abs(C[:, 2]) > 0.3) & (eye(0.3) | eye(-0.3) | mouth)] = [1.0, 0.8, 0.1]
+    S, FS, _ = revolve([0.0, 0.08, 0.06, 0.0], [0.7, 0.7, 0.95, 0.95], 12)
+    return _combine((V, F, A), (S, FS, _paint(FS, [0.3, 0.35, 0.1])))
+
+
+def water_bottle():
+    """A plastic water bottle: pale blue, ribbed waist, a blue label and a blue cap."""
+    r = [0.0, 0.32, 0.33, 0.33, 0.3, 0.33, 0.33, 0.25, 0.13, 0.13, 0.14, 0.14, 0.0]
+    y = [0.0, 0.0, 0.03, 0.5, 0.6, 0.7, 1.3, 1.6, 1.75, 1.8, 1.8, 1.95, 1.95]
+    V, F, _ = revolve(r, y, 64)
+    A = _paint(F, [0.6, 0.75, 0.9])
+    Cy = V[F].mean(1)[:, 1]
+    A[(Cy > 0.8) & (Cy < 1.2)] = [0.15, 0.35, 0.8]
+    A[Cy > 1.79] = [0.1, 0.3, 0.85]
+    return V, F, A
+
+
+#: ImageNet class name -> model: every model EfficientNet-lite0 recognizes top-1 from at least 8
+#: of 24 azimuths at 30 degrees elevation under Grace Cathedral lighting (see the module
+#: docstring for the counts and the attack rates). The flower pot is seen as a bucket, so it
+#: stands for "bucket".
+SUBJECTS = {"orange": orange, "wine bottle": wine_bottle, "jack-o'-lantern": jack_o_lantern,
+            "golf ball": golf_ball, "candle": candle, "coffee mug": coffee_mug,
+            "bucket": flowerpot, "water bottle": water_bottle}
 
 
 def subject(name: str):
