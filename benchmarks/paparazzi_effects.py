@@ -8,8 +8,12 @@ For each mesh (tests/data; Loop-subdivided until it has at least 5,000 vertices,
 13,234) and each filter, runs ``Paparazzi`` with ``PaparazziParams(iterations=N)`` and the
 filter's default Params -- exactly what ``stylize3d paparazzi MESH -o OUT --filter NAME`` builds
 from its flags' defaults -- and prints one row: vertices in/out, seconds, the filter's measure
-before -> after and whether it moved the expected way, and the output checks (2-manifold, same
-Euler characteristic and boundary-loop count, libigl self-intersecting pairs).
+before -> after and whether it moved the expected way, the output checks (2-manifold, same
+Euler characteristic and boundary-loop count, libigl self-intersecting pairs of the input and of
+the output, and how many of the output's are new: farther than 4 edge lengths from the input's
+own), and how often the surface crossed itself on the way (remeshings, those rejected, retries of
+remeshings that crossed it; rollbacks, the vertices held still after them and the learning rate's
+factor at the end (1 = never halved); see algorithms/paparazzi/optimize.py).
 
 Measures (algorithms/paparazzi/measures.py):
   quantize      area fraction of faces whose normal is within 15 deg of the 20 palette normals (up)
@@ -113,17 +117,23 @@ def main() -> int:
                 pass
             sec = time.perf_counter() - t
             Vo, Fo = last.V, last.F
+            m = last.metrics
             label, before, sign = measure(name, run, V, F)
             _, after, _ = measure(name, run, Vo, Fo)
             ok = (after - before) * sign > 0
             same = (euler_characteristic(Fo), len(boundary_loops(Fo))) == topo
             crossings = count_self_intersections(Vo, Fo)
             crossings_in = run.input_intersections
+            new = run.new_self_intersections(Vo, Fo) if crossings else 0
             print(f"{mesh:<16}{name:<13}{len(V):>7}{len(Vo):>7}{sec:>8.1f}  {label:<10}"
                   f"{before:>10.4g} -> {after:<10.4g}{'yes' if ok else 'NO':<4}"
                   f"{'yes' if is_manifold(Fo) else 'NO':<9}{'same' if same else 'CHANGED':<9}"
-                  f"{crossings_in:>12} -> {crossings:<3}  (remeshes {int(last.metrics['remeshes'])}, rollbacks "
-                  f"{int(last.metrics['rollbacks'])})", flush=True)
+                  f"{crossings_in:>12} -> {crossings:<3} ({new} new)  "
+                  f"(remeshes {int(m['remeshes'])}, "
+                  f"rejected {int(m['remesh_rejected'])}, retries {int(m['remesh_retries'])}; "
+                  f"rollbacks {int(m['rollbacks'])}, held {int(m['held_vertices'])} V; "
+                  f"step x{m['learning_rate'] / (0.2 * run.learning_rate):.3g})",
+                  flush=True)
     return 0
 
 
