@@ -560,6 +560,9 @@ class PaparazziPanel(MethodPanel):
         if F is not None:
             extra.append(f"{len(step.V):,} vertices, {len(F):,} triangles")
         if m.get("rollbacks"):
-            extra.append(plural(int(m["rollbacks"]), "self-intersection rollback"))
+            held = int(m.get("held_vertices") or 0)
+            extra.append(plural(int(m["rollbacks"]), "self-intersection rollback")
+                         + (f" ({plural(held, 'vertex', 'vertices')} near the crossings held "
+                            "still)" if held else ""))
         if extra:
             self.status_label.setText(self.status_label.text() + "\n" + "; ".join(extra) + ".")
