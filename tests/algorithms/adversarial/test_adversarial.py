@@ -176,3 +176,15 @@ def test_a_view_that_does_not_see_the_shape_is_refused(mug, clf):
     away = look_at((0, 0, 3), (0, 0, 6), width=1.5, resolution=448)
     with pytest.raises(ParameterError, match="not visible from view 1"):
         next(attack_iter(mug, clf, [away]))
+
+
+@pytest.mark.parametrize("name", sorted(SUBJECTS))
+def test_subjects_are_valid_coloured_meshes(name):
+    V, F, A = SUBJECTS[name]()
+    assert V.ndim == 2 and V.shape[1] == 3 and np.isfinite(V).all()
+    assert F.dtype == np.int64 and F.shape[1] == 3 and F.min() >= 0 and F.max() < len(V)
+    assert A.shape == (len(F), 3) and A.min() >= 0 and A.max() <= 1
+    area = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    assert area.min() > 0                                   # no degenerate triangles
+    scene = prepare_scene(V, F, albedo=A)
+    assert np.isclose(np.ptp(scene.V, axis=0).max(), 1.0)
