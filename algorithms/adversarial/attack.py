@@ -23,7 +23,10 @@ scaled by the ratio of the balls (0.002 / 0.1), a choice: the thesis gives no ge
 ``direction="sign"`` (an option) steps along the sign of the gradient instead (steepest descent
 for the L-infinity norm, as in PGD). The attack stops as soon as every attacked view is fooled
 (top-1 differs from ``L_d``, or equals the view's target) or after ``iterations`` (<= 30 in the
-thesis) steps.
+thesis) steps. (App. 3.7.6 says "stepsize 0.05 along the direction of lighting gradients",
+which could also be read as a normalized gradient; we keep Eq. 3.3's ``gamma dC/dx``. Where the
+lighting attack fails -- confidently recognized views, :mod:`.shapes` -- this step already takes
+the light to the ball's boundary within the 30 iterations, and sign steps do no better.)
 
 Random baseline (Fig. 3.10): a perturbation of the same norm, ``radius * sign(N(0, 1))`` per
 parameter (a corner of the ball: the largest random perturbation the ball allows), evaluated on
