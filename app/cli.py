@@ -1275,7 +1275,9 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
             "new_self_intersecting_pairs": new_crossings,
             "self_intersections": crossings > 0,
             "remeshes": int(last.metrics["remeshes"]),
-            "rollbacks": int(last.metrics["rollbacks"])})
+            "rollbacks": int(last.metrics["rollbacks"]),
+            **{k: int(last.metrics.get(k, 0))
+               for k in ("remesh_rejected", "remesh_retries", "held_vertices")}})
     else:
         print(f"Paparazzi '{spec.name}' on {args.mesh}: {it} iterations in {seconds:.1f} s; "
               f"monitor energy {last.metrics['initial_monitor_energy']:.4g} -> "

@@ -9,7 +9,7 @@ CLI's defaults makes the monitor view's Gram (style) loss fall.
    style-image network (384 px inside) at 128 px, and the guided filter at 128 px as the peer
    (ratios printed).
 2. A run with ``stylize3d paparazzi IN -o OUT --filter neural-style`` defaults (1000 iterations,
-   128 px, view width 0.1, sigma 0.02, lr 2e-4, remesh every 30). Every 100 iterations: the Gram
+   128 px, view width 0.1, sigma 0.02, lr 1e-3, remesh every 30). Every 100 iterations: the Gram
    loss (:func:`gram_style_loss`) of the fixed monitor view against its own stylization
    ``f(R)``, against the stylization of the *first* monitor image ``f(R0)``, and, as a control,
    against another built-in style's stylization; the optimizer's monitor energy
@@ -124,7 +124,7 @@ def main() -> None:
                     help="Loop-subdivide to at least this many vertices (the CLI's default: 0)")
     ap.add_argument("--view-width", type=float, default=None, help="default: the filter's (0.1)")
     ap.add_argument("--sigma", type=float, default=None, help="default: the filter's (0.02)")
-    ap.add_argument("--learning-rate", type=float, default=None, help="default: the CLI's (2e-4)")
+    ap.add_argument("--learning-rate", type=float, default=None, help="default: the filter's (1e-3)")
     ap.add_argument("--repeat", type=int, default=15)
     ap.add_argument("--skip-run", action="store_true")
     a = ap.parse_args()

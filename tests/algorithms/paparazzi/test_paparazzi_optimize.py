@@ -264,3 +264,22 @@ def test_an_input_that_intersects_itself_may_keep_but_not_add_intersections():
     moved[first] -= [0.0, 1.0, 0.0]
     assert count_self_intersections(moved, last.F) > 0
     assert run.new_self_intersections(moved, last.F) > 0
+
+
+def test_guided_run_on_camelhead_finishes_despite_its_near_touching_lips():
+    """Regression (issue 12): camelhead's lips are a few % of an edge apart, so remeshing there
+    crosses the surface; with the CLI's defaults (1000 iterations) every remeshing used to be
+    rejected and the halved steps stopped the run. Crossings are now handled where they happen
+    (retried remeshing with the crossing's neighbourhood held, local rollback)."""
+    m = read_mesh(shared_mesh("camelhead.off"))
+    run = Paparazzi(m.V, m.F, "guided", None, PaparazziParams(iterations=1000))
+    last = run_to_end(run.steps())
+    mt = last.metrics
+    print(f"\ncamelhead guided: {mt['remeshes']} remeshes, {mt['remesh_rejected']} rejected, "
+          f"{mt['remesh_retries']} retries, {mt['rollbacks']} rollbacks, "
+          f"{mt['held_vertices']} vertices held")
+    assert mt["remeshes"] >= 20 and mt["remesh_rejected"] <= 3
+    assert is_manifold(last.F)
+    assert euler_characteristic(last.F) == euler_characteristic(m.F)
+    assert len(boundary_loops(last.F)) == len(boundary_loops(m.F))
+    assert run.new_self_intersections(last.V, last.F) == 0
