@@ -21,6 +21,16 @@ def open_panel(window, name="hand_lowres.obj"):
     return panel
 
 
+def _choose_unreadable_file(panel, dialogs, tmp_path, field):
+    """Pick a file that is not a picture for ``field``: a plain message says so."""
+    bad = tmp_path / "notes.png"
+    bad.write_text("not a picture")
+    dialogs.open_paths.append(str(bad))
+    panel._path_buttons[field].click()
+    assert dialogs.errors[-1][0] == "Cannot use this image"
+    assert "cannot be read" in dialogs.errors[-1][1] and "PNG or JPEG" in dialogs.errors[-1][1]
+
+
 def short_run(panel, iterations=30, monitor_every=5):
     p = panel.form.params()
     panel.form.set_params(p.__class__(iterations=iterations, resolution=64, remesh_every=10,
@@ -99,12 +109,7 @@ def test_target_image_that_cannot_be_used_changes_nothing(window, dialogs, qtbot
     panel.set_filter("target-image")
     assert "image" in panel._path_edits
     # a file that is not an image, and a non-square picture: plain messages, nothing changes
-    bad = tmp_path / "notes.png"
-    bad.write_text("not a picture")
-    dialogs.open_paths.append(str(bad))
-    panel._path_buttons["image"].click()
-    assert dialogs.errors[-1][0] == "Cannot use this image"
-    assert "cannot be read" in dialogs.errors[-1][1] and "PNG or JPEG" in dialogs.errors[-1][1]
+    _choose_unreadable_file(panel, dialogs, tmp_path, "image")
     wide = tmp_path / "wide.png"
     Image.new("RGB", (40, 20), (200, 10, 10)).save(wide)
     assert not panel.set_filter_file("image", str(wide))
@@ -145,12 +150,7 @@ def test_neural_style_takes_a_painting_of_any_shape_and_runs_without_one(window,
     assert "400 × 200 pixels, used as 256 × 256 grey" in panel.status_label.text()
     assert panel.filter_params().style_image == str(wide)
     # files it cannot use still get plain messages, and the chosen painting stays
-    bad = tmp_path / "notes.png"
-    bad.write_text("not a picture")
-    dialogs.open_paths.append(str(bad))
-    panel._path_buttons["style_image"].click()
-    assert dialogs.errors[-1][0] == "Cannot use this image"
-    assert "cannot be read" in dialogs.errors[-1][1] and "PNG or JPEG" in dialogs.errors[-1][1]
+    _choose_unreadable_file(panel, dialogs, tmp_path, "style_image")
     tiny = tmp_path / "tiny.png"
     Image.new("L", (10, 5), 0).save(tiny)
     assert not panel.set_filter_file("style_image", str(tiny))
