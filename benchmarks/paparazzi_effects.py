@@ -17,7 +17,9 @@ factor at the end (1 = never halved); see algorithms/paparazzi/optimize.py).
 
 Measures (algorithms/paparazzi/measures.py):
   quantize      area fraction of faces whose normal is within 15 deg of the 20 palette normals (up)
-  slic, l0      area fraction of faces whose dihedral angles to all neighbours are < 3 deg (up)
+  slic, l0      area fraction of faces whose dihedral angles to all neighbours are < 3 deg (up);
+                also printed: flat1, the share of the interior edge length along which the
+                two faces meet at < 1 deg (up; patches a few triangles wide count there too)
   guided        bending energy sum |L V|^2 / M (discrete Willmore energy; down)
   neural-style  Gram (style) loss between the monitor view and its stylization (down)
   identity      (--filters identity) the control run of the guided row: f(R) = R, so the
@@ -70,6 +72,15 @@ def measure(name, run, V, F):
     if name == "neural-style":
         return "gram", _gram_monitor(run, V, F), -1
     raise KeyError(name)
+
+
+def second_measure(name, V, F):
+    """The planar rows' second look (flat_edge_fraction), or None for the other filters."""
+    from algorithms.paparazzi.measures import flat_edge_fraction
+
+    if name in ("slic", "l0", "identity-planar"):
+        return "flat1", flat_edge_fraction(V, F)
+    return None
 
 
 def main() -> int:
@@ -125,6 +136,9 @@ def main() -> int:
             crossings = count_self_intersections(Vo, Fo)
             crossings_in = run.input_intersections
             new = run.new_self_intersections(Vo, Fo) if crossings else 0
+            second = second_measure(name, V, F)
+            also = (f"  [{second[0]} {second[1]:.4g} -> {second_measure(name, Vo, Fo)[1]:.4g}]"
+                    if second else "")
             print(f"{mesh:<16}{name:<13}{len(V):>7}{len(Vo):>7}{sec:>8.1f}  {label:<10}"
                   f"{before:>10.4g} -> {after:<10.4g}{'yes' if ok else 'NO':<4}"
                   f"{'yes' if is_manifold(Fo) else 'NO':<9}{'same' if same else 'CHANGED':<9}"
@@ -132,7 +146,7 @@ def main() -> int:
                   f"(remeshes {int(m['remeshes'])}, "
                   f"rejected {int(m['remesh_rejected'])}, retries {int(m['remesh_retries'])}; "
                   f"rollbacks {int(m['rollbacks'])}, held {int(m['held_vertices'])} V; "
-                  f"step x{m['learning_rate'] / (0.2 * run.learning_rate):.3g})",
+                  f"step x{m['learning_rate'] / (0.2 * run.learning_rate):.3g}){also}",
                   flush=True)
     return 0
 

@@ -129,6 +129,66 @@ def test_slic_paints_superpixels_with_their_mean_colour():
     assert out[mask].mean(0) == pytest.approx(img[mask].mean(0), abs=1e-9)  # means preserved
 
 
+def _normal_image(n=128):
+    """A smooth picture of normals (a sphere cap seen from above), as the renderer paints them."""
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) / n * 1.2 - 0.6
+    z = np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, None))
+    return (np.stack([x, y, z], -1) + 1.0) / 2.0
+
+
+def test_slic_superpixels_keep_their_size_whatever_share_of_the_view_the_shape_fills():
+    # the authors cut the whole picture into `segments` superpixels; a view in which the shape
+    # fills a third of the picture gets about a third as many, not `segments` smaller ones
+    spec = get_filter("slic")
+    img = _normal_image()
+    params = spec.params(segments=60)
+    full = np.ones(img.shape[:2], bool)
+    third = np.zeros(img.shape[:2], bool)
+    third[:, :43] = True
+    n_full = len(np.unique(spec.function(img, params, _ctx(full))[full].round(12), axis=0))
+    n_third = len(np.unique(spec.function(img, params, _ctx(third))[third].round(12), axis=0))
+    assert 40 <= n_full <= 80, n_full
+    assert 0.2 * n_full <= n_third <= 0.5 * n_full, (n_full, n_third)
+
+
+def test_slic_means_leave_the_background_out():
+    # a superpixel beside the silhouette is painted with the mean of its foreground pixels only
+    spec = get_filter("slic")
+    img = np.zeros((64, 64, 3))
+    mask = np.zeros((64, 64), bool)
+    mask[10:50, 5:40] = True
+    img[mask] = [0.25, 0.5, 0.75]
+    out = spec.function(img, spec.params(segments=30), _ctx(mask))
+    np.testing.assert_array_equal(out[mask], img[mask])
+    np.testing.assert_array_equal(out[~mask], img[~mask])
+
+
+def test_flat_edge_fraction_counts_the_edge_length_between_coplanar_faces():
+    from algorithms.mesh.primitives import grid
+    from algorithms.paparazzi.measures import flat_edge_fraction, planar_area_fraction
+
+    V, F = grid(4, 4)
+    assert flat_edge_fraction(V, F) == 1.0 and planar_area_fraction(V, F) == 1.0
+    # folded by 20 degrees along x = 0.5: the 4 edges on the fold (length 1 in all) are creases
+    Vf = V.copy()
+    Vf[:, 2] = np.tan(np.radians(20.0)) * np.clip(V[:, 0] - 0.5, 0.0, None)
+    edges = {}
+    for f in F:
+        for a, b in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0])):
+            edges[(min(a, b), max(a, b))] = edges.get((min(a, b), max(a, b)), 0) + 1
+    inner = np.array([e for e, n in edges.items() if n == 2])
+    total = np.linalg.norm(Vf[inner[:, 0]] - Vf[inner[:, 1]], axis=1).sum()
+    assert flat_edge_fraction(Vf, F) == pytest.approx(1.0 - 1.0 / total)
+    assert flat_edge_fraction(Vf, F, degrees=25.0) == 1.0
+    # the per-face measure drops every face with an edge on the fold
+    assert planar_area_fraction(Vf, F) < 0.9
+
+
+def test_slic_learning_rate_is_the_authors():
+    # 2e-4 roughened every test shape (docs/paparazzi.md, measured effects)
+    assert get_filter("slic").learning_rate == pytest.approx(6e-5)
+
+
 def test_read_image_plain_errors_grey_to_colour_and_resizing(tmp_path):
     from PIL import Image
 
