@@ -283,3 +283,34 @@ def test_guided_run_on_camelhead_finishes_despite_its_near_touching_lips():
     assert euler_characteristic(last.F) == euler_characteristic(m.F)
     assert len(boundary_loops(last.F)) == len(boundary_loops(m.F))
     assert run.new_self_intersections(last.V, last.F) == 0
+
+
+def test_piecewise_planar_filters_keep_creases_through_remeshing():
+    """FilterSpec.crease_angle: a filter that makes shapes piecewise planar (slic, l0: 45 deg)
+    has the remeshing keep edges sharper than that as creases; without it, remeshing
+    alone rounds a box's edges (measured: near-planar area 1 -> 0.21 without, 0.66 with; the
+    faces beside a crease are a large share of so coarse a box)."""
+    from algorithms.mesh.primitives import cube
+    from algorithms.paparazzi import planar_area_fraction
+    from algorithms.paparazzi.optimize import crease_edges
+
+    assert {get_filter(n).crease_angle for n in ("slic", "l0")} == {45.0}
+    assert {get_filter(n).crease_angle for n in ("guided", "quantize")} == {0.0}
+    V, F = cube(subdivisions=5)
+    assert len(crease_edges(V, F, 45.0)) == 12 * 6          # 12 edges of 6 segments
+    V = V * [3.0, 1.0, 1.0]    # a box of stretched triangles: the remeshing splits and flips
+    planar = {}
+    for angle in (0.0, 45.0):
+        name = f"test-identity-{int(angle)}"
+        register_filter(name, kind="iterative", crease_angle=angle)(
+            lambda image, params, ctx: image)
+        try:
+            last = run_to_end(paparazzi_iter(V, F, name, None, PaparazziParams(
+                iterations=31, resolution=32, remesh_every=30, monitor_every=0)))
+        finally:
+            unregister_filter(name)
+        assert last.metrics["remeshes"] == 1 and len(last.V) != len(V)
+        planar[angle] = planar_area_fraction(last.V, last.F)
+        print(f"\ncrease angle {angle}: planar share 1.0 -> {planar[angle]:.3f}, "
+              f"{len(crease_edges(last.V, last.F, 45.0))} crease edges")
+    assert planar[45.0] > 0.5 and planar[45.0] > planar[0.0] + 0.3
