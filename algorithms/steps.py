@@ -13,7 +13,8 @@ from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
-__all__ = ["Step", "run_to_end", "Cancelled", "with_progress", "isolated_iter", "IsolatedProcessError"]
+__all__ = ["Step", "run_to_end", "Cancelled", "with_progress", "isolated_iter",
+           "IsolatedProcessError"]
 
 
 @dataclass
@@ -154,6 +155,11 @@ def isolated_iter(gen_fn: Callable[..., Iterator], *args, poll_seconds: float = 
     """
     import multiprocessing as mp
 
+    def died() -> IsolatedProcessError:
+        proc.join(5)
+        return IsolatedProcessError(f"the computation's process ended without a result (exit "
+                                    f"code {proc.exitcode}); it may have run out of memory")
+
     ctx = mp.get_context("spawn")
     recv, send = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_isolated_main, args=(send, gen_fn, args, kwargs),
@@ -166,16 +172,11 @@ def isolated_iter(gen_fn: Callable[..., Iterator], *args, poll_seconds: float = 
                 if proc.is_alive():
                     continue
                 if not recv.poll(0):
-                    raise IsolatedProcessError(
-                        f"the computation's process ended without a result (exit code "
-                        f"{proc.exitcode}); it may have run out of memory")
+                    raise died()
             try:
                 kind, payload = recv.recv()
             except EOFError:
-                proc.join(5)
-                raise IsolatedProcessError(
-                    f"the computation's process ended without a result (exit code "
-                    f"{proc.exitcode}); it may have run out of memory") from None
+                raise died() from None
             if kind == "item":
                 yield payload
             elif kind == "return":

@@ -21,5 +21,6 @@ def main(argv: list[str] | None = None) -> int:
 if __name__ == "__main__":
     import multiprocessing
 
-    multiprocessing.freeze_support()  # child processes (algorithms.steps.isolated_iter) of a frozen app
+    # child processes (algorithms.steps.isolated_iter) of a frozen (PyInstaller) app
+    multiprocessing.freeze_support()
     sys.exit(main())

@@ -101,7 +101,8 @@ def main() -> int:
             planar = "planar" in control  # the L0 / SLIC rows' control: their remeshing too
             register_filter(control, kind="iterative", resolution=256 if planar else 128,
                             crease_angle=45.0 if planar else 0.0,
-                            description="control: the image itself")(lambda image, params, ctx: image)
+                            description="control: the image itself")(
+                lambda image, params, ctx: image)
 
     print(f"{'mesh':<16}{'filter':<13}{'V in':>7}{'V out':>7}{'sec':>8}  {'measure':<10}"
           f"{'before':>10} -> {'after':<10}{'ok':<4}{'manifold':<9}{'topology':<9}"

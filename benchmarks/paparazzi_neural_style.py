@@ -124,7 +124,8 @@ def main() -> None:
                     help="Loop-subdivide to at least this many vertices (the CLI's default: 0)")
     ap.add_argument("--view-width", type=float, default=None, help="default: the filter's (0.1)")
     ap.add_argument("--sigma", type=float, default=None, help="default: the filter's (0.02)")
-    ap.add_argument("--learning-rate", type=float, default=None, help="default: the filter's (1e-3)")
+    ap.add_argument("--learning-rate", type=float, default=None,
+                    help="default: the filter's (1e-3)")
     ap.add_argument("--repeat", type=int, default=15)
     ap.add_argument("--skip-run", action="store_true")
     a = ap.parse_args()

@@ -412,8 +412,8 @@ class SlicParams:
                                                        "lower ones follow colour more.")
 
 
-@register_filter("slic", kind="iterative", crease_angle=45.0, params=SlicParams, resolution=256, width=0.3,
-                 learning_rate=6e-5,
+@register_filter("slic", kind="iterative", params=SlicParams, resolution=256, width=0.3,
+                 learning_rate=6e-5, crease_angle=45.0,
                  description="SLIC superpixels: each superpixel takes its mean colour")
 def _slic(image, params: SlicParams, ctx: FilterContext):
     """SLIC superpixels of the foreground, each painted with its mean colour (thesis 414-418).

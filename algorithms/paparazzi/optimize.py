@@ -59,8 +59,8 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   comparing pair counts rejected every remeshing of camelhead, since resampling an existing
   intersection changes its pair count).
 * Learning rate: the thesis gives none; each filter has its own default (``FilterSpec.
-  learning_rate``: 2e-4, the guided filter 5e-5, slic 6e-5, neural-style 1e-3). NAdam's steps are about ``lr`` per coordinate
-  whatever the gradient's size, so where a filter's signal is weak (the self-guided filter with
+  learning_rate``: 2e-4, the guided filter 5e-5, slic 6e-5, neural-style 1e-3). NAdam's steps
+  are about ``lr`` per coordinate whatever the gradient's size, so where a filter's signal is weak (the self-guided filter with
   epsilon 1e-8 mostly removes the faceting of flat shading) a large step is mostly noise: on bob
   (5,344 V, 300 iterations) the bending energy goes 172 -> 191 at 2e-4, -> 173 at 1e-4 and
   -> 166 at 5e-5 (and -> 432 at 2e-4 without remeshing).
@@ -126,7 +126,8 @@ class PaparazziParams:
                                  log_scale=True, decimals=7,
                                  tooltip="NAdam step size (in units of the shape normalized to "
                                          "a cube of side 2). 0 = the filter's default (2e-4; "
-                                         "guided 5e-5, slic 6e-5, neural-style 1e-3). Larger moves faster but adds noise and "
+                                         "guided 5e-5, slic 6e-5, neural-style 1e-3). Larger "
+                                         "moves faster but adds noise and "
                                          "may need more self-intersection rollbacks.")
     sigma: float = param(0.0, label="Camera offset σ", minimum=0.0, maximum=1.0, decimals=3,
                          tooltip="Distance of the camera cage from the shape (shape in a cube of "
