@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..compiled import KernelModule
 from ..errors import InvalidMeshError, ParameterError, Stylize3DError
 from ..params import param
 from .data import check_manifold, normalization
@@ -206,6 +207,115 @@ def _mlp(torch, fin):
     return net.to(DTYPE_NAME == 'float64' and torch.float64 or torch.float32)
 
 
+_KERNELS = KernelModule("algorithms.subdivision.kernels")
+_FUSED = {}
+
+
+def compiled_kernels():
+    """The compiled half-flap kernels (:mod:`algorithms.subdivision.kernels`), or None."""
+    return _KERNELS.get()
+
+
+def set_compiled_kernels(enabled: bool) -> bool:
+    """Switch the compiled half-flap kernels on or off; returns the previous setting."""
+    return _KERNELS.set(enabled)
+
+
+def _fused(torch):
+    """PyTorch autograd Functions over the compiled kernels, or None without them.
+
+    ``Flap``: (V, level) -> (loc (H, 7, 3), R (H, 3, 3)), the differential coordinates, the
+    local frames and the flap vectors in them (kernels module docstring); ``SlotGather``:
+    (Z4 (n, 4, C), ijkl) -> sum_s Z4[ijkl[:, s], s]; ``Pool``: (out (H, C), R, dst, count) ->
+    (N, C), each flap's [R^T out[:3], out[3:]] averaged into its vertex or edge ``dst``. Each
+    forward is one compiled loop and so is each backward (no per-operation autograd graph)."""
+    kern = _KERNELS.get()
+    if kern is None:
+        return None
+    if "ns" in _FUSED:
+        return _FUSED["ns"]
+
+    def arr(t):
+        return np.ascontiguousarray(t.detach().numpy())
+
+    class Flap(torch.autograd.Function):
+        @staticmethod
+        def forward(ctx, V, lv):
+            Vn = arr(V)
+            ijkl, has_l = lv["ijkl"].numpy(), lv["has_l"].numpy()
+            D = np.empty_like(Vn)
+            kern.laplace(Vn, lv["nb_src"].numpy(), lv["nb_dst"].numpy(), lv["deg"].numpy(), D)
+            H = len(ijkl)
+            loc = np.empty((H, 7, 3), dtype=Vn.dtype)
+            R = np.empty((H, 3, 3), dtype=Vn.dtype)
+            kern.flap_forward(Vn, D, ijkl, has_l, loc, R)
+            ctx.save_for_backward(V)
+            ctx.D = D
+            ctx.lv = lv
+            return torch.from_numpy(loc), torch.from_numpy(R)
+
+        @staticmethod
+        def backward(ctx, gloc, gR):
+            (V,) = ctx.saved_tensors
+            lv = ctx.lv
+            Vn = arr(V)
+            H = len(lv["ijkl"])
+            gl = arr(gloc) if gloc is not None else np.zeros((H, 7, 3), Vn.dtype)
+            gr = arr(gR) if gR is not None else np.zeros((H, 3, 3), Vn.dtype)
+            gV = np.zeros_like(Vn)
+            gD = np.zeros_like(Vn)
+            kern.flap_backward(Vn, ctx.D, lv["ijkl"].numpy(), lv["has_l"].numpy(), gl, gr, gV,
+                               gD)
+            kern.laplace_backward(gD, lv["nb_src"].numpy(), lv["nb_dst"].numpy(),
+                                  lv["deg"].numpy(), gV)
+            return torch.from_numpy(gV), None
+
+    class Pool(torch.autograd.Function):
+        @staticmethod
+        def forward(ctx, out, R, dst, count):
+            o, Rn = arr(out), arr(R)
+            acc = np.empty((len(count), o.shape[1]), dtype=o.dtype)
+            inv = 1.0 / count.numpy()
+            kern.pool(o, Rn, dst.numpy(), inv, acc)
+            ctx.save_for_backward(out, R)
+            ctx.idx = (dst, inv)
+            return torch.from_numpy(acc)
+
+        @staticmethod
+        def backward(ctx, g):
+            out, R = ctx.saved_tensors
+            dst, inv = ctx.idx
+            o, Rn = arr(out), arr(R)
+            gout = np.empty_like(o)
+            gR = np.empty_like(Rn)
+            kern.pool_backward(o, Rn, dst.numpy(), inv, arr(g), gout, gR)
+            return torch.from_numpy(gout), torch.from_numpy(gR), None, None
+
+    class SlotGather(torch.autograd.Function):
+        @staticmethod
+        def forward(ctx, Z4, ijkl):
+            z = arr(Z4)
+            out = np.empty((len(ijkl), z.shape[2]), dtype=z.dtype)
+            kern.slot_gather_sum(z, ijkl.numpy(), out)
+            ctx.shape = z.shape
+            ctx.ijkl = ijkl
+            return torch.from_numpy(out)
+
+        @staticmethod
+        def backward(ctx, g):
+            gz = np.zeros(ctx.shape, dtype=g.numpy().dtype)
+            kern.slot_scatter_add(arr(g), ctx.ijkl.numpy(), gz)
+            return torch.from_numpy(gz), None
+
+    class NS:
+        pass
+
+    ns = NS()
+    ns.Flap, ns.Pool, ns.SlotGather = Flap, Pool, SlotGather
+    _FUSED["ns"] = ns
+    return ns
+
+
 def _normalize(torch, x):
     return x / torch.linalg.vector_norm(x, dim=1, keepdim=True).clamp_min(1e-12)
 
@@ -225,11 +335,17 @@ class SubdivisionNet:
     vectors of a half-flap are turned into its local frame by one batched product; the first
     layer of V and E is split into its geometric columns (applied per half-flap) and its feature
     columns, which are applied once per *vertex* and then gathered to the flaps (a vertex is in
-    ~24 half-flaps, so this saves most of the first layer's work).
+    ~24 half-flaps, so this saves most of the first layer's work). With Numba (the project's
+    kernel switch, :mod:`algorithms.compiled`) the differential coordinates, frames, flap
+    vectors, feature gathers and the averaging into vertices / edges run as compiled loops
+    with hand-written backward passes (:func:`_fused`, :mod:`algorithms.subdivision.kernels`;
+    tested against this PyTorch path and finite differences); ``fused = False`` on an instance
+    or ``set_compiled_kernels(False)`` selects the plain PyTorch path.
     """
 
     def __init__(self, seed: int | None = 0):
         torch = _torch()
+        self.fused = True  # use the compiled kernels where they are available
         if seed is not None:
             g = torch.random.fork_rng()
             g.__enter__()
@@ -261,8 +377,33 @@ class SubdivisionNet:
         acc = torch.zeros_like(V).index_add_(0, lv["nb_src"], V[lv["nb_dst"]])
         return V - acc / lv["deg"][:, None]
 
-    def _apply(self, torch, name, V, Z, lv):
-        """Outputs of module ``name`` on every half-flap: world displacement (H, 3), feature."""
+    def _pooled(self, torch, name, V, Z, lv, dst, count):
+        """Module ``name`` on every half-flap of level ``lv``, its outputs averaged into
+        ``dst`` (vertices or edges; ``count`` flaps each): (N, 32) = [world displacement,
+        feature]."""
+        fused = _fused(torch) if self.fused else None
+        if fused is None:
+            disp, feat = self._apply_torch(torch, name, V, Z, lv)
+            return torch.zeros(len(count), FEATURES, dtype=V.dtype).index_add_(
+                0, dst, torch.cat([disp, feat], dim=1)) / count
+        ijkl = lv["ijkl"]
+        loc, R = fused.Flap.apply(V, lv)
+        mlp = self.module[name]
+        geo = loc.reshape(len(loc), 21)
+        if Z is None:
+            h = mlp[0](geo)
+        else:
+            lin = mlp[0]
+            w = lin.weight
+            h = torch.nn.functional.linear(geo, w[:, _GEO_COLS], lin.bias)
+            wz = w[:, _Z_COLS].reshape(HIDDEN, 4, FEATURES - 3).transpose(0, 1)  # (4, 32, 29)
+            ZW = (Z @ wz.reshape(4 * HIDDEN, FEATURES - 3).T).reshape(-1, 4, HIDDEN)
+            h = h + fused.SlotGather.apply(ZW, ijkl)
+        return fused.Pool.apply(mlp[1:](h), R, dst, count.reshape(-1))
+
+    def _apply_torch(self, torch, name, V, Z, lv):
+        """Outputs of module ``name`` on every half-flap: world displacement (H, 3), feature
+        (plain PyTorch operations: Numba missing or switched off)."""
         ijkl = lv["ijkl"]
         PD = torch.cat([V, self._laplace(torch, V, lv)], dim=1)[ijkl]  # (H, 4, 6): one gather
         P, D = PD[..., :3], PD[..., 3:]
@@ -295,22 +436,14 @@ class SubdivisionNet:
         torch = _torch()
         L = len(levels.levels) if n_levels is None else n_levels
         lv = levels.levels[0]
-        disp, feat = self._apply(torch, "I", V0, None, lv)
-        i = lv["ijkl"][:, 0]
-        acc = torch.zeros(len(V0), FEATURES, dtype=V0.dtype).index_add_(
-            0, i, torch.cat([disp, feat], dim=1)) / lv["src_count"]
+        acc = self._pooled(torch, "I", V0, None, lv, lv["ijkl"][:, 0], lv["src_count"])
         V, Z = V0 + acc[:, :3], acc[:, 3:]
         outs = [V]
         for lev in range(L):
             lv = levels.levels[lev]
-            i = lv["ijkl"][:, 0]
-            disp, feat = self._apply(torch, "V", V, Z, lv)
-            acc = torch.zeros(len(V), FEATURES, dtype=V.dtype).index_add_(
-                0, i, torch.cat([disp, feat], dim=1)) / lv["src_count"]
+            acc = self._pooled(torch, "V", V, Z, lv, lv["ijkl"][:, 0], lv["src_count"])
             V, Z = V + acc[:, :3], acc[:, 3:]
-            disp, feat = self._apply(torch, "E", V, Z, lv)
-            acc = torch.zeros(lv["e"], FEATURES, dtype=V.dtype).index_add_(
-                0, lv["edge"], torch.cat([disp, feat], dim=1)) / lv["edge_count"]
+            acc = self._pooled(torch, "E", V, Z, lv, lv["edge"], lv["edge_count"])
             E = lv["E"]
             Vo = 0.5 * (V[E[:, 0]] + V[E[:, 1]]) + acc[:, :3]
             V = torch.cat([V, Vo], dim=0)
