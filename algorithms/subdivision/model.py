@@ -238,6 +238,9 @@ def _fused(torch):
     def arr(t):
         return np.ascontiguousarray(t.detach().numpy())
 
+    def consts(a):  # 1 and the norm clamp in the arrays' precision (kernels docstring)
+        return a.dtype.type(1.0), a.dtype.type(kern.EPS)
+
     class Flap(torch.autograd.Function):
         @staticmethod
         def forward(ctx, V, lv):
@@ -248,7 +251,7 @@ def _fused(torch):
             H = len(ijkl)
             loc = np.empty((H, 7, 3), dtype=Vn.dtype)
             R = np.empty((H, 3, 3), dtype=Vn.dtype)
-            kern.flap_forward(Vn, D, ijkl, has_l, loc, R)
+            kern.flap_forward(Vn, D, ijkl, has_l, loc, R, *consts(Vn))
             ctx.save_for_backward(V)
             ctx.D = D
             ctx.lv = lv
@@ -265,7 +268,7 @@ def _fused(torch):
             gV = np.zeros_like(Vn)
             gD = np.zeros_like(Vn)
             kern.flap_backward(Vn, ctx.D, lv["ijkl"].numpy(), lv["has_l"].numpy(), gl, gr, gV,
-                               gD)
+                               gD, *consts(Vn))
             kern.laplace_backward(gD, lv["nb_src"].numpy(), lv["nb_dst"].numpy(),
                                   lv["deg"].numpy(), gV)
             return torch.from_numpy(gV), None

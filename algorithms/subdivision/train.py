@@ -16,10 +16,13 @@ network beat Loop and modified butterfly on both Hausdorff and mean distance on 
 meshes (the shipped weights: 7 of 9), so it is not the default until a full 700-epoch run shows
 whether the extra epochs matter.
 
-Speed: every coarse mesh's index tensors are built once (:class:`MeshLevels`); the validation
-meshes run as one batch (:meth:`MeshLevels.batch`); torch runs on one thread while training
-(the tensors are small -- a few thousand half-flaps -- and a second thread only pays off on an
-idle machine: under load it was up to 20x slower here), restored between epochs.
+Speed: every coarse mesh's index tensors are built once (:class:`MeshLevels`); the half-flap
+plumbing runs as compiled loops with hand-written backward passes
+(:mod:`algorithms.subdivision.kernels`; the MLPs stay PyTorch); Adam is PyTorch's fused CPU
+implementation; the validation meshes run as one batch (:meth:`MeshLevels.batch`); torch runs on
+one thread while training (the tensors are small -- a few thousand half-flaps -- and a second
+thread did not pay off: 2 threads took the same wall time for twice the CPU on a quiet machine,
+and under load it was up to 20x slower), restored between epochs.
 """
 
 from __future__ import annotations
