@@ -39,6 +39,17 @@ def main() -> int:
     from .render import look_at, rasterize
     for projection in ("orthographic", "perspective"):
         rasterize(V4, F4, look_at((0, 0, 3), (0, 0, 0), projection=projection, resolution=16))
+    try:  # neural subdivision's half-flap kernels, forward and backward (training)
+        import torch
+
+        from .subdivision.model import MeshLevels, SubdivisionNet
+
+        net = SubdivisionNet()
+        for Vs, Fs in ((V, F), (Vg, Fg)):
+            V0 = torch.from_numpy(Vs).to(net.dtype).requires_grad_(True)
+            net.forward(V0, MeshLevels(Fs, len(Vs), 1, net.dtype))[-1].sum().backward()
+    except ImportError:  # PyTorch is optional for everything else
+        pass
     print(f"warm-up: compiled kernels ready in {time.perf_counter() - t0:.1f} s")
     return 0
 

@@ -81,6 +81,18 @@ def warm_up_in_background() -> "threading.Thread":
                 DataSmoother(V, F, mg=mg, energy=energy).smooth(V[:, 0], 1e-3)
         except Exception:  # a warm-up never stops the app; the first run will say what is wrong
             pass
+        try:  # neural subdivision's kernels (the Subdivision panel)
+            import torch
+
+            from algorithms.mesh.primitives import icosphere
+            from algorithms.subdivision.model import MeshLevels, SubdivisionNet
+
+            V, F = icosphere(1)
+            net = SubdivisionNet()
+            V0 = torch.from_numpy(V).to(net.dtype).requires_grad_(True)
+            net.forward(V0, MeshLevels(F, len(V), 1, net.dtype))[-1].sum().backward()
+        except Exception:  # noqa: BLE001 - as above
+            pass
         try:  # the renderer's kernels (Paparazzi, adversarial lighting: ~10 s to compile)
             import numpy as np
 
