@@ -44,8 +44,9 @@ from ..params import param
 from .data import check_manifold, normalization
 from .topology import half_flaps, refine
 
-__all__ = ["SubdivideParams", "SubdivisionNet", "MeshLevels", "neural_subdivide", "save_weights", "load_weights",
-           "shipped_weights_path", "WeightsError", "FORMAT", "FEATURES"]
+__all__ = ["SubdivideParams", "SubdivisionNet", "MeshLevels", "neural_subdivide", "save_weights",
+           "load_weights", "shipped_weights_path", "WeightsError", "FORMAT", "FEATURES",
+           "compiled_kernels", "set_compiled_kernels"]
 
 FORMAT = "stylize3d-neural-subdivision"
 FORMAT_VERSION = 1
@@ -120,6 +121,7 @@ class MeshLevels:
             lv["ijkl"] = torch.from_numpy(np.stack([ijkl[:, 0], ijkl[:, 1], ijkl[:, 2], lsafe],
                                                    axis=1))
             lv["has_l"] = torch.from_numpy(has_l)
+            lv["src"] = torch.from_numpy(np.ascontiguousarray(ijkl[:, 0]))  # flap -> its vertex
             lv["boundary"] = bool((~has_l).any())
             lv["face"] = torch.from_numpy(hf.face)
             lv["twin"] = torch.from_numpy(np.maximum(hf.twin_face, 0))
@@ -177,7 +179,7 @@ class MeshLevels:
             cat = lambda key, off=None: torch.cat(  # noqa: E731
                 [x[key] + int(o) for x, o in zip(lvs, off)] if off is not None
                 else [x[key] for x in lvs])
-            lv = {"ijkl": cat("ijkl", voff), "has_l": cat("has_l"),
+            lv = {"ijkl": cat("ijkl", voff), "src": cat("src", voff), "has_l": cat("has_l"),
                   "boundary": any(x["boundary"] for x in lvs),
                   "face": cat("face", foff), "twin": cat("twin", foff),
                   "has_twin": cat("has_twin"), "F": cat("F", voff),
@@ -439,12 +441,12 @@ class SubdivisionNet:
         torch = _torch()
         L = len(levels.levels) if n_levels is None else n_levels
         lv = levels.levels[0]
-        acc = self._pooled(torch, "I", V0, None, lv, lv["ijkl"][:, 0], lv["src_count"])
+        acc = self._pooled(torch, "I", V0, None, lv, lv["src"], lv["src_count"])
         V, Z = V0 + acc[:, :3], acc[:, 3:]
         outs = [V]
         for lev in range(L):
             lv = levels.levels[lev]
-            acc = self._pooled(torch, "V", V, Z, lv, lv["ijkl"][:, 0], lv["src_count"])
+            acc = self._pooled(torch, "V", V, Z, lv, lv["src"], lv["src_count"])
             V, Z = V + acc[:, :3], acc[:, 3:]
             acc = self._pooled(torch, "E", V, Z, lv, lv["edge"], lv["edge_count"])
             E = lv["E"]
