@@ -19,8 +19,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["project", "rasterize", "barycentrics", "seen_faces", "face_normals", "paint",
-           "face_sums", "normal_vjp", "sh_values_t", "sh_normal_vjp"]
+__all__ = ["project", "rasterize", "barycentrics", "seen_faces", "seen_faces_among",
+           "face_normals", "paint", "face_sums", "normal_vjp", "sh_values_t", "sh_normal_vjp"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -57,17 +57,44 @@ def project(V, position, basis, perspective, scale, res, out):  # pragma: no cov
         out[i, 2] = cz
 
 
+_LANES = 8       # pixels per vector step of a row (see _row)
+_TILE = 3        # log2 of the tile side of the occlusion test (8 x 8 pixels)
+
+
 @njit(cache=True, nogil=True)
 def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no cover - compiled
-    """Z-buffer ``F`` with vertices ``P (n, 3)`` = (column, row, depth) into the output arrays
-    (every pixel is written: -1 / inf / 0 for background).
+    """Z-buffer ``F`` with vertices ``P (n, 3)`` = (column, row, depth) into ``face_id`` and
+    ``depth (res, res)`` (C-contiguous; every pixel is written: -1 / inf for background) and,
+    when ``bary`` has shape ``(res, res, 3)``, the barycentrics (an empty ``bary`` of shape
+    ``(0, 0, 3)`` leaves them to :func:`barycentrics`). Returns the sorted ids of the faces that
+    were rasterized (the only ones that can be seen: :func:`seen_faces_among`).
 
-    The z-test runs on one interleaved scratch buffer (depth, face id) so that a covered pixel
-    touches one cache line, not three arrays; the barycentrics of the winning faces are computed
-    afterwards in one pass over the pixels, by the same formulas (so bit-identical)."""
-    # Outcodes (Cohen-Sutherland): a face whose three corners are all left of, right of, above
-    # or below the pixel centres is skipped after reading three bytes; the same faces are
-    # rejected by the bounding-box test below, so the result does not change (NaN -> code 0).
+    Same picture as testing every face against every pixel centre of its bounding box in index
+    order (the NumPy code), bit for bit; what is skipped cannot change it:
+
+    * Outcodes (Cohen-Sutherland): a face whose three corners are all left of, right of, above or
+      below the pixel centres is skipped after reading three bytes (NaN -> code 0); then the
+      NumPy code's rejections (behind ``near``, non-finite corner, no pixel centre in the
+      bounding box, zero or non-finite area).
+    * Two passes: first the faces of one orientation in screen space (sign of the projected
+      area), then the others, each in index order; the first pass is the orientation whose faces
+      are nearer on average (area-weighted), i.e. the front faces of a closed mesh seen from
+      outside. Equal depths go to the lower face index: within a pass by the index order, in the
+      second pass also by comparing the index with the first pass's winner, so the passes do not
+      change the picture.
+    * Occlusion test of the second pass (usually the back faces): after the first pass, the
+      farthest depth of each 8 x 8 tile (inf where a pixel is still background); a face whose
+      smallest corner depth, less a margin far larger than the rounding of the interpolated
+      depth (``1e-9 max |z_i|``), is beyond that of every tile its bounding box meets cannot win
+      a pixel (the interpolated depth of a covered pixel is a convex combination of the corner
+      depths, in ``1/z`` for perspective cameras: tested only when the corner depths are all
+      positive) and is skipped. Nothing is culled by orientation: open meshes, self-intersecting meshes and
+      cameras inside the mesh see their back faces exactly as before.
+    * Rows: each row's columns where the three edge functions can be ``>= 0`` are found from the
+      edges' intersections with the row, widened by one pixel on each side (edges within 1e-6
+      pixels of horizontal bound nothing); the exact test (the NumPy formulas, same operands and
+      order) decides every pixel, 8 pixels at a time (vectorized; pixels outside the row's span
+      are masked off)."""
     n = P.shape[0]
     code = np.empty(n, np.uint8)
     hi = res - 1.0
@@ -84,12 +111,19 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
         if y > hi:
             k |= 8
         code[v] = k
-    zbuf = np.empty((res, res, 2))
-    for i in range(res):
-        for j in range(res):
-            zbuf[i, j, 0] = np.inf
-            zbuf[i, j, 1] = -1.0
+    zbuf = depth.reshape(-1)           # flat views (C-contiguous): no view per row
+    fbuf = face_id.reshape(-1)
+    zbuf[:] = np.inf
+    fbuf[:] = -1
     m = F.shape[0]
+    neg = np.empty(m, np.int64)
+    pos = np.empty(m, np.int64)
+    nneg = 0
+    npos = 0
+    zneg = 0.0          # sums of |area| * (z0 + z1 + z2) and of |area| per orientation
+    zpos = 0.0
+    aneg = 0.0
+    apos = 0.0
     for f in range(m):
         a = F[f, 0]
         b = F[f, 1]
@@ -118,76 +152,267 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
         xmax = max(x0, max(x1, x2))
         ymin = min(y0, min(y1, y2))
         ymax = max(y0, max(y1, y2))
-        if xmax < 0.0 or ymax < 0.0 or xmin > res - 1.0 or ymin > res - 1.0:
+        if xmax < 0.0 or ymax < 0.0 or xmin > hi or ymin > hi:
             continue
-        i0 = max(0, int(math.ceil(ymin)))
-        i1 = min(res - 1, int(math.floor(ymax)))
-        j0 = max(0, int(math.ceil(xmin)))
-        j1 = min(res - 1, int(math.floor(xmax)))
-        if i1 < i0 or j1 < j0:          # no pixel centre in the bounding box (small faces)
-            continue
+        if (math.floor(min(ymax, hi)) < math.ceil(max(ymin, 0.0))
+                or math.floor(min(xmax, hi)) < math.ceil(max(xmin, 0.0))):
+            continue                    # no pixel centre in the bounding box (small faces)
         area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
         if area == 0.0 or not math.isfinite(area):
             continue
-        inv = 1.0 / area
-        # Edge functions are affine in the column: w_e(px) = a_e px + b_e(py). Each row's span
-        # of columns where all three are >= 0 is found analytically, widened by one pixel on
-        # each side, and the exact test below (the NumPy formulas) decides, so the result is
-        # the same as testing the whole bounding box.
-        # Narrow boxes (up to 4 columns: most faces of a dense mesh) skip the span computation.
-        a0 = -(y2 - y1) * inv
-        a1 = -(y0 - y2) * inv
-        narrow = j1 - j0 < 4
-        for i in range(i0, i1 + 1):
-            py = float(i)
-            lo = float(j0)
-            hi = float(j1)
-            if narrow:
-                _fill_row(i, j0, j1, f, x0, y0, z0, x1, y1, z1, x2, y2, z2, inv, perspective,
-                          near, zbuf)
-                continue
-            c0 = (x1 * (y2 - py) - x2 * (y1 - py)) * inv
-            c1 = (x2 * (y0 - py) - x0 * (y2 - py)) * inv
-            c2 = 1.0 - c0 - c1
-            a2 = -a0 - a1
-            empty = False
-            for e in range(3):
-                if e == 0:
-                    a = a0
-                    c = c0
-                elif e == 1:
-                    a = a1
-                    c = c1
-                else:
-                    a = a2
-                    c = c2
-                if a == 0.0:
-                    if c < -1e-12:
-                        empty = True
-                    continue
-                t = min(max(-c / a, j0 - 2.0), j1 + 2.0)   # clamped: no int overflow
-                if a > 0.0:
-                    lo = max(lo, math.ceil(t) - 1.0)
-                else:
-                    hi = min(hi, math.floor(t) + 1.0)
-            if empty or hi < lo:
-                continue
-            _fill_row(i, int(lo), int(hi), f, x0, y0, z0, x1, y1, z1, x2, y2, z2, inv,
-                      perspective, near, zbuf)
-    # the winners' ids, depths and barycentrics (same formulas and operands as in _fill_row);
-    # an empty ``bary`` (shape (0, 0, 3)) leaves them to :func:`barycentrics`
-    with_bary = bary.shape[0] == res
-    for i in range(res):
-        for j in range(res):
-            fz = zbuf[i, j, 1]
-            if fz < 0.0:
-                face_id[i, j] = -1
-                depth[i, j] = np.inf
-            else:
-                face_id[i, j] = int(fz)
-                depth[i, j] = zbuf[i, j, 0]
-            if with_bary:
+        zs = z0 + z1 + z2
+        if area < 0.0:
+            neg[nneg] = f
+            nneg += 1
+            zneg -= area * zs
+            aneg -= area
+        else:
+            pos[npos] = f
+            npos += 1
+            zpos += area * zs
+            apos += area
+    first = neg
+    nfirst = nneg
+    second = pos
+    nsecond = npos
+    if zpos * aneg < zneg * apos:       # the positive faces are nearer on average
+        first = pos
+        nfirst = npos
+        second = neg
+        nsecond = nneg
+    for q in range(nfirst):
+        _face(P, F, first[q], res, perspective, near, fbuf, zbuf, False)
+    kept = 0
+    if nsecond > 0:
+        T = _TILE
+        nt = (res + (1 << T) - 1) >> T
+        tmax = np.full((nt, nt), -np.inf)
+        for i in range(res):
+            ti = i >> T
+            drow = depth[i]
+            for tj in range(nt):
+                j0 = tj << T
+                j1 = min(res, j0 + (1 << T))
+                mx = tmax[ti, tj]
+                for j in range(j0, j1):
+                    d = drow[j]
+                    mx = d if d > mx else mx
+                tmax[ti, tj] = mx
+        for q in range(nsecond):
+            f = second[q]
+            if not _occluded(P, F, f, res, perspective, tmax, T):
+                _face(P, F, f, res, perspective, near, fbuf, zbuf, True)
+                second[kept] = f
+                kept += 1
+    # the faces rasterized, sorted (both lists are)
+    out = np.empty(nfirst + kept, np.int64)
+    ia = 0
+    ib = 0
+    for q in range(nfirst + kept):
+        if ib >= kept or (ia < nfirst and first[ia] < second[ib]):
+            out[q] = first[ia]
+            ia += 1
+        else:
+            out[q] = second[ib]
+            ib += 1
+    if bary.shape[0] == res:
+        for i in range(res):
+            for j in range(res):
                 _bary_at(P, F, face_id[i, j], i, j, perspective, bary)
+    return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _box(x0, y0, x1, y1, x2, y2, res):  # pragma: no cover - compiled
+    """First and last row and column of the pixel centres in the bounding box (clamped to the
+    image before the conversion to integers)."""
+    hi = res - 1.0
+    i0 = int(math.ceil(max(0.0, min(y0, min(y1, y2)))))
+    i1 = int(math.floor(min(hi, max(y0, max(y1, y2)))))
+    j0 = int(math.ceil(max(0.0, min(x0, min(x1, x2)))))
+    j1 = int(math.floor(min(hi, max(x0, max(x1, x2)))))
+    return i0, i1, j0, j1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _occluded(P, F, f, res, perspective, tmax, T):  # pragma: no cover - compiled
+    """True when face ``f`` is beyond the farthest depth of every tile its bounding box meets
+    (see :func:`rasterize`; NaN depths are never occluded)."""
+    a = F[f, 0]
+    b = F[f, 1]
+    c = F[f, 2]
+    z0 = P[a, 2]
+    z1 = P[b, 2]
+    z2 = P[c, 2]
+    zmin = min(z0, min(z1, z2))
+    if perspective and not zmin > 0.0:
+        return False
+    zabs = max(abs(z0), max(abs(z1), abs(z2)))
+    zlo = zmin - 1e-9 * zabs
+    x0 = P[a, 0]
+    y0 = P[a, 1]
+    x1 = P[b, 0]
+    y1 = P[b, 1]
+    x2 = P[c, 0]
+    y2 = P[c, 1]
+    i0, i1, j0, j1 = _box(x0, y0, x1, y1, x2, y2, res)
+    for ti in range(i0 >> T, (i1 >> T) + 1):
+        for tj in range(j0 >> T, (j1 >> T) + 1):
+            if not zlo > tmax[ti, tj]:
+                return False
+    return True
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _face(P, F, f, res, perspective, near, fbuf, zbuf, ties):  # pragma: no cover - compiled
+    """Z-test face ``f`` (kept by :func:`rasterize`'s rejections) against the buffers, row by
+    row; ``ties``: compare equal depths by face index (faces not in increasing index order)."""
+    a = F[f, 0]
+    b = F[f, 1]
+    c = F[f, 2]
+    x0 = P[a, 0]
+    y0 = P[a, 1]
+    z0 = P[a, 2]
+    x1 = P[b, 0]
+    y1 = P[b, 1]
+    z1 = P[b, 2]
+    x2 = P[c, 0]
+    y2 = P[c, 1]
+    z2 = P[c, 2]
+    i0, i1, j0, j1 = _box(x0, y0, x1, y1, x2, y2, res)
+    area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+    inv = 1.0 / area
+    # Edge from corner a to corner b (a = e + 1, b = e + 2 mod 3; w_e = 0 on it): at row py it
+    # crosses column xa + (py - ya) k, k = (xb - xa) / (yb - ya); w_e >= 0 right of it when
+    # (ya - yb) * area > 0 (a lower bound of the span), left of it otherwise (an upper bound).
+    lx0 = -1e300
+    ly0 = 0.0
+    lk0 = 0.0
+    lx1 = -1e300
+    ly1 = 0.0
+    lk1 = 0.0
+    ux0 = 1e300
+    uy0 = 0.0
+    uk0 = 0.0
+    ux1 = 1e300
+    uy1 = 0.0
+    uk1 = 0.0
+    nl = 0
+    nu = 0
+    if j1 - j0 >= _LANES:               # narrow boxes: one vector step per row, no span needed
+        for e in range(3):
+            if e == 0:
+                xa = x1
+                ya = y1
+                xb = x2
+                yb = y2
+            elif e == 1:
+                xa = x2
+                ya = y2
+                xb = x0
+                yb = y0
+            else:
+                xa = x0
+                ya = y0
+                xb = x1
+                yb = y1
+            dy = yb - ya
+            if not abs(dy) >= 1e-6:
+                continue
+            k = (xb - xa) / dy
+            if (ya - yb) * area > 0.0:
+                if nl == 0:
+                    lx0 = xa
+                    ly0 = ya
+                    lk0 = k
+                else:
+                    lx1 = xa
+                    ly1 = ya
+                    lk1 = k
+                nl += 1
+            else:
+                if nu == 0:
+                    ux0 = xa
+                    uy0 = ya
+                    uk0 = k
+                else:
+                    ux1 = xa
+                    uy1 = ya
+                    uk1 = k
+                nu += 1
+    fj0 = float(j0)
+    fj1 = float(j1)
+    for i in range(i0, i1 + 1):
+        py = float(i)
+        lo = j0
+        hi = j1
+        if nl + nu > 0:
+            tl = max(lx0 + (py - ly0) * lk0, lx1 + (py - ly1) * lk1)
+            tu = min(ux0 + (py - uy0) * uk0, ux1 + (py - uy1) * uk1)
+            flo = math.ceil(tl) - 1.0
+            fhi = math.floor(tu) + 1.0
+            if not (flo > fj0 and math.isfinite(tl)):       # overflow or NaN: the whole box
+                flo = fj0
+            if not (fhi < fj1 and math.isfinite(tu)):
+                fhi = fj1
+            if fhi < flo:
+                continue
+            lo = int(flo)
+            hi = int(fhi)
+        _row(zbuf, fbuf, i * res, res, py, lo, hi, f, x0, y0, z0, x1, y1, z1, x2, y2, z2, inv,
+             perspective, near, ties)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _row(zbuf, fbuf, base, res, py, lo, hi, f, x0, y0, z0, x1, y1, z1, x2, y2, z2, inv,
+         perspective, near, ties):  # pragma: no cover - compiled
+    """The exact coverage and depth test (the NumPy formulas) of pixels ``lo..hi`` of the row
+    starting at ``base`` of the flat buffers: steps of ``_LANES`` pixels starting at
+    ``min(s, res - _LANES)`` (inside the row; the pixels outside ``s..hi`` are masked off), so that
+    the loop has a fixed length and vectorizes (unsigned indices: no negative-index wraparound)."""
+    a2 = y2 - py
+    a1 = y1 - py
+    a0 = y0 - py
+    # a lane count LLVM cannot bound (``res >> 40`` is 0): with the constant 8 it unrolls the
+    # loop fully and then does not vectorize it
+    L = max(_LANES, res >> 40)
+    if res < L:
+        L = res
+    UL = np.uint64(L)
+    s = lo
+    while s <= hi:
+        b = min(s, res - L)
+        u = np.uint64(base + b)
+        fs = float(s)
+        fh = float(hi)
+        fb = float(b)
+        if perspective:
+            for t in range(UL):
+                px = fb + t
+                w0 = ((x1 - px) * a2 - (x2 - px) * a1) * inv
+                w1 = ((x2 - px) * a0 - (x0 - px) * a2) * inv
+                w2 = 1.0 - w0 - w1
+                z = 1.0 / (w0 / z0 + w1 / z1 + w2 / z2)
+                old = zbuf[u + t]
+                oldf = fbuf[u + t]
+                ok = ((px >= fs) & (px <= fh) & (w0 >= 0.0) & (w1 >= 0.0) & (w2 >= 0.0)
+                      & (z > near) & ((z < old) | (ties & (z == old) & (f < oldf))))
+                zbuf[u + t] = z if ok else old
+                fbuf[u + t] = f if ok else oldf
+        else:
+            for t in range(UL):
+                px = fb + t
+                w0 = ((x1 - px) * a2 - (x2 - px) * a1) * inv
+                w1 = ((x2 - px) * a0 - (x0 - px) * a2) * inv
+                w2 = 1.0 - w0 - w1
+                z = w0 * z0 + w1 * z1 + w2 * z2
+                old = zbuf[u + t]
+                oldf = fbuf[u + t]
+                ok = ((px >= fs) & (px <= fh) & (w0 >= 0.0) & (w1 >= 0.0) & (w2 >= 0.0)
+                      & (z > near) & ((z < old) | (ties & (z == old) & (f < oldf))))
+                zbuf[u + t] = z if ok else old
+                fbuf[u + t] = f if ok else oldf
+        s = b + L
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -235,50 +460,37 @@ def barycentrics(P, F, face_id, perspective, bary):  # pragma: no cover - compil
             _bary_at(P, F, face_id[i, j], i, j, perspective, bary)
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _fill_row(i, jlo, jhi, f, x0, y0, z0, x1, y1, z1, x2, y2, z2, inv, perspective, near,
-              zbuf):  # pragma: no cover - compiled
-    """The exact coverage and depth test (the NumPy formulas) of pixels ``(i, jlo..jhi)``."""
-    py = float(i)
-    for j in range(jlo, jhi + 1):
-        px = float(j)
-        w0 = ((x1 - px) * (y2 - py) - (x2 - px) * (y1 - py)) * inv
-        w1 = ((x2 - px) * (y0 - py) - (x0 - px) * (y2 - py)) * inv
-        w2 = 1.0 - w0 - w1
-        if w0 < 0.0 or w1 < 0.0 or w2 < 0.0:
-            continue
-        if perspective:
-            z = 1.0 / (w0 / z0 + w1 / z1 + w2 / z2)
-        else:
-            z = w0 * z0 + w1 * z1 + w2 * z2
-        if z <= near or z >= zbuf[i, j, 0]:
-            continue
-        zbuf[i, j, 0] = z
-        zbuf[i, j, 1] = f
-
-
 @njit(cache=True, nogil=True)
 def seen_faces(face_id, m, slot):  # pragma: no cover - compiled
     """Sorted ids of the faces seen in ``face_id (H, W)`` (of ``m`` faces); fills ``slot (H, W)``
     with each pixel's index into them (-1 for background). O(pixels + m)."""
-    H, W = face_id.shape
-    mark = np.zeros(m, np.int64)
-    for i in range(H):
-        for j in range(W):
-            f = face_id[i, j]
-            if f >= 0:
-                mark[f] = 1
-    faces = np.empty(m, np.int64)
+    return seen_faces_among(face_id, np.arange(m), m, slot)
+
+
+@njit(cache=True, nogil=True)
+def seen_faces_among(face_id, cand, m, slot):  # pragma: no cover - compiled
+    """:func:`seen_faces` when every face id in ``face_id`` is in ``cand`` (sorted; e.g. what
+    :func:`rasterize` returned): O(pixels + len(cand)), whatever ``m``."""
+    mark = np.empty(m, np.int64)
+    for q in range(cand.shape[0]):
+        mark[cand[q]] = 0
+    fid = face_id.reshape(-1)
+    sl = slot.reshape(-1)
+    for p in range(fid.shape[0]):
+        f = fid[p]
+        if f >= 0:
+            mark[f] = 1
+    faces = np.empty(cand.shape[0], np.int64)
     k = 0
-    for f in range(m):
+    for q in range(cand.shape[0]):
+        f = cand[q]
         if mark[f] != 0:
             faces[k] = f
             mark[f] = k
             k += 1
-    for i in range(H):
-        for j in range(W):
-            f = face_id[i, j]
-            slot[i, j] = mark[f] if f >= 0 else -1
+    for p in range(fid.shape[0]):
+        f = fid[p]
+        sl[p] = mark[f] if f >= 0 else -1
     return faces[:k].copy()
 
 
@@ -314,17 +526,29 @@ def face_normals(V, F, faces, out):  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def paint(slot, colors, background, image):  # pragma: no cover - compiled
     """``image (H, W, C)``: each pixel the colour of its face, ``background`` elsewhere."""
-    H, W = slot.shape
     C = colors.shape[1]
-    for i in range(H):
-        for j in range(W):
-            s = slot[i, j]
+    sl = slot.reshape(-1)
+    img = image.reshape(-1, C)
+    if C == 3:                          # RGB: unrolled
+        for p in range(sl.shape[0]):
+            s = sl[p]
             if s >= 0:
-                for c in range(C):
-                    image[i, j, c] = colors[s, c]
+                img[p, 0] = colors[s, 0]
+                img[p, 1] = colors[s, 1]
+                img[p, 2] = colors[s, 2]
             else:
-                for c in range(C):
-                    image[i, j, c] = background
+                img[p, 0] = background
+                img[p, 1] = background
+                img[p, 2] = background
+        return
+    for p in range(sl.shape[0]):
+        s = sl[p]
+        if s >= 0:
+            for c in range(C):
+                img[p, c] = colors[s, c]
+        else:
+            for c in range(C):
+                img[p, c] = background
 
 
 @njit(cache=True, nogil=True)

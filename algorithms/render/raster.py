@@ -29,6 +29,7 @@ from .camera import Camera
 __all__ = ["Raster", "rasterize", "compiled_kernels", "set_compiled_kernels"]
 
 _KERNELS = KernelModule("algorithms.render.kernels")
+_NO_BARY = np.empty((0, 0, 3))     # the compiled rasterizer leaves the barycentrics to Raster.bary
 
 
 def compiled_kernels():
@@ -56,12 +57,15 @@ class Raster:
     """
 
     def __init__(self, face_id: np.ndarray, depth: np.ndarray, bary: np.ndarray | None,
-                 camera: Camera, *, _lazy_bary=None):
+                 camera: Camera, *, _lazy_bary=None, _candidates=None):
         self.face_id = face_id
         self.depth = depth
         self._bary = bary
         self.camera = camera
         self._lazy = _lazy_bary          # (P, F) while bary is not computed
+        # sorted faces the compiled rasterizer z-tested (every face seen is one of them), for
+        # the renderer's seen faces; None otherwise
+        self._candidates = _candidates
 
     @property
     def bary(self) -> np.ndarray:
@@ -113,9 +117,9 @@ def rasterize(V, F, camera: Camera, *, backend: str = "auto") -> Raster:
         P = np.empty_like(V)
         kern.project(V, camera.position, camera._basis, camera.perspective,
                      camera.projection_scale, res, P)
-        kern.rasterize(P, F, res, camera.perspective, camera.near, face_id, depth,
-                       np.empty((0, 0, 3)))
-        return Raster(face_id, depth, None, camera, _lazy_bary=(P, F))
+        cand = kern.rasterize(P, F, res, camera.perspective, camera.near, face_id, depth,
+                              _NO_BARY)
+        return Raster(face_id, depth, None, camera, _lazy_bary=(P, F), _candidates=cand)
     else:
         face_id = np.full((res, res), -1, dtype=np.int64)
         depth = np.full((res, res), np.inf)

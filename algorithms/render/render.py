@@ -98,7 +98,9 @@ def render(V, F, camera: Camera, shading: Shading | None = None, *, albedo=None,
     kern = compiled_kernels() if backend != "numpy" else None
     if kern is not None:
         slot = np.empty_like(fid)
-        faces = kern.seen_faces(fid, len(F), slot)
+        cand = r._candidates
+        faces = (kern.seen_faces(fid, len(F), slot) if cand is None
+                 else kern.seen_faces_among(fid, cand, len(F), slot))
         N = np.empty((len(faces), 3))
         kern.face_normals(np.ascontiguousarray(V), np.ascontiguousarray(F), faces, N)
         alb = None if albedo is None else np.asarray(albedo, dtype=np.float64)[faces]
