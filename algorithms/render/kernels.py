@@ -19,14 +19,22 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["project", "rasterize", "barycentrics", "seen_faces", "seen_faces_among",
-           "face_normals", "paint", "face_sums", "normal_vjp", "sh_values_t", "sh_normal_vjp"]
+__all__ = ["project", "rasterize", "project_rasterize", "barycentrics", "seen_faces",
+           "seen_faces_among", "face_normals", "paint", "face_sums", "normal_vjp", "sh_values_t",
+           "sh_normal_vjp"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def project(V, position, basis, perspective, scale, res, out):  # pragma: no cover - compiled
     """:meth:`Camera.to_pixels` of ``V (n, 3)`` into ``out (n, 3)`` (same operations in the same
     order: bit-identical). ``scale``: ``tan(fov / 2)`` (perspective) or ``width / 2``."""
+    _project(V, position, basis, perspective, scale, res, out, np.empty(0, np.uint8))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _project(V, position, basis, perspective, scale, res, out, code):  # pragma: no cover
+    """:func:`project`, and the outcodes of the projected vertices into ``code (n,)`` unless it is
+    empty (see :func:`_outcodes`)."""
     px = position[0]
     py = position[1]
     pz = position[2]
@@ -39,6 +47,8 @@ def project(V, position, basis, perspective, scale, res, out):  # pragma: no cov
     r20 = basis[2, 0]
     r21 = basis[2, 1]
     r22 = basis[2, 2]
+    with_code = code.shape[0] == V.shape[0]
+    hi = res - 1.0
     for i in range(V.shape[0]):
         dx = V[i, 0] - px
         dy = V[i, 1] - py
@@ -52,9 +62,29 @@ def project(V, position, basis, perspective, scale, res, out):  # pragma: no cov
         else:
             sx = cx / scale
             sy = cy / scale
-        out[i, 0] = (sx + 1.0) * 0.5 * res - 0.5
-        out[i, 1] = (1.0 - sy) * 0.5 * res - 0.5
+        x = (sx + 1.0) * 0.5 * res - 0.5
+        y = (1.0 - sy) * 0.5 * res - 0.5
+        out[i, 0] = x
+        out[i, 1] = y
         out[i, 2] = cz
+        if with_code:
+            code[i] = _outcode(x, y, hi)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _outcode(x, y, hi):  # pragma: no cover - compiled
+    """Cohen-Sutherland outcode of a projected vertex: bits for left of column 0, right of column
+    ``hi``, above row 0, below row ``hi`` (NaN: 0)."""
+    k = 0
+    if x < 0.0:
+        k |= 1
+    if x > hi:
+        k |= 2
+    if y < 0.0:
+        k |= 4
+    if y > hi:
+        k |= 8
+    return k
 
 
 _LANES = 8       # pixels per vector step of a row (see _row)
@@ -99,18 +129,24 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
     code = np.empty(n, np.uint8)
     hi = res - 1.0
     for v in range(n):
-        x = P[v, 0]
-        y = P[v, 1]
-        k = 0
-        if x < 0.0:
-            k |= 1
-        if x > hi:
-            k |= 2
-        if y < 0.0:
-            k |= 4
-        if y > hi:
-            k |= 8
-        code[v] = k
+        code[v] = _outcode(P[v, 0], P[v, 1], hi)
+    return _zbuffer(P, F, code, res, perspective, near, face_id, depth, bary)
+
+
+@njit(cache=True, nogil=True)
+def project_rasterize(V, position, basis, perspective, scale, res, near, F, P, face_id, depth,
+                      bary):  # pragma: no cover - compiled
+    """:func:`project` of ``V`` into ``P`` and :func:`rasterize` of ``(P, F)`` (the outcodes are
+    computed in the projection's loop); returns what :func:`rasterize` returns."""
+    code = np.empty(V.shape[0], np.uint8)
+    _project(V, position, basis, perspective, scale, res, P, code)
+    return _zbuffer(P, F, code, res, perspective, near, face_id, depth, bary)
+
+
+@njit(cache=True, nogil=True)
+def _zbuffer(P, F, code, res, perspective, near, face_id, depth, bary):  # pragma: no cover
+    """:func:`rasterize` given the outcodes ``code (n,)`` of ``P``."""
+    hi = res - 1.0
     zbuf = depth.reshape(-1)           # flat views (C-contiguous): no view per row
     fbuf = face_id.reshape(-1)
     zbuf[:] = np.inf
@@ -187,16 +223,22 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
         T = _TILE
         nt = (res + (1 << T) - 1) >> T
         tmax = np.full((nt, nt), -np.inf)
-        for i in range(res):
-            ti = i >> T
-            drow = depth[i]
-            for tj in range(nt):
-                j0 = tj << T
-                j1 = min(res, j0 + (1 << T))
-                mx = tmax[ti, tj]
-                for j in range(j0, j1):
+        colmax = np.empty(nt << T)
+        colmax[res:] = -np.inf
+        for ti in range(nt):
+            # the column maxima of the tile row (elementwise: vectorizes), then per tile
+            r0 = ti << T
+            r1 = min(res, r0 + (1 << T))
+            colmax[:res] = zbuf[r0 * res:(r0 + 1) * res]
+            for i in range(r0 + 1, r1):
+                drow = zbuf[i * res:(i + 1) * res]
+                for j in range(res):
                     d = drow[j]
-                    mx = d if d > mx else mx
+                    colmax[j] = d if d > colmax[j] else colmax[j]
+            for tj in range(nt):
+                mx = -np.inf
+                for j in range(tj << T, (tj + 1) << T):
+                    mx = colmax[j] if colmax[j] > mx else mx
                 tmax[ti, tj] = mx
         for q in range(nsecond):
             f = second[q]

@@ -115,10 +115,9 @@ def rasterize(V, F, camera: Camera, *, backend: str = "auto") -> Raster:
         V = np.ascontiguousarray(V).reshape(-1, 3)
         F = np.ascontiguousarray(F).reshape(-1, 3)
         P = np.empty_like(V)
-        kern.project(V, camera.position, camera._basis, camera.perspective,
-                     camera.projection_scale, res, P)
-        cand = kern.rasterize(P, F, res, camera.perspective, camera.near, face_id, depth,
-                              _NO_BARY)
+        cand = kern.project_rasterize(V, camera.position, camera._basis, camera.perspective,
+                                      camera.projection_scale, res, camera.near, F, P, face_id,
+                                      depth, _NO_BARY)
         return Raster(face_id, depth, None, camera, _lazy_bary=(P, F), _candidates=cand)
     else:
         face_id = np.full((res, res), -1, dtype=np.int64)
