@@ -19,22 +19,24 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["project", "rasterize", "project_rasterize", "barycentrics", "seen_faces",
-           "seen_faces_among", "face_normals", "paint", "face_sums", "normal_vjp", "sh_values_t",
-           "sh_normal_vjp"]
+__all__ = ["project", "rasterize", "project_rasterize", "barycentrics", "barycentrics_q",
+           "seen_faces", "seen_faces_among", "face_normals", "paint", "face_sums", "normal_vjp",
+           "sh_values_t", "sh_normal_vjp"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def project(V, position, basis, perspective, scale, res, out):  # pragma: no cover - compiled
     """:meth:`Camera.to_pixels` of ``V (n, 3)`` into ``out (n, 3)`` (same operations in the same
     order: bit-identical). ``scale``: ``tan(fov / 2)`` (perspective) or ``width / 2``."""
-    _project(V, position, basis, perspective, scale, res, out, np.empty(0, np.uint8))
+    Q = np.empty((3, V.shape[0]))
+    _project(V, position, basis, perspective, scale, res, Q)
+    out[:, :] = Q.T
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _project(V, position, basis, perspective, scale, res, out, code):  # pragma: no cover
-    """:func:`project`, and the outcodes of the projected vertices into ``code (n,)`` unless it is
-    empty (see :func:`_outcodes`)."""
+def _project(V, position, basis, perspective, scale, res, Q):  # pragma: no cover - compiled
+    """:func:`project` into the rows of ``Q (3, n)`` (column, row, depth: contiguous, so that the
+    loop vectorizes)."""
     px = position[0]
     py = position[1]
     pz = position[2]
@@ -47,28 +49,50 @@ def _project(V, position, basis, perspective, scale, res, out, code):  # pragma:
     r20 = basis[2, 0]
     r21 = basis[2, 1]
     r22 = basis[2, 2]
-    with_code = code.shape[0] == V.shape[0]
-    hi = res - 1.0
-    for i in range(V.shape[0]):
-        dx = V[i, 0] - px
-        dy = V[i, 1] - py
-        dz = V[i, 2] - pz
-        cx = dx * r00 + dy * r01 + dz * r02
-        cy = dx * r10 + dy * r11 + dz * r12
-        cz = dx * r20 + dy * r21 + dz * r22
-        if perspective:
+    n = V.shape[0]
+    Vf = V.reshape(-1)
+    X = Q[0]
+    Y = Q[1]
+    Z = Q[2]
+    if perspective:
+        for i in range(n):
+            dx = Vf[3 * i] - px
+            dy = Vf[3 * i + 1] - py
+            dz = Vf[3 * i + 2] - pz
+            cx = dx * r00 + dy * r01 + dz * r02
+            cy = dx * r10 + dy * r11 + dz * r12
+            cz = dx * r20 + dy * r21 + dz * r22
             sx = cx / (cz * scale)
             sy = cy / (cz * scale)
-        else:
+            X[i] = (sx + 1.0) * 0.5 * res - 0.5
+            Y[i] = (1.0 - sy) * 0.5 * res - 0.5
+            Z[i] = cz
+    else:
+        for i in range(n):
+            dx = Vf[3 * i] - px
+            dy = Vf[3 * i + 1] - py
+            dz = Vf[3 * i + 2] - pz
+            cx = dx * r00 + dy * r01 + dz * r02
+            cy = dx * r10 + dy * r11 + dz * r12
+            cz = dx * r20 + dy * r21 + dz * r22
             sx = cx / scale
             sy = cy / scale
-        x = (sx + 1.0) * 0.5 * res - 0.5
-        y = (1.0 - sy) * 0.5 * res - 0.5
-        out[i, 0] = x
-        out[i, 1] = y
-        out[i, 2] = cz
-        if with_code:
-            code[i] = _outcode(x, y, hi)
+            X[i] = (sx + 1.0) * 0.5 * res - 0.5
+            Y[i] = (1.0 - sy) * 0.5 * res - 0.5
+            Z[i] = cz
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _outcodes(Q, res):  # pragma: no cover - compiled
+    """``(n,) uint8`` outcodes (:func:`_outcode`) of the projected vertices ``Q (3, n)``."""
+    n = Q.shape[1]
+    code = np.empty(n, np.uint8)
+    hi = res - 1.0
+    X = Q[0]
+    Y = Q[1]
+    for v in range(n):
+        code[v] = _outcode(X[v], Y[v], hi)
+    return code
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -125,27 +149,25 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
       pixels of horizontal bound nothing); the exact test (the NumPy formulas, same operands and
       order) decides every pixel, 8 pixels at a time (vectorized; pixels outside the row's span
       are masked off)."""
-    n = P.shape[0]
-    code = np.empty(n, np.uint8)
-    hi = res - 1.0
-    for v in range(n):
-        code[v] = _outcode(P[v, 0], P[v, 1], hi)
-    return _zbuffer(P, F, code, res, perspective, near, face_id, depth, bary)
+    Q = P.T.copy()
+    return _zbuffer(Q, F, _outcodes(Q, res), res, perspective, near, face_id, depth, bary)
 
 
 @njit(cache=True, nogil=True)
-def project_rasterize(V, position, basis, perspective, scale, res, near, F, P, face_id, depth,
+def project_rasterize(V, position, basis, perspective, scale, res, near, F, Q, face_id, depth,
                       bary):  # pragma: no cover - compiled
-    """:func:`project` of ``V`` into ``P`` and :func:`rasterize` of ``(P, F)`` (the outcodes are
-    computed in the projection's loop); returns what :func:`rasterize` returns."""
-    code = np.empty(V.shape[0], np.uint8)
-    _project(V, position, basis, perspective, scale, res, P, code)
-    return _zbuffer(P, F, code, res, perspective, near, face_id, depth, bary)
+    """:func:`project` of ``V`` into the rows of ``Q (3, n)`` (column, row, depth; ``P = Q.T``)
+    and :func:`rasterize` of ``(P, F)``; returns what :func:`rasterize` returns."""
+    _project(V, position, basis, perspective, scale, res, Q)
+    return _zbuffer(Q, F, _outcodes(Q, res), res, perspective, near, face_id, depth, bary)
 
 
 @njit(cache=True, nogil=True)
-def _zbuffer(P, F, code, res, perspective, near, face_id, depth, bary):  # pragma: no cover
-    """:func:`rasterize` given the outcodes ``code (n,)`` of ``P``."""
+def _zbuffer(Q, F, code, res, perspective, near, face_id, depth, bary):  # pragma: no cover
+    """:func:`rasterize` of the projected vertices ``Q (3, n)`` given their outcodes."""
+    X = Q[0]
+    Y = Q[1]
+    Z = Q[2]
     hi = res - 1.0
     zbuf = depth.reshape(-1)           # flat views (C-contiguous): no view per row
     fbuf = face_id.reshape(-1)
@@ -166,15 +188,15 @@ def _zbuffer(P, F, code, res, perspective, near, face_id, depth, bary):  # pragm
         c = F[f, 2]
         if code[a] & code[b] & code[c]:
             continue
-        x0 = P[a, 0]
-        y0 = P[a, 1]
-        z0 = P[a, 2]
-        x1 = P[b, 0]
-        y1 = P[b, 1]
-        z1 = P[b, 2]
-        x2 = P[c, 0]
-        y2 = P[c, 1]
-        z2 = P[c, 2]
+        x0 = X[a]
+        y0 = Y[a]
+        z0 = Z[a]
+        x1 = X[b]
+        y1 = Y[b]
+        z1 = Z[b]
+        x2 = X[c]
+        y2 = Y[c]
+        z2 = Z[c]
         if perspective:
             if z0 <= near or z1 <= near or z2 <= near:
                 continue
@@ -216,36 +238,179 @@ def _zbuffer(P, F, code, res, perspective, near, face_id, depth, bary):  # pragm
         nfirst = npos
         second = neg
         nsecond = nneg
-    for q in range(nfirst):
-        _face(P, F, first[q], res, perspective, near, fbuf, zbuf, False)
+    # The face and row loops are written out here, not in helper functions: Numba's inlining
+    # of functions taking arrays adds reference counting (atomic) per call, per face and row.
+    T = _TILE
+    nt = (res + (1 << T) - 1) >> T
+    tmax = np.full((nt, nt), -np.inf)
+    # a lane count LLVM cannot bound (``res >> 40`` is 0): with the constant 8 it unrolls the
+    # row loop fully and then does not vectorize it
+    L = max(_LANES, res >> 40)
+    if res < L:
+        L = res
+    UL = np.uint64(L)
     kept = 0
-    if nsecond > 0:
-        T = _TILE
-        nt = (res + (1 << T) - 1) >> T
-        tmax = np.full((nt, nt), -np.inf)
-        colmax = np.empty(nt << T)
-        colmax[res:] = -np.inf
-        for ti in range(nt):
-            # the column maxima of the tile row (elementwise: vectorizes), then per tile
-            r0 = ti << T
-            r1 = min(res, r0 + (1 << T))
-            colmax[:res] = zbuf[r0 * res:(r0 + 1) * res]
-            for i in range(r0 + 1, r1):
-                drow = zbuf[i * res:(i + 1) * res]
-                for j in range(res):
-                    d = drow[j]
-                    colmax[j] = d if d > colmax[j] else colmax[j]
-            for tj in range(nt):
-                mx = -np.inf
-                for j in range(tj << T, (tj + 1) << T):
-                    mx = colmax[j] if colmax[j] > mx else mx
-                tmax[ti, tj] = mx
-        for q in range(nsecond):
-            f = second[q]
-            if not _occluded(P, F, f, res, perspective, tmax, T):
-                _face(P, F, f, res, perspective, near, fbuf, zbuf, True)
+    for pss in range(2):
+        ties = pss == 1
+        count = nfirst
+        if ties:
+            count = nsecond
+            if nsecond > 0:
+                _tile_maxima(zbuf, res, T, tmax)
+        for q in range(count):
+            f = second[q] if ties else first[q]
+            a = F[f, 0]
+            b = F[f, 1]
+            c = F[f, 2]
+            x0 = X[a]
+            y0 = Y[a]
+            z0 = Z[a]
+            x1 = X[b]
+            y1 = Y[b]
+            z1 = Z[b]
+            x2 = X[c]
+            y2 = Y[c]
+            z2 = Z[c]
+            i0, i1, j0, j1 = _box(x0, y0, x1, y1, x2, y2, res)
+            if ties:
+                # occlusion test (see the docstring); NaN depths are never occluded
+                zmin = min(z0, min(z1, z2))
+                zlo = zmin - 1e-9 * max(abs(z0), max(abs(z1), abs(z2)))
+                occluded = zmin > 0.0 or not perspective
+                ti = i0 >> T
+                while occluded and ti <= i1 >> T:
+                    tj = j0 >> T
+                    while occluded and tj <= j1 >> T:
+                        occluded = zlo > tmax[ti, tj]
+                        tj += 1
+                    ti += 1
+                if occluded:
+                    continue
                 second[kept] = f
                 kept += 1
+            area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+            inv = 1.0 / area
+            # Edge from corner a to corner b (a = e + 1, b = e + 2 mod 3; w_e = 0 on it): at row
+            # py it crosses column xa + (py - ya) k, k = (xb - xa) / (yb - ya); w_e >= 0 right of
+            # it when (ya - yb) * area > 0 (a lower bound of the span), left of it otherwise.
+            lx0 = -1e300
+            ly0 = 0.0
+            lk0 = 0.0
+            lx1 = -1e300
+            ly1 = 0.0
+            lk1 = 0.0
+            ux0 = 1e300
+            uy0 = 0.0
+            uk0 = 0.0
+            ux1 = 1e300
+            uy1 = 0.0
+            uk1 = 0.0
+            nl = 0
+            nu = 0
+            if j1 - j0 >= L:            # narrow boxes: one vector step per row, no span needed
+                for e in range(3):
+                    if e == 0:
+                        xa = x1
+                        ya = y1
+                        xb = x2
+                        yb = y2
+                    elif e == 1:
+                        xa = x2
+                        ya = y2
+                        xb = x0
+                        yb = y0
+                    else:
+                        xa = x0
+                        ya = y0
+                        xb = x1
+                        yb = y1
+                    dy = yb - ya
+                    if not abs(dy) >= 1e-6:
+                        continue
+                    k = (xb - xa) / dy
+                    if (ya - yb) * area > 0.0:
+                        if nl == 0:
+                            lx0 = xa
+                            ly0 = ya
+                            lk0 = k
+                        else:
+                            lx1 = xa
+                            ly1 = ya
+                            lk1 = k
+                        nl += 1
+                    else:
+                        if nu == 0:
+                            ux0 = xa
+                            uy0 = ya
+                            uk0 = k
+                        else:
+                            ux1 = xa
+                            uy1 = ya
+                            uk1 = k
+                        nu += 1
+            fj0 = float(j0)
+            fj1 = float(j1)
+            for i in range(i0, i1 + 1):
+                py = float(i)
+                lo = j0
+                hi = j1
+                if nl + nu > 0:
+                    tl = max(lx0 + (py - ly0) * lk0, lx1 + (py - ly1) * lk1)
+                    tu = min(ux0 + (py - uy0) * uk0, ux1 + (py - uy1) * uk1)
+                    flo = math.ceil(tl) - 1.0
+                    fhi = math.floor(tu) + 1.0
+                    if not (flo > fj0 and math.isfinite(tl)):   # overflow or NaN: the whole box
+                        flo = fj0
+                    if not (fhi < fj1 and math.isfinite(tu)):
+                        fhi = fj1
+                    if fhi < flo:
+                        continue
+                    lo = int(flo)
+                    hi = int(fhi)
+                # The exact coverage and depth test (the NumPy formulas) of pixels lo..hi: steps
+                # of L pixels from min(s, res - L) (inside the row; pixels outside s..hi are
+                # masked off), a loop of fixed length that vectorizes (unsigned indices: no
+                # negative-index wraparound).
+                a2 = y2 - py
+                a1 = y1 - py
+                a0 = y0 - py
+                base = i * res
+                s = lo
+                while s <= hi:
+                    b0 = min(s, res - L)
+                    u = np.uint64(base + b0)
+                    fs = float(s)
+                    fh = float(hi)
+                    fb = float(b0)
+                    if perspective:
+                        for t in range(UL):
+                            px = fb + t
+                            w0 = ((x1 - px) * a2 - (x2 - px) * a1) * inv
+                            w1 = ((x2 - px) * a0 - (x0 - px) * a2) * inv
+                            w2 = 1.0 - w0 - w1
+                            z = 1.0 / (w0 / z0 + w1 / z1 + w2 / z2)
+                            old = zbuf[u + t]
+                            oldf = fbuf[u + t]
+                            ok = ((px >= fs) & (px <= fh) & (w0 >= 0.0) & (w1 >= 0.0)
+                                  & (w2 >= 0.0) & (z > near)
+                                  & ((z < old) | (ties & (z == old) & (f < oldf))))
+                            zbuf[u + t] = z if ok else old
+                            fbuf[u + t] = f if ok else oldf
+                    else:
+                        for t in range(UL):
+                            px = fb + t
+                            w0 = ((x1 - px) * a2 - (x2 - px) * a1) * inv
+                            w1 = ((x2 - px) * a0 - (x0 - px) * a2) * inv
+                            w2 = 1.0 - w0 - w1
+                            z = w0 * z0 + w1 * z1 + w2 * z2
+                            old = zbuf[u + t]
+                            oldf = fbuf[u + t]
+                            ok = ((px >= fs) & (px <= fh) & (w0 >= 0.0) & (w1 >= 0.0)
+                                  & (w2 >= 0.0) & (z > near)
+                                  & ((z < old) | (ties & (z == old) & (f < oldf))))
+                            zbuf[u + t] = z if ok else old
+                            fbuf[u + t] = f if ok else oldf
+                    s = b0 + L
     # the faces rasterized, sorted (both lists are)
     out = np.empty(nfirst + kept, np.int64)
     ia = 0
@@ -260,7 +425,7 @@ def _zbuffer(P, F, code, res, perspective, near, face_id, depth, bary):  # pragm
     if bary.shape[0] == res:
         for i in range(res):
             for j in range(res):
-                _bary_at(P, F, face_id[i, j], i, j, perspective, bary)
+                _bary_at(Q, F, face_id[i, j], i, j, perspective, bary)
     return out
 
 
@@ -276,189 +441,31 @@ def _box(x0, y0, x1, y1, x2, y2, res):  # pragma: no cover - compiled
     return i0, i1, j0, j1
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _occluded(P, F, f, res, perspective, tmax, T):  # pragma: no cover - compiled
-    """True when face ``f`` is beyond the farthest depth of every tile its bounding box meets
-    (see :func:`rasterize`; NaN depths are never occluded)."""
-    a = F[f, 0]
-    b = F[f, 1]
-    c = F[f, 2]
-    z0 = P[a, 2]
-    z1 = P[b, 2]
-    z2 = P[c, 2]
-    zmin = min(z0, min(z1, z2))
-    if perspective and not zmin > 0.0:
-        return False
-    zabs = max(abs(z0), max(abs(z1), abs(z2)))
-    zlo = zmin - 1e-9 * zabs
-    x0 = P[a, 0]
-    y0 = P[a, 1]
-    x1 = P[b, 0]
-    y1 = P[b, 1]
-    x2 = P[c, 0]
-    y2 = P[c, 1]
-    i0, i1, j0, j1 = _box(x0, y0, x1, y1, x2, y2, res)
-    for ti in range(i0 >> T, (i1 >> T) + 1):
-        for tj in range(j0 >> T, (j1 >> T) + 1):
-            if not zlo > tmax[ti, tj]:
-                return False
-    return True
+@njit(cache=True, nogil=True)
+def _tile_maxima(zbuf, res, T, tmax):  # pragma: no cover - compiled
+    """``tmax (nt, nt)``: the largest depth of each ``2^T x 2^T`` tile of the flat depth buffer
+    (column maxima of a tile row elementwise, which vectorizes, then per tile)."""
+    nt = tmax.shape[0]
+    colmax = np.empty(nt << T)
+    colmax[res:] = -np.inf
+    for ti in range(nt):
+        r0 = ti << T
+        r1 = min(res, r0 + (1 << T))
+        colmax[:res] = zbuf[r0 * res:(r0 + 1) * res]
+        for i in range(r0 + 1, r1):
+            drow = zbuf[i * res:(i + 1) * res]
+            for j in range(res):
+                d = drow[j]
+                colmax[j] = d if d > colmax[j] else colmax[j]
+        for tj in range(nt):
+            mx = -np.inf
+            for j in range(tj << T, (tj + 1) << T):
+                mx = colmax[j] if colmax[j] > mx else mx
+            tmax[ti, tj] = mx
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _face(P, F, f, res, perspective, near, fbuf, zbuf, ties):  # pragma: no cover - compiled
-    """Z-test face ``f`` (kept by :func:`rasterize`'s rejections) against the buffers, row by
-    row; ``ties``: compare equal depths by face index (faces not in increasing index order)."""
-    a = F[f, 0]
-    b = F[f, 1]
-    c = F[f, 2]
-    x0 = P[a, 0]
-    y0 = P[a, 1]
-    z0 = P[a, 2]
-    x1 = P[b, 0]
-    y1 = P[b, 1]
-    z1 = P[b, 2]
-    x2 = P[c, 0]
-    y2 = P[c, 1]
-    z2 = P[c, 2]
-    i0, i1, j0, j1 = _box(x0, y0, x1, y1, x2, y2, res)
-    area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-    inv = 1.0 / area
-    # Edge from corner a to corner b (a = e + 1, b = e + 2 mod 3; w_e = 0 on it): at row py it
-    # crosses column xa + (py - ya) k, k = (xb - xa) / (yb - ya); w_e >= 0 right of it when
-    # (ya - yb) * area > 0 (a lower bound of the span), left of it otherwise (an upper bound).
-    lx0 = -1e300
-    ly0 = 0.0
-    lk0 = 0.0
-    lx1 = -1e300
-    ly1 = 0.0
-    lk1 = 0.0
-    ux0 = 1e300
-    uy0 = 0.0
-    uk0 = 0.0
-    ux1 = 1e300
-    uy1 = 0.0
-    uk1 = 0.0
-    nl = 0
-    nu = 0
-    if j1 - j0 >= _LANES:               # narrow boxes: one vector step per row, no span needed
-        for e in range(3):
-            if e == 0:
-                xa = x1
-                ya = y1
-                xb = x2
-                yb = y2
-            elif e == 1:
-                xa = x2
-                ya = y2
-                xb = x0
-                yb = y0
-            else:
-                xa = x0
-                ya = y0
-                xb = x1
-                yb = y1
-            dy = yb - ya
-            if not abs(dy) >= 1e-6:
-                continue
-            k = (xb - xa) / dy
-            if (ya - yb) * area > 0.0:
-                if nl == 0:
-                    lx0 = xa
-                    ly0 = ya
-                    lk0 = k
-                else:
-                    lx1 = xa
-                    ly1 = ya
-                    lk1 = k
-                nl += 1
-            else:
-                if nu == 0:
-                    ux0 = xa
-                    uy0 = ya
-                    uk0 = k
-                else:
-                    ux1 = xa
-                    uy1 = ya
-                    uk1 = k
-                nu += 1
-    fj0 = float(j0)
-    fj1 = float(j1)
-    for i in range(i0, i1 + 1):
-        py = float(i)
-        lo = j0
-        hi = j1
-        if nl + nu > 0:
-            tl = max(lx0 + (py - ly0) * lk0, lx1 + (py - ly1) * lk1)
-            tu = min(ux0 + (py - uy0) * uk0, ux1 + (py - uy1) * uk1)
-            flo = math.ceil(tl) - 1.0
-            fhi = math.floor(tu) + 1.0
-            if not (flo > fj0 and math.isfinite(tl)):       # overflow or NaN: the whole box
-                flo = fj0
-            if not (fhi < fj1 and math.isfinite(tu)):
-                fhi = fj1
-            if fhi < flo:
-                continue
-            lo = int(flo)
-            hi = int(fhi)
-        _row(zbuf, fbuf, i * res, res, py, lo, hi, f, x0, y0, z0, x1, y1, z1, x2, y2, z2, inv,
-             perspective, near, ties)
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _row(zbuf, fbuf, base, res, py, lo, hi, f, x0, y0, z0, x1, y1, z1, x2, y2, z2, inv,
-         perspective, near, ties):  # pragma: no cover - compiled
-    """The exact coverage and depth test (the NumPy formulas) of pixels ``lo..hi`` of the row
-    starting at ``base`` of the flat buffers: steps of ``_LANES`` pixels starting at
-    ``min(s, res - _LANES)`` (inside the row; the pixels outside ``s..hi`` are masked off), so that
-    the loop has a fixed length and vectorizes (unsigned indices: no negative-index wraparound)."""
-    a2 = y2 - py
-    a1 = y1 - py
-    a0 = y0 - py
-    # a lane count LLVM cannot bound (``res >> 40`` is 0): with the constant 8 it unrolls the
-    # loop fully and then does not vectorize it
-    L = max(_LANES, res >> 40)
-    if res < L:
-        L = res
-    UL = np.uint64(L)
-    s = lo
-    while s <= hi:
-        b = min(s, res - L)
-        u = np.uint64(base + b)
-        fs = float(s)
-        fh = float(hi)
-        fb = float(b)
-        if perspective:
-            for t in range(UL):
-                px = fb + t
-                w0 = ((x1 - px) * a2 - (x2 - px) * a1) * inv
-                w1 = ((x2 - px) * a0 - (x0 - px) * a2) * inv
-                w2 = 1.0 - w0 - w1
-                z = 1.0 / (w0 / z0 + w1 / z1 + w2 / z2)
-                old = zbuf[u + t]
-                oldf = fbuf[u + t]
-                ok = ((px >= fs) & (px <= fh) & (w0 >= 0.0) & (w1 >= 0.0) & (w2 >= 0.0)
-                      & (z > near) & ((z < old) | (ties & (z == old) & (f < oldf))))
-                zbuf[u + t] = z if ok else old
-                fbuf[u + t] = f if ok else oldf
-        else:
-            for t in range(UL):
-                px = fb + t
-                w0 = ((x1 - px) * a2 - (x2 - px) * a1) * inv
-                w1 = ((x2 - px) * a0 - (x0 - px) * a2) * inv
-                w2 = 1.0 - w0 - w1
-                z = w0 * z0 + w1 * z1 + w2 * z2
-                old = zbuf[u + t]
-                oldf = fbuf[u + t]
-                ok = ((px >= fs) & (px <= fh) & (w0 >= 0.0) & (w1 >= 0.0) & (w2 >= 0.0)
-                      & (z > near) & ((z < old) | (ties & (z == old) & (f < oldf))))
-                zbuf[u + t] = z if ok else old
-                fbuf[u + t] = f if ok else oldf
-        s = b + L
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _bary_at(P, F, f, i, j, perspective, bary):  # pragma: no cover - compiled
+def _bary_at(Q, F, f, i, j, perspective, bary):  # pragma: no cover - compiled
     """``bary[i, j]``: barycentrics of pixel ``(i, j)`` in face ``f`` (0 for ``f < 0``)."""
     if f < 0:
         bary[i, j, 0] = 0.0
@@ -468,12 +475,12 @@ def _bary_at(P, F, f, i, j, perspective, bary):  # pragma: no cover - compiled
     a = F[f, 0]
     b = F[f, 1]
     c = F[f, 2]
-    x0 = P[a, 0]
-    y0 = P[a, 1]
-    x1 = P[b, 0]
-    y1 = P[b, 1]
-    x2 = P[c, 0]
-    y2 = P[c, 1]
+    x0 = Q[0, a]
+    y0 = Q[1, a]
+    x1 = Q[0, b]
+    y1 = Q[1, b]
+    x2 = Q[0, c]
+    y2 = Q[1, c]
     inv = 1.0 / ((x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0))
     px = float(j)
     py = float(i)
@@ -481,9 +488,9 @@ def _bary_at(P, F, f, i, j, perspective, bary):  # pragma: no cover - compiled
     w1 = ((x2 - px) * (y0 - py) - (x0 - px) * (y2 - py)) * inv
     w2 = 1.0 - w0 - w1
     if perspective:
-        q0 = w0 / P[a, 2]
-        q1 = w1 / P[b, 2]
-        q2 = w2 / P[c, 2]
+        q0 = w0 / Q[2, a]
+        q1 = w1 / Q[2, b]
+        q2 = w2 / Q[2, c]
         z = 1.0 / (q0 + q1 + q2)
         w0 = q0 * z
         w1 = q1 * z
@@ -496,10 +503,16 @@ def _bary_at(P, F, f, i, j, perspective, bary):  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def barycentrics(P, F, face_id, perspective, bary):  # pragma: no cover - compiled
     """``bary (H, W, 3)`` of the faces ``face_id`` seen (as :func:`rasterize` computes them)."""
+    barycentrics_q(P.T.copy(), F, face_id, perspective, bary)
+
+
+@njit(cache=True, nogil=True)
+def barycentrics_q(Q, F, face_id, perspective, bary):  # pragma: no cover - compiled
+    """:func:`barycentrics` of the projected vertices ``Q (3, n)`` (``P = Q.T``)."""
     H, W = face_id.shape
     for i in range(H):
         for j in range(W):
-            _bary_at(P, F, face_id[i, j], i, j, perspective, bary)
+            _bary_at(Q, F, face_id[i, j], i, j, perspective, bary)
 
 
 @njit(cache=True, nogil=True)

@@ -62,7 +62,7 @@ class Raster:
         self.depth = depth
         self._bary = bary
         self.camera = camera
-        self._lazy = _lazy_bary          # (P, F) while bary is not computed
+        self._lazy = _lazy_bary          # (Q, F), P = Q.T, while bary is not computed
         # sorted faces the compiled rasterizer z-tested (every face seen is one of them), for
         # the renderer's seen faces; None otherwise
         self._candidates = _candidates
@@ -70,13 +70,13 @@ class Raster:
     @property
     def bary(self) -> np.ndarray:
         if self._bary is None:
-            P, F = self._lazy
+            Q, F = self._lazy
             kern = compiled_kernels()
             if kern is not None:
                 b = np.empty(self.face_id.shape + (3,))
-                kern.barycentrics(P, F, self.face_id, self.camera.perspective, b)
+                kern.barycentrics_q(Q, F, self.face_id, self.camera.perspective, b)
             else:
-                b = _barycentrics_numpy(P, F, self.face_id, self.camera.perspective)
+                b = _barycentrics_numpy(Q.T, F, self.face_id, self.camera.perspective)
             self._bary, self._lazy = b, None
         return self._bary
 
@@ -114,11 +114,11 @@ def rasterize(V, F, camera: Camera, *, backend: str = "auto") -> Raster:
         depth = np.empty((res, res))
         V = np.ascontiguousarray(V).reshape(-1, 3)
         F = np.ascontiguousarray(F).reshape(-1, 3)
-        P = np.empty_like(V)
+        Q = np.empty((3, len(V)))              # the projected vertices, P = Q.T
         cand = kern.project_rasterize(V, camera.position, camera._basis, camera.perspective,
-                                      camera.projection_scale, res, camera.near, F, P, face_id,
+                                      camera.projection_scale, res, camera.near, F, Q, face_id,
                                       depth, _NO_BARY)
-        return Raster(face_id, depth, None, camera, _lazy_bary=(P, F), _candidates=cand)
+        return Raster(face_id, depth, None, camera, _lazy_bary=(Q, F), _candidates=cand)
     else:
         face_id = np.full((res, res), -1, dtype=np.int64)
         depth = np.full((res, res), np.inf)
