@@ -38,7 +38,8 @@ Built-in filters and their defaults (DESIGN.md §5, the authors' settings)
   the nearest of the 20 icosahedron face normals.
 * ``slic`` -- SLIC superpixels (scikit-image; 100 segments, compactness 10, colours compared in
   CIELAB as scikit-image does by default, as the authors' call did) on the foreground, each
-  superpixel painted with its mean colour; view width 0.3 (the authors' window), learning rate
+  superpixel painted with its mean colour; view width 1.0 (the authors' window was 0.3 on
+  meshes of 10^5 vertices and more; see :func:`_slic` for why a wider one here), learning rate
   6e-5 (the authors' SLIC script; see :func:`_slic` for why 2e-4 roughened the shapes).
 * ``l0`` -- L0 gradient smoothing (Xu et al. 2011; lambda 0.01, kappa 2, beta_max 1e5, periodic
   boundary as in their MATLAB code) at 256 px; written here.
@@ -412,7 +413,7 @@ class SlicParams:
                                                        "lower ones follow colour more.")
 
 
-@register_filter("slic", kind="iterative", params=SlicParams, resolution=256, width=0.3,
+@register_filter("slic", kind="iterative", params=SlicParams, resolution=256, width=1.0,
                  learning_rate=6e-5, crease_angle=45.0,
                  description="SLIC superpixels: each superpixel takes its mean colour")
 def _slic(image, params: SlicParams, ctx: FilterContext):
@@ -435,6 +436,23 @@ def _slic(image, params: SlicParams, ctx: FilterContext):
       of spot 0.30 -> 0.16 and of fandisk 0.75 -> 0.42, far below remeshing alone (0.30,
       0.63), and a Gaussian blur in place of SLIC roughened spot as much (0.30 -> 0.12 in 300
       iterations). At 6e-5: docs/paparazzi.md's effects table (benchmarks/paparazzi_effects.py).
+    * View width 1.0 (the authors' 0.3). ``segments`` counts superpixels per picture, so the view
+      width sets their size on the shape: at 0.3 a superpixel (a hundredth of the picture)
+      covered only 1.5-4 triangles of the test meshes Loop-subdivided to >= 5,000 vertices
+      (spot at 13,234: 3.4; bob, fandisk: 1.5; camelhead: 3.9), so the "flat patches" were
+      hardly larger than a face, and 1000 iterations with the CLI's defaults left the
+      near-planar share (measures.planar_area_fraction) below the remeshing-only control on
+      spot (0.3005 -> 0.2948, control 0.2982) and barely above it on fandisk (0.751 -> 0.755,
+      control 0.754). The thesis's shapes have 10^5-10^6 vertices (its SLIC example 43,000):
+      many triangles per superpixel. At 1.0 a superpixel covers 11 times the area (spot 38
+      triangles, bob and fandisk 16, camelhead 44), and each face is seen in more of the views.
+      Measured 2026-11-25 (benchmarks/paparazzi_effects.py, 1000 iterations, CLI defaults;
+      controls 0.2982, 0.018, 0.754, 0.278): spot 0.3005 -> 0.551, bob 0.008 -> 0.328, fandisk
+      0.751 -> 0.798, camelhead 0.221 -> 0.589, all clean (camelhead: 2 rollbacks, step halved
+      once); width 0.6: spot 0.419, fandisk 0.774; 1.5: spot 0.576, fandisk 0.799; spot in 300
+      iterations (control 0.302): 0.263 at 0.3, 0.342 at 0.6, 0.429 at 1.0, 0.436 at 1.5, 0.404
+      at 2.0. Painting each superpixel with its normalized mean normal instead of its mean
+      colour did not help (spot, 300 iterations, 1.0 wide: 0.418).
     """
     from skimage.segmentation import slic
 
