@@ -377,7 +377,7 @@ def _zbuffer(Q, F, code, res, perspective, near, face_id, depth, bary):  # pragm
                 base = i * res
                 s = lo
                 while s <= hi:
-                    b0 = min(s, res - L)
+                    b0 = min(s - (s & 3), res - L)   # 4-aligned: stores forward to loads
                     u = np.uint64(base + b0)
                     fs = float(s)
                     fh = float(hi)
