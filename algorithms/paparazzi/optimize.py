@@ -137,7 +137,7 @@ class PaparazziParams:
                                     "(128 or 256).")
     view_width: float = param(0.0, label="View width", minimum=0.0, maximum=4.0, decimals=3,
                               tooltip="Width of the orthographic view. 0 = the filter's default "
-                                      "(0.5; SLIC 0.3).")
+                                      "(0.5; SLIC 1.0).")
     remesh_every: int = param(30, label="Remesh every", minimum=0, maximum=10000, step=10,
                               tooltip="Remesh and check for self-intersections every this many "
                                       "iterations (0 = only check at the end).")
