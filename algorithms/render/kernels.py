@@ -20,8 +20,8 @@ import numpy as np
 from numba import njit
 
 __all__ = ["project", "rasterize", "project_rasterize", "barycentrics", "barycentrics_q",
-           "seen_faces", "seen_faces_among", "face_normals", "paint", "face_sums", "normal_vjp",
-           "sh_values_t", "sh_normal_vjp"]
+           "seen_faces", "seen_faces_among", "face_normals", "lambert_colors", "paint", "face_sums",
+           "normal_vjp", "lambert_normal_vjp", "sh_values_t", "sh_normal_vjp"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -553,6 +553,25 @@ def seen_faces_among(face_id, cand, m, slot):  # pragma: no cover - compiled
 def face_normals(V, F, faces, out):  # pragma: no cover - compiled
     """Unit normals ``out (k, 3)`` of the faces ``F[faces]`` (zero for degenerate faces), as
     :func:`algorithms.render.render.face_unit_normals`."""
+    _face_normals(V, F, faces, out)
+
+
+@njit(cache=True, nogil=True)
+def lambert_colors(V, F, faces, M, scale, offset, N, colors):  # pragma: no cover - compiled
+    """:func:`face_normals` into ``N (k, 3)`` and ``colors (k, C) = scale (N M) + offset``
+    (:class:`~algorithms.render.shading.LambertianShading` without albedo) in one loop."""
+    _face_normals(V, F, faces, N)
+    C = M.shape[1]
+    for q in range(N.shape[0]):
+        n0 = N[q, 0]
+        n1 = N[q, 1]
+        n2 = N[q, 2]
+        for c in range(C):
+            colors[q, c] = scale * (n0 * M[0, c] + n1 * M[1, c] + n2 * M[2, c]) + offset
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _face_normals(V, F, faces, out):  # pragma: no cover - compiled
     for q in range(faces.shape[0]):
         f = faces[q]
         a = F[f, 0]
@@ -609,22 +628,45 @@ def paint(slot, colors, background, image):  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def face_sums(slot, G, out):  # pragma: no cover - compiled
     """``out (k, C)`` (zeroed beforehand) += the pixel gradients ``G (H, W, C)`` of each face,
-    summed in pixel order (as ``np.bincount``)."""
-    H, W = slot.shape
+    summed in pixel order (as ``np.bincount``). ``slot`` and ``G`` C-contiguous."""
     C = out.shape[1]
-    for i in range(H):
-        for j in range(W):
-            s = slot[i, j]
+    sl = slot.reshape(-1)
+    g = G.reshape(-1)
+    if C == 3:                          # RGB: unrolled, flat indices
+        for p in range(sl.shape[0]):
+            s = sl[p]
             if s >= 0:
-                for c in range(C):
-                    out[s, c] += G[i, j, c]
+                out[s, 0] += g[3 * p]
+                out[s, 1] += g[3 * p + 1]
+                out[s, 2] += g[3 * p + 2]
+        return
+    for p in range(sl.shape[0]):
+        s = sl[p]
+        if s >= 0:
+            for c in range(C):
+                out[s, c] += g[C * p + c]
 
 
 @njit(cache=True, nogil=True)
 def normal_vjp(V, F, faces, g, out):  # pragma: no cover - compiled
     """``out (n, 3)`` (zeroed beforehand) += ``sum_j sum_k -n_j (h_jk . g_j) / |h_jk|^2`` at the
     corners ``v_k`` of the faces ``faces`` (see :mod:`algorithms.render.render`)."""
+    _normal_vjp(V, F, faces, g, np.empty((0, 0)), out)
+
+
+@njit(cache=True, nogil=True)
+def lambert_normal_vjp(V, F, faces, gc, A, out):  # pragma: no cover - compiled
+    """:func:`normal_vjp` of ``g_j = A gc_j`` (``A (3, C)``, ``gc (k, C)``): the gradient of
+    linear shading (colour ``= N M * scale + offset``: ``A = scale M``) in the same loop."""
+    _normal_vjp(V, F, faces, gc, A, out)
+
+
+@njit(cache=True, nogil=True)
+def _normal_vjp(V, F, faces, g, A, out):  # pragma: no cover - compiled
+    """:func:`normal_vjp` (``A`` empty) or :func:`lambert_normal_vjp`."""
     X = np.empty((3, 3))
+    lin = A.shape[0] == 3
+    C = g.shape[1]
     for q in range(faces.shape[0]):
         f = faces[q]
         for k in range(3):
@@ -645,9 +687,18 @@ def normal_vjp(V, F, faces, g, out):  # pragma: no cover - compiled
         nx /= nrm
         ny /= nrm
         nz /= nrm
-        gx = g[q, 0]
-        gy = g[q, 1]
-        gz = g[q, 2]
+        if lin:
+            gx = 0.0
+            gy = 0.0
+            gz = 0.0
+            for c in range(C):
+                gx += A[0, c] * g[q, c]
+                gy += A[1, c] * g[q, c]
+                gz += A[2, c] * g[q, c]
+        else:
+            gx = g[q, 0]
+            gy = g[q, 1]
+            gz = g[q, 2]
         for k in range(3):
             ka = (k + 1) % 3
             kb = (k + 2) % 3

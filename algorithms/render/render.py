@@ -102,13 +102,17 @@ def render(V, F, camera: Camera, shading: Shading | None = None, *, albedo=None,
         faces = (kern.seen_faces(fid, len(F), slot) if cand is None
                  else kern.seen_faces_among(fid, cand, len(F), slot))
         N = np.empty((len(faces), 3))
-        kern.face_normals(np.ascontiguousarray(V), np.ascontiguousarray(F), faces, N)
+        V = np.ascontiguousarray(V)
+        F = np.ascontiguousarray(F)
+        if albedo is None and type(shading) is LambertianShading:     # normals and colours
+            colors = np.empty((len(faces), shading.channels))         # in one loop
+            kern.lambert_colors(V, F, faces, shading.light_matrix(camera), shading.scale,
+                                shading.offset, N, colors)
+            return _paint(kern, r, slot, faces, N, colors, None, shading, None, background)
+        kern.face_normals(V, F, faces, N)
         alb = None if albedo is None else np.asarray(albedo, dtype=np.float64)[faces]
         colors, state = _shade(shading, N, camera, alb)
-        colors = np.ascontiguousarray(colors, dtype=np.float64)
-        image = np.empty(fid.shape + (colors.shape[1],))
-        kern.paint(slot, colors, float(background), image)
-        return Rendering(r, image, faces, slot, N, colors, alb, shading, state)
+        return _paint(kern, r, slot, faces, N, colors, alb, shading, state, background)
     mask = fid >= 0
     seen = fid[mask]
     faces = np.flatnonzero(np.bincount(seen, minlength=len(F)))   # O(pixels + faces), no sort
@@ -122,6 +126,14 @@ def render(V, F, camera: Camera, shading: Shading | None = None, *, albedo=None,
     C = colors.shape[1]
     image = np.full(fid.shape + (C,), float(background))
     image[mask] = colors[inv]
+    return Rendering(r, image, faces, slot, N, colors, alb, shading, state)
+
+
+def _paint(kern, r, slot, faces, N, colors, alb, shading, state, background):
+    """The compiled path's image and :class:`Rendering`."""
+    colors = np.ascontiguousarray(colors, dtype=np.float64)
+    image = np.empty(slot.shape + (colors.shape[1],))
+    kern.paint(slot, colors, float(background), image)
     return Rendering(r, image, faces, slot, N, colors, alb, shading, state)
 
 
@@ -187,7 +199,7 @@ def face_color_gradients(rendering: Rendering, grad_image) -> np.ndarray:
     kern = compiled_kernels()
     if kern is not None:
         gc = np.zeros((k, C))
-        kern.face_sums(rendering.slot, np.ascontiguousarray(G), gc)
+        kern.face_sums(np.ascontiguousarray(rendering.slot), np.ascontiguousarray(G), gc)
         return gc
     mask = rendering.slot >= 0
     s = rendering.slot[mask]
@@ -204,8 +216,17 @@ def image_vjp(V, F, rendering: Rendering, grad_image, *, return_albedo: bool = F
     needs a rendering made with an albedo)."""
     gc = face_color_gradients(rendering, grad_image)
     C = gc.shape[1]
-    gN, gA = rendering.shading.face_colors_vjp(rendering.normals, rendering.camera, gc,
-                                              rendering.albedo)
+    shading = rendering.shading
+    kern = compiled_kernels()
+    if (kern is not None and not return_albedo and rendering.albedo is None
+            and type(shading) is LambertianShading):
+        # linear shading: dE/dn_j = scale M gc_j, applied in the normal derivative's loop
+        V = np.ascontiguousarray(V, dtype=np.float64)
+        dV = np.zeros((len(V), 3))
+        kern.lambert_normal_vjp(V, np.ascontiguousarray(F, dtype=np.int64), rendering.faces, gc,
+                                shading.scale * shading.light_matrix(rendering.camera), dV)
+        return dV
+    gN, gA = shading.face_colors_vjp(rendering.normals, rendering.camera, gc, rendering.albedo)
     dV = normal_vjp(V, F, rendering.faces, gN)
     if not return_albedo:
         return dV

@@ -163,3 +163,29 @@ def test_sh_render_and_vjps_agree_with_numpy_with_and_without_the_kept_basis():
     for x, y in zip(a[1:4], a[4:]):
         np.testing.assert_allclose(x, y, rtol=0, atol=1e-12 * max(1.0, np.abs(y).max()))
     assert np.abs(a[1]).max() > 0.1 and np.abs(a[2]).max() > 1
+
+
+@pytest.mark.parametrize("name", sorted(CAMERAS))
+@pytest.mark.parametrize("mapping", ["authors", "linear"])
+def test_lambertian_fast_path_agrees_with_numpy(name, mapping):
+    """Without albedo the compiled path shades Lambertian faces in the normals' loop and applies
+    dE/dn = scale M gc in the normal derivative's loop: same numbers as the NumPy path."""
+    cam = CAMERAS[name]
+    V, F = _bumpy(9)
+    G = np.random.default_rng(4).standard_normal((40, 40, 3))
+    sh = LambertianShading([[1, 0.2, 0], [0, 1, 0.5]], [[1, 0.5, 0], [0, 0.3, 1]],
+                           mapping=mapping)
+
+    def run():
+        r = render(V, F, cam, sh, background=0.2)
+        return r, image_vjp(V, F, r, G)
+
+    (a, dva), (b, dvb) = _both(run)
+    np.testing.assert_array_equal(a.faces, b.faces)
+    np.testing.assert_allclose(a.normals, b.normals, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.colors, b.colors, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.image, b.image, rtol=0, atol=1e-12)
+    assert a.state is None and np.all(a.image[~a.mask] == 0.2)
+    scale = np.abs(dvb).max()
+    assert scale > 1
+    np.testing.assert_allclose(dva, dvb, rtol=0, atol=1e-12 * scale)
