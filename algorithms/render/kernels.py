@@ -20,8 +20,9 @@ import numpy as np
 from numba import njit
 
 __all__ = ["project", "rasterize", "project_rasterize", "barycentrics", "barycentrics_q",
-           "seen_faces", "seen_faces_among", "face_normals", "lambert_colors", "paint", "face_sums",
-           "normal_vjp", "lambert_normal_vjp", "sh_values_t", "sh_normal_vjp"]
+           "seen_faces", "seen_faces_among", "seen_lookup", "slot_paint", "face_normals",
+           "lambert_colors", "paint", "face_sums", "normal_vjp", "lambert_normal_vjp", "sh_values_t",
+           "sh_normal_vjp"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -526,27 +527,73 @@ def seen_faces(face_id, m, slot):  # pragma: no cover - compiled
 def seen_faces_among(face_id, cand, m, slot):  # pragma: no cover - compiled
     """:func:`seen_faces` when every face id in ``face_id`` is in ``cand`` (sorted; e.g. what
     :func:`rasterize` returned): O(pixels + len(cand)), whatever ``m``."""
-    mark = np.empty(m, np.int64)
-    for q in range(cand.shape[0]):
-        mark[cand[q]] = 0
+    faces, lookup = seen_lookup(face_id, cand, m)
     fid = face_id.reshape(-1)
     sl = slot.reshape(-1)
     for p in range(fid.shape[0]):
         f = fid[p]
+        sl[p] = lookup[f] if f >= 0 else -1
+    return faces
+
+
+@njit(cache=True, nogil=True)
+def seen_lookup(face_id, cand, m):  # pragma: no cover - compiled
+    """The sorted faces seen in ``face_id`` (every id in it is in the sorted ``cand``) and a
+    lookup ``(m,)`` whose entry of each seen face is its index among them (other entries
+    undefined): the first half of :func:`seen_faces_among`; :func:`slot_paint` does the rest."""
+    lookup = np.empty(m, np.int64)
+    for q in range(cand.shape[0]):
+        lookup[cand[q]] = 0
+    fid = face_id.reshape(-1)
+    for p in range(fid.shape[0]):
+        f = fid[p]
         if f >= 0:
-            mark[f] = 1
+            lookup[f] = 1
     faces = np.empty(cand.shape[0], np.int64)
     k = 0
     for q in range(cand.shape[0]):
         f = cand[q]
-        if mark[f] != 0:
+        if lookup[f] != 0:
             faces[k] = f
-            mark[f] = k
+            lookup[f] = k
             k += 1
+    return faces[:k].copy(), lookup
+
+
+@njit(cache=True, nogil=True)
+def slot_paint(face_id, lookup, colors, background, slot, image):  # pragma: no cover - compiled
+    """``slot (H, W)`` from :func:`seen_lookup`'s lookup and :func:`paint` of ``image (H, W, C)``
+    in the same pass over the pixels."""
+    C = colors.shape[1]
+    fid = face_id.reshape(-1)
+    sl = slot.reshape(-1)
+    img = image.reshape(-1)
+    if C == 3:                          # RGB: unrolled
+        for p in range(fid.shape[0]):
+            f = fid[p]
+            if f >= 0:
+                s = lookup[f]
+                sl[p] = s
+                img[3 * p] = colors[s, 0]
+                img[3 * p + 1] = colors[s, 1]
+                img[3 * p + 2] = colors[s, 2]
+            else:
+                sl[p] = -1
+                img[3 * p] = background
+                img[3 * p + 1] = background
+                img[3 * p + 2] = background
+        return
     for p in range(fid.shape[0]):
         f = fid[p]
-        sl[p] = mark[f] if f >= 0 else -1
-    return faces[:k].copy()
+        if f >= 0:
+            s = lookup[f]
+            sl[p] = s
+            for c in range(C):
+                img[C * p + c] = colors[s, c]
+        else:
+            sl[p] = -1
+            for c in range(C):
+                img[C * p + c] = background
 
 
 @njit(cache=True, nogil=True)

@@ -97,22 +97,27 @@ def render(V, F, camera: Camera, shading: Shading | None = None, *, albedo=None,
     fid = r.face_id
     kern = compiled_kernels() if backend != "numpy" else None
     if kern is not None:
-        slot = np.empty_like(fid)
         cand = r._candidates
-        faces = (kern.seen_faces(fid, len(F), slot) if cand is None
-                 else kern.seen_faces_among(fid, cand, len(F), slot))
+        if cand is None:
+            cand = np.arange(len(F))
+        faces, lookup = kern.seen_lookup(fid, cand, len(F))
         N = np.empty((len(faces), 3))
         V = np.ascontiguousarray(V)
         F = np.ascontiguousarray(F)
+        alb, state = None, None
         if albedo is None and type(shading) is LambertianShading:     # normals and colours
             colors = np.empty((len(faces), shading.channels))         # in one loop
             kern.lambert_colors(V, F, faces, shading.light_matrix(camera), shading.scale,
                                 shading.offset, N, colors)
-            return _paint(kern, r, slot, faces, N, colors, None, shading, None, background)
-        kern.face_normals(V, F, faces, N)
-        alb = None if albedo is None else np.asarray(albedo, dtype=np.float64)[faces]
-        colors, state = _shade(shading, N, camera, alb)
-        return _paint(kern, r, slot, faces, N, colors, alb, shading, state, background)
+        else:
+            kern.face_normals(V, F, faces, N)
+            alb = None if albedo is None else np.asarray(albedo, dtype=np.float64)[faces]
+            colors, state = _shade(shading, N, camera, alb)
+            colors = np.ascontiguousarray(colors, dtype=np.float64)
+        slot = np.empty_like(fid)
+        image = np.empty(fid.shape + (colors.shape[1],))
+        kern.slot_paint(fid, lookup, colors, float(background), slot, image)
+        return Rendering(r, image, faces, slot, N, colors, alb, shading, state)
     mask = fid >= 0
     seen = fid[mask]
     faces = np.flatnonzero(np.bincount(seen, minlength=len(F)))   # O(pixels + faces), no sort
@@ -126,14 +131,6 @@ def render(V, F, camera: Camera, shading: Shading | None = None, *, albedo=None,
     C = colors.shape[1]
     image = np.full(fid.shape + (C,), float(background))
     image[mask] = colors[inv]
-    return Rendering(r, image, faces, slot, N, colors, alb, shading, state)
-
-
-def _paint(kern, r, slot, faces, N, colors, alb, shading, state, background):
-    """The compiled path's image and :class:`Rendering`."""
-    colors = np.ascontiguousarray(colors, dtype=np.float64)
-    image = np.empty(slot.shape + (colors.shape[1],))
-    kern.paint(slot, colors, float(background), image)
     return Rendering(r, image, faces, slot, N, colors, alb, shading, state)
 
 

@@ -99,11 +99,14 @@ class LambertianShading:
         self.channels = int(C.shape[1])
 
     def light_matrix(self, camera: Camera) -> np.ndarray:
-        """(3, C) ``M = sum_i l_i c_i^T`` in world coordinates (colour = scale n M + offset)."""
-        L = self.directions
+        """(3, C) ``M = sum_i l_i c_i^T`` in world coordinates (colour = scale n M + offset).
+        Camera frame: ``M = R^T diag(1, 1, -1) L^T C`` with ``R`` the camera's rows (right, up,
+        direction), i.e. ``(L light_frame)^T C`` in two small products."""
+        K = self.directions.T @ self.colors
         if self.frame == "camera":
-            L = L @ light_frame(camera)
-        return L.T @ self.colors
+            K[2] = -K[2]
+            return camera._basis.T @ K
+        return K
 
     def face_colors(self, normals, camera, albedo=None):
         M = self.light_matrix(camera)
