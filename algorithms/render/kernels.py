@@ -1,5 +1,6 @@
-"""Compiled (Numba) kernels of the renderer: projection, rasterizer, seen faces, painting, the
-per-face pixel sums and the normal derivative of :mod:`algorithms.render.render`, and the
+"""Compiled (Numba) kernels of the renderer: projection, rasterizer (two passes with an exact
+tile occlusion test, see :func:`rasterize`), seen faces, painting, the per-face pixel sums and the
+normal derivative of :mod:`algorithms.render.render` (with Lambertian shading folded in), and the
 spherical-harmonics shading and its derivatives of :mod:`algorithms.render.sh`.
 
 Importing this module imports :mod:`numba`; :mod:`algorithms.render.raster` loads it lazily
@@ -21,8 +22,8 @@ from numba import njit
 
 __all__ = ["project", "rasterize", "project_rasterize", "barycentrics", "barycentrics_q",
            "seen_faces", "seen_faces_among", "seen_lookup", "slot_paint", "face_normals",
-           "lambert_colors", "paint", "face_sums", "normal_vjp", "lambert_normal_vjp", "sh_values_t",
-           "sh_normal_vjp"]
+           "lambert_colors", "paint", "face_sums", "normal_vjp", "lambert_normal_vjp",
+           "sh_values_t", "sh_normal_vjp"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -143,8 +144,8 @@ def rasterize(P, F, res, perspective, near, face_id, depth, bary):  # pragma: no
       depth (``1e-9 max |z_i|``), is beyond that of every tile its bounding box meets cannot win
       a pixel (the interpolated depth of a covered pixel is a convex combination of the corner
       depths, in ``1/z`` for perspective cameras: tested only when the corner depths are all
-      positive) and is skipped. Nothing is culled by orientation: open meshes, self-intersecting meshes and
-      cameras inside the mesh see their back faces exactly as before.
+      positive) and is skipped. Nothing is culled by orientation: open meshes,
+      self-intersecting meshes and cameras inside the mesh see their back faces as before.
     * Rows: each row's columns where the three edge functions can be ``>= 0`` are found from the
       edges' intersections with the row, widened by one pixel on each side (edges within 1e-6
       pixels of horizontal bound nothing); the exact test (the NumPy formulas, same operands and

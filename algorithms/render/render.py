@@ -18,10 +18,12 @@ the tests). So for an image gradient ``G = dE/dR (H, W, C)``:
 No matrix is ever formed; cost O(pixels + seen faces).
 
 Compiled path (:mod:`algorithms.render.kernels`, switched with
-:func:`~algorithms.render.raster.set_compiled_kernels`): the seen faces and their slots, their
-normals, the painting of the image, step 1 and step 3 are single loops (no per-corner temporary
-arrays, one pass over the pixels); the shading (step 2) stays pluggable. Both paths give the same
-numbers (to rounding; tested to 1e-12).
+:func:`~algorithms.render.raster.set_compiled_kernels`): the seen faces (among the faces the
+rasterizer z-tested), their normals, the slots and the painting of the image (one pass over the
+pixels), step 1 and step 3 are single loops (no per-corner temporary arrays); the shading (step 2)
+stays pluggable. :class:`LambertianShading` without albedo, being linear in the normal, is applied
+inside the kernels (colours in the normals' loop; ``dE/dn_j = scale M g_j`` in step 3's loop).
+Both paths give the same numbers (to rounding; tested to 1e-12).
 """
 
 from __future__ import annotations
