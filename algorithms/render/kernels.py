@@ -178,6 +178,8 @@ def _zbuffer(Q, F, code, res, perspective, near, face_id, depth, bary):  # pragm
     m = F.shape[0]
     neg = np.empty(m, np.int64)
     pos = np.empty(m, np.int64)
+    box = np.empty((m, 4), np.int32)
+    zlow = np.empty(m)
     nneg = 0
     npos = 0
     zneg = 0.0          # sums of |area| * (z0 + z1 + z2) and of |area| per orientation
@@ -214,32 +216,50 @@ def _zbuffer(Q, F, code, res, perspective, near, face_id, depth, bary):  # pragm
         ymax = max(y0, max(y1, y2))
         if xmax < 0.0 or ymax < 0.0 or xmin > hi or ymin > hi:
             continue
-        if (math.floor(min(ymax, hi)) < math.ceil(max(ymin, 0.0))
-                or math.floor(min(xmax, hi)) < math.ceil(max(xmin, 0.0))):
+        fi0 = math.ceil(max(ymin, 0.0))
+        fi1 = math.floor(min(ymax, hi))
+        fj0 = math.ceil(max(xmin, 0.0))
+        fj1 = math.floor(min(xmax, hi))
+        if fi1 < fi0 or fj1 < fj0:
             continue                    # no pixel centre in the bounding box (small faces)
         area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
         if area == 0.0 or not math.isfinite(area):
             continue
         zs = z0 + z1 + z2
         if area < 0.0:
+            k = nneg
             neg[nneg] = f
             nneg += 1
             zneg -= area * zs
             aneg -= area
         else:
+            k = m - 1 - npos
             pos[npos] = f
             npos += 1
             zpos += area * zs
             apos += area
+        # the pixel box and the occlusion test's depth bound, kept for the passes (the
+        # negative faces' from the start of the arrays, the positive faces' from the end)
+        box[k, 0] = int(fi0)
+        box[k, 1] = int(fi1)
+        box[k, 2] = int(fj0)
+        box[k, 3] = int(fj1)
+        zmin = min(z0, min(z1, z2))
+        if perspective and not zmin > 0.0:
+            zlow[k] = -np.inf           # not tested (NaN: never occluded either)
+        else:
+            zlow[k] = zmin - 1e-9 * max(abs(z0), max(abs(z1), abs(z2)))
     first = neg
     nfirst = nneg
     second = pos
     nsecond = npos
+    rev1 = False                        # whether the first list's boxes are stored from the end
     if zpos * aneg < zneg * apos:       # the positive faces are nearer on average
         first = pos
         nfirst = npos
         second = neg
         nsecond = nneg
+        rev1 = True
     # The face and row loops are written out here, not in helper functions: Numba's inlining
     # of functions taking arrays adds reference counting (atomic) per call, per face and row.
     T = _TILE
@@ -261,8 +281,29 @@ def _zbuffer(Q, F, code, res, perspective, near, face_id, depth, bary):  # pragm
             count = nsecond
             if nsecond > 0:
                 _tile_maxima(zbuf, res, T, tmax)
+        rev = rev1 != ties
         for q in range(count):
             f = second[q] if ties else first[q]
+            k = m - 1 - q if rev else q
+            i0 = np.int64(box[k, 0])
+            i1 = np.int64(box[k, 1])
+            j0 = np.int64(box[k, 2])
+            j1 = np.int64(box[k, 3])
+            if ties:
+                # occlusion test (see the docstring); NaN depths are never occluded
+                zlo = zlow[k]
+                occluded = zlo > -np.inf
+                ti = i0 >> T
+                while occluded and ti <= i1 >> T:
+                    tj = j0 >> T
+                    while occluded and tj <= j1 >> T:
+                        occluded = zlo > tmax[ti, tj]
+                        tj += 1
+                    ti += 1
+                if occluded:
+                    continue
+                second[kept] = f
+                kept += 1
             a = F[f, 0]
             b = F[f, 1]
             c = F[f, 2]
@@ -275,23 +316,6 @@ def _zbuffer(Q, F, code, res, perspective, near, face_id, depth, bary):  # pragm
             x2 = X[c]
             y2 = Y[c]
             z2 = Z[c]
-            i0, i1, j0, j1 = _box(x0, y0, x1, y1, x2, y2, res)
-            if ties:
-                # occlusion test (see the docstring); NaN depths are never occluded
-                zmin = min(z0, min(z1, z2))
-                zlo = zmin - 1e-9 * max(abs(z0), max(abs(z1), abs(z2)))
-                occluded = zmin > 0.0 or not perspective
-                ti = i0 >> T
-                while occluded and ti <= i1 >> T:
-                    tj = j0 >> T
-                    while occluded and tj <= j1 >> T:
-                        occluded = zlo > tmax[ti, tj]
-                        tj += 1
-                    ti += 1
-                if occluded:
-                    continue
-                second[kept] = f
-                kept += 1
             area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
             inv = 1.0 / area
             # Edge from corner a to corner b (a = e + 1, b = e + 2 mod 3; w_e = 0 on it): at row
@@ -432,18 +456,6 @@ def _zbuffer(Q, F, code, res, perspective, near, face_id, depth, bary):  # pragm
             for j in range(res):
                 _bary_at(Q, F, face_id[i, j], i, j, perspective, bary)
     return out
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _box(x0, y0, x1, y1, x2, y2, res):  # pragma: no cover - compiled
-    """First and last row and column of the pixel centres in the bounding box (clamped to the
-    image before the conversion to integers)."""
-    hi = res - 1.0
-    i0 = int(math.ceil(max(0.0, min(y0, min(y1, y2)))))
-    i1 = int(math.floor(min(hi, max(y0, max(y1, y2)))))
-    j0 = int(math.ceil(max(0.0, min(x0, min(x1, x2)))))
-    j1 = int(math.floor(min(hi, max(x0, max(x1, x2)))))
-    return i0, i1, j0, j1
 
 
 @njit(cache=True, nogil=True)
