@@ -22,7 +22,8 @@ from numba import njit
 
 __all__ = ["project", "rasterize", "project_rasterize", "barycentrics", "barycentrics_q",
            "seen_faces", "seen_faces_among", "seen_lookup", "slot_paint", "face_normals",
-           "lambert_colors", "paint", "face_sums", "normal_vjp", "lambert_normal_vjp",
+           "lambert_colors", "lambert_render", "paint", "face_sums", "normal_vjp",
+           "lambert_normal_vjp", "lambert_image_vjp",
            "sh_values_t", "sh_normal_vjp"]
 
 
@@ -613,6 +614,24 @@ def slot_paint(face_id, lookup, colors, background, slot, image):  # pragma: no 
 
 
 @njit(cache=True, nogil=True)
+def lambert_render(V, F, face_id, cand, m, M, scale, offset, background):  # pragma: no cover
+    """:func:`seen_lookup`, :func:`lambert_colors` and :func:`slot_paint` in one call. Returns
+    the seen faces, their normals and colours, the slots ``(H, W)`` and the image
+    ``(H, W, C)``."""
+    faces, lookup = seen_lookup(face_id, cand, m)
+    k = faces.shape[0]
+    C = M.shape[1]
+    N = np.empty((k, 3))
+    colors = np.empty((k, C))
+    lambert_colors(V, F, faces, M, scale, offset, N, colors)
+    H, W = face_id.shape
+    slot = np.empty((H, W), np.int64)
+    image = np.empty((H, W, C))
+    slot_paint(face_id, lookup, colors, background, slot, image)
+    return faces, N, colors, slot, image
+
+
+@njit(cache=True, nogil=True)
 def face_normals(V, F, faces, out):  # pragma: no cover - compiled
     """Unit normals ``out (k, 3)`` of the faces ``F[faces]`` (zero for degenerate faces), as
     :func:`algorithms.render.render.face_unit_normals`."""
@@ -708,6 +727,17 @@ def face_sums(slot, G, out):  # pragma: no cover - compiled
         if s >= 0:
             for c in range(C):
                 out[s, c] += g[C * p + c]
+
+
+@njit(cache=True, nogil=True)
+def lambert_image_vjp(V, F, slot, faces, G, A):  # pragma: no cover - compiled
+    """``dE/dV (n, 3)`` of Lambertian shading without albedo in one call: :func:`face_sums` of
+    ``G (H, W, C)`` into ``gc``, then :func:`lambert_normal_vjp`."""
+    gc = np.zeros((faces.shape[0], G.shape[2]))
+    face_sums(slot, G, gc)
+    out = np.zeros((V.shape[0], 3))
+    _normal_vjp(V, F, faces, gc, A, out)
+    return out
 
 
 @njit(cache=True, nogil=True)

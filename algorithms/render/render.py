@@ -22,7 +22,8 @@ Compiled path (:mod:`algorithms.render.kernels`, switched with
 rasterizer z-tested), their normals, the slots and the painting of the image (one pass over the
 pixels), step 1 and step 3 are single loops (no per-corner temporary arrays); the shading (step 2)
 stays pluggable. :class:`LambertianShading` without albedo, being linear in the normal, is applied
-inside the kernels (colours in the normals' loop; ``dE/dn_j = scale M g_j`` in step 3's loop).
+inside the kernels (colours in the normals' loop; ``dE/dn_j = scale M g_j`` in step 3's loop),
+and each of the shading and its derivative is one kernel call.
 Both paths give the same numbers (to rounding; tested to 1e-12).
 """
 
@@ -102,20 +103,19 @@ def render(V, F, camera: Camera, shading: Shading | None = None, *, albedo=None,
         cand = r._candidates
         if cand is None:
             cand = np.arange(len(F))
-        faces, lookup = kern.seen_lookup(fid, cand, len(F))
-        N = np.empty((len(faces), 3))
         V = np.ascontiguousarray(V)
         F = np.ascontiguousarray(F)
-        alb, state = None, None
-        if albedo is None and type(shading) is LambertianShading:     # normals and colours
-            colors = np.empty((len(faces), shading.channels))         # in one loop
-            kern.lambert_colors(V, F, faces, shading.light_matrix(camera), shading.scale,
-                                shading.offset, N, colors)
-        else:
-            kern.face_normals(V, F, faces, N)
-            alb = None if albedo is None else np.asarray(albedo, dtype=np.float64)[faces]
-            colors, state = _shade(shading, N, camera, alb)
-            colors = np.ascontiguousarray(colors, dtype=np.float64)
+        if albedo is None and type(shading) is LambertianShading:     # one call: normals and
+            faces, N, colors, slot, image = kern.lambert_render(      # colours in one loop
+                V, F, fid, cand, len(F), shading.light_matrix(camera), shading.scale,
+                shading.offset, float(background))
+            return Rendering(r, image, faces, slot, N, colors, None, shading, None)
+        faces, lookup = kern.seen_lookup(fid, cand, len(F))
+        N = np.empty((len(faces), 3))
+        kern.face_normals(V, F, faces, N)
+        alb = None if albedo is None else np.asarray(albedo, dtype=np.float64)[faces]
+        colors, state = _shade(shading, N, camera, alb)
+        colors = np.ascontiguousarray(colors, dtype=np.float64)
         slot = np.empty_like(fid)
         image = np.empty(fid.shape + (colors.shape[1],))
         kern.slot_paint(fid, lookup, colors, float(background), slot, image)
@@ -183,17 +183,24 @@ def normal_vjp(V, F, faces, grad_normals) -> np.ndarray:
     return out
 
 
-def face_color_gradients(rendering: Rendering, grad_image) -> np.ndarray:
-    """``dE/d(face colour) (k, C)`` of the seen faces (``rendering.faces``) from ``dE/dR
-    (H, W, C)``: flat shading gives each pixel its face's colour, so this is the per-face sum of
-    the pixel gradients (one bincount per channel, O(pixels + faces)). Shared by every shading's
-    vector-Jacobian product."""
-    G = np.asarray(grad_image, dtype=np.float64)
+def _checked_gradient(rendering: Rendering, grad_image) -> np.ndarray:
+    """``dE/dR`` as a C-contiguous float64 ``(H, W, C)`` array of the rendering's shape."""
+    G = np.ascontiguousarray(grad_image, dtype=np.float64)
     if G.ndim == 2:
         G = G[..., None]
     C = rendering.colors.shape[1]
     if G.shape != rendering.image.shape[:2] + (C,):
         raise ValueError(f"image gradient has shape {G.shape}, the image {rendering.image.shape}")
+    return G
+
+
+def face_color_gradients(rendering: Rendering, grad_image) -> np.ndarray:
+    """``dE/d(face colour) (k, C)`` of the seen faces (``rendering.faces``) from ``dE/dR
+    (H, W, C)``: flat shading gives each pixel its face's colour, so this is the per-face sum of
+    the pixel gradients (one bincount per channel, O(pixels + faces)). Shared by every shading's
+    vector-Jacobian product."""
+    G = _checked_gradient(rendering, grad_image)
+    C = G.shape[2]
     k = len(rendering.faces)
     kern = compiled_kernels()
     if kern is not None:
@@ -213,18 +220,19 @@ def image_vjp(V, F, rendering: Rendering, grad_image, *, return_albedo: bool = F
     """``dE/dV (n, 3)`` from ``dE/dR (H, W, C)`` for the image of :func:`render` (visibility
     fixed). With ``return_albedo=True`` also ``dE/d(albedo) (m, C)`` (zero for unseen faces;
     needs a rendering made with an albedo)."""
-    gc = face_color_gradients(rendering, grad_image)
-    C = gc.shape[1]
     shading = rendering.shading
     kern = compiled_kernels()
     if (kern is not None and not return_albedo and rendering.albedo is None
             and type(shading) is LambertianShading):
-        # linear shading: dE/dn_j = scale M gc_j, applied in the normal derivative's loop
-        V = np.ascontiguousarray(V, dtype=np.float64)
-        dV = np.zeros((len(V), 3))
-        kern.lambert_normal_vjp(V, np.ascontiguousarray(F, dtype=np.int64), rendering.faces, gc,
-                                shading.scale * shading.light_matrix(rendering.camera), dV)
-        return dV
+        # linear shading: dE/dn_j = scale M gc_j, applied in the normal derivative's loop; the
+        # per-face sums too, in the same call
+        G = _checked_gradient(rendering, grad_image)
+        return kern.lambert_image_vjp(
+            np.ascontiguousarray(V, dtype=np.float64), np.ascontiguousarray(F, dtype=np.int64),
+            np.ascontiguousarray(rendering.slot), rendering.faces, G,
+            shading.scale * shading.light_matrix(rendering.camera))
+    gc = face_color_gradients(rendering, grad_image)
+    C = gc.shape[1]
     gN, gA = shading.face_colors_vjp(rendering.normals, rendering.camera, gc, rendering.albedo)
     dV = normal_vjp(V, F, rendering.faces, gN)
     if not return_albedo:

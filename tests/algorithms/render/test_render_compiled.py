@@ -182,6 +182,7 @@ def test_lambertian_fast_path_agrees_with_numpy(name, mapping):
 
     (a, dva), (b, dvb) = _both(run)
     np.testing.assert_array_equal(a.faces, b.faces)
+    np.testing.assert_array_equal(a.slot, b.slot)
     np.testing.assert_allclose(a.normals, b.normals, rtol=0, atol=1e-12)
     np.testing.assert_allclose(a.colors, b.colors, rtol=0, atol=1e-12)
     np.testing.assert_allclose(a.image, b.image, rtol=0, atol=1e-12)
