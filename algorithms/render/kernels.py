@@ -426,7 +426,7 @@ def _zbuffer(Q, F, code, res, perspective, near, face_id, depth, bary):  # pragm
                                   & ((z < old) | (ties & (z == old) & (f < oldf))))
                             zbuf[u + t] = z if ok else old
                             fbuf[u + t] = f if ok else oldf
-                    else:
+                    elif ties:            # orthographic, second pass
                         for t in range(UL):
                             px = fb + t
                             w0 = ((x1 - px) * a2 - (x2 - px) * a1) * inv
@@ -437,9 +437,23 @@ def _zbuffer(Q, F, code, res, perspective, near, face_id, depth, bary):  # pragm
                             oldf = fbuf[u + t]
                             ok = ((px >= fs) & (px <= fh) & (w0 >= 0.0) & (w1 >= 0.0)
                                   & (w2 >= 0.0) & (z > near)
-                                  & ((z < old) | (ties & (z == old) & (f < oldf))))
+                                  & ((z < old) | ((z == old) & (f < oldf))))
                             zbuf[u + t] = z if ok else old
                             fbuf[u + t] = f if ok else oldf
+                    else:
+                        # orthographic, first pass: no ties to break (index order), no tie test
+                        # (~1% faster; the same split of the perspective loop measured slower)
+                        for t in range(UL):
+                            px = fb + t
+                            w0 = ((x1 - px) * a2 - (x2 - px) * a1) * inv
+                            w1 = ((x2 - px) * a0 - (x0 - px) * a2) * inv
+                            w2 = 1.0 - w0 - w1
+                            z = w0 * z0 + w1 * z1 + w2 * z2
+                            old = zbuf[u + t]
+                            ok = ((px >= fs) & (px <= fh) & (w0 >= 0.0) & (w1 >= 0.0)
+                                  & (w2 >= 0.0) & (z > near) & (z < old))
+                            zbuf[u + t] = z if ok else old
+                            fbuf[u + t] = f if ok else fbuf[u + t]
                     s = b0 + L
     # the faces rasterized, sorted (both lists are)
     out = np.empty(nfirst + kept, np.int64)
