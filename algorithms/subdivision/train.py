@@ -12,10 +12,11 @@ validation loss has not dropped by at least ``min_improvement`` (relative) durin
 ``patience`` epochs; the best weights are kept as always. The default 0 keeps the thesis' 700
 epochs: measured on armadillo (200 coarse meshes), ``patience=60`` stopped at epoch 137 (best
 validation loss 4.90e-4 at epoch 129), and its network beat Loop and modified butterfly on both
-Hausdorff and mean distance on only 2 of 9 other meshes; the whole 700-epoch default run
-(2026-11-25, 33.3 min with its data) kept epoch 110 (4.89e-4) and did no better (2 of 11; the
-shipped weights, 100 coarse meshes: 8 of 11; resources/subdivision/README.md), so the extra
-epochs do not pay off here, but the default stays the thesis's.
+Hausdorff and mean distance on only 2 of 9 other meshes; two whole 700-epoch default runs
+(2026-11-25, 26.2 and 33.3 min with their data, by the machine's load) kept epochs 108 / 110
+(4.93e-4 / 4.89e-4) and did little better (4 and 2 of 11; the shipped weights, 100 coarse
+meshes: 8 of 11; resources/subdivision/README.md), so the extra epochs do not pay off here, but
+the default stays the thesis's.
 
 Speed: every coarse mesh's index tensors are built once (:class:`MeshLevels`); the half-flap
 plumbing runs as compiled loops with hand-written backward passes
