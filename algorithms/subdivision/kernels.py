@@ -138,7 +138,8 @@ def flap_backward(V, D, ijkl, has_l, gloc, gR, gV, gD, one,
             for s in (2, 6):
                 G[s, 1] = -G[s, 1]
                 G[s, 2] = -G[s, 2]
-        # ---- forward again, keeping what the backward needs
+        # ---- forward again (the lines of flap_forward, kept in registers rather than stored:
+        # an array-taking helper shared by both would add reference counting per flap)
         a0, a1, a2 = W[0, 0], W[0, 1], W[0, 2]
         b0, b1, b2 = W[1, 0], W[1, 1], W[1, 2]
         c0, c1, c2 = W[2, 0], W[2, 1], W[2, 2]

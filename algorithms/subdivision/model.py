@@ -394,17 +394,22 @@ class SubdivisionNet:
         ijkl = lv["ijkl"]
         loc, R = fused.Flap.apply(V, lv)
         mlp = self.module[name]
+        h = self._first_layer(torch, mlp[0], loc, Z, lambda ZW: fused.SlotGather.apply(
+            ZW.reshape(-1, 4, HIDDEN), ijkl))
+        return fused.Pool.apply(mlp[1:](h), R, dst, count.reshape(-1))
+
+    @staticmethod
+    def _first_layer(torch, lin, loc, Z, gather):
+        """The first layer's pre-activations: its geometric columns applied to every flap's
+        ``loc``, its feature columns applied once per vertex (``Z @ wz``: (n, 4 * 32), the four
+        flap slots side by side) and summed over each flap's vertices by ``gather``."""
         geo = loc.reshape(len(loc), 21)
         if Z is None:
-            h = mlp[0](geo)
-        else:
-            lin = mlp[0]
-            w = lin.weight
-            h = torch.nn.functional.linear(geo, w[:, _GEO_COLS], lin.bias)
-            wz = w[:, _Z_COLS].reshape(HIDDEN, 4, FEATURES - 3).transpose(0, 1)  # (4, 32, 29)
-            ZW = (Z @ wz.reshape(4 * HIDDEN, FEATURES - 3).T).reshape(-1, 4, HIDDEN)
-            h = h + fused.SlotGather.apply(ZW, ijkl)
-        return fused.Pool.apply(mlp[1:](h), R, dst, count.reshape(-1))
+            return lin(geo)
+        w = lin.weight
+        h = torch.nn.functional.linear(geo, w[:, _GEO_COLS], lin.bias)
+        wz = w[:, _Z_COLS].reshape(HIDDEN, 4, FEATURES - 3).transpose(0, 1)  # (4, 32, 29)
+        return h + gather(Z @ wz.reshape(4 * HIDDEN, FEATURES - 3).T)
 
     def _apply_torch(self, torch, name, V, Z, lv):
         """Outputs of module ``name`` on every half-flap: world displacement (H, 3), feature
@@ -422,16 +427,8 @@ class SubdivisionNet:
                              loc[:, 3:6], torch.where(has_l, loc[:, 6:7], loc[:, 5:6] * flip)],
                             dim=1)
         mlp = self.module[name]
-        geo = loc.reshape(len(loc), 21)
-        if Z is None:
-            h = mlp[0](geo)
-        else:
-            lin = mlp[0]
-            w = lin.weight
-            h = torch.nn.functional.linear(geo, w[:, _GEO_COLS], lin.bias)
-            wz = w[:, _Z_COLS].reshape(HIDDEN, 4, FEATURES - 3).transpose(0, 1)  # (4, 32, 29)
-            ZW = (Z @ wz.reshape(4 * HIDDEN, FEATURES - 3).T).reshape(-1, HIDDEN)  # (n*4, 32)
-            h = h + ZW[ijkl * 4 + torch.from_numpy(_SLOT)].sum(1)
+        h = self._first_layer(torch, mlp[0], loc, Z, lambda ZW: ZW.reshape(-1, HIDDEN)[
+            ijkl * 4 + torch.from_numpy(_SLOT)].sum(1))
         out = mlp[1:](h)
         disp = torch.bmm(out[:, None, :3], R)[:, 0]  # back to world axes
         return disp, out[:, 3:]
