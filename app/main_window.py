@@ -334,18 +334,10 @@ class MainWindow(QMainWindow):
         return zlib.crc32(",".join(self.panels).encode()) & 0x7FFFFFFF
 
     def _build_panels(self) -> None:
-        from app.panels.adversarial import AdversarialPanel
-        from app.panels.analogies import AnalogiesPanel
-        from app.panels.cubic import CubicPanel
-        from app.panels.multigrid import MultigridPanel
-        from app.panels.paparazzi import PaparazziPanel
-        from app.panels.smooth import SmoothPanel
-        from app.panels.spectral import SpectralPanel
-        from app.panels.subdivision import SubdivisionPanel
+        from app.panels import panel_classes
 
         self.panels = {}
-        for cls in (CubicPanel, AnalogiesPanel, SmoothPanel, MultigridPanel, SpectralPanel,
-                    SubdivisionPanel, PaparazziPanel, AdversarialPanel):
+        for cls in panel_classes():
             panel = cls(self)
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, panel)
             self.panels[cls.title] = panel

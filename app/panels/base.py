@@ -137,6 +137,8 @@ class MethodPanel(QDockWidget):
         self.setWidget(outer)
 
         self._last: tuple[MeshState, MeshState] | None = None  # (input, result) of last run
+        self._recipe_cache: dict = {}  # the recipe's precomputation, kept between runs
+        self._run_options: dict | None = None
         self._pending_input: MeshState | None = None
         self._mesh_job: dict | None = None  # the running changes_faces job (see run)
         self._shown_F: np.ndarray | None = None  # faces a mesh job put on the 3D view
@@ -171,11 +173,33 @@ class MethodPanel(QDockWidget):
     # -- to implement -------------------------------------------------------------------------
     def job_options(self) -> dict:
         """Settings of the next run that are not in the Params form (e.g. a switch of the
-        panel's own), as a JSON-able dict: the study log records them with the run."""
+        panel's own, the chosen style, a seed, blob references of loaded images), as a
+        JSON-able dict: with the state and the Params they are the recipe's whole input; the
+        study log and the project file record them."""
         return {}
 
+    def restore_options(self, options: dict) -> None:
+        """Set the panel's own widgets from ``options`` saved by :meth:`job_options` (a project
+        file being opened). The default has nothing to restore."""
+
+    @classmethod
+    def recipe(cls):
+        """The panel's Qt-free recipe (:mod:`app.recipes`, registered under the panel's
+        title), or None for a panel that computes nothing of its own."""
+        from app.recipes import recipes
+
+        return recipes().get(cls.title)
+
     def build_steps(self, state: MeshState, params: Any) -> Iterator[Step]:
-        raise NotImplementedError
+        """The run's Step generator (worker thread): the panel's recipe with the options read
+        on the GUI thread when the run started."""
+        recipe = self.recipe()
+        if recipe is None:
+            raise NotImplementedError(f"{self.title} has no recipe")
+        options = getattr(self, "_run_options", None)
+        if options is None:
+            options = self.job_options()
+        return recipe.steps(state, params, options, self._recipe_cache)
 
     def job_factory(self, state: MeshState, params: Any):
         """The job's factory (called on the worker thread) for one run. The default calls
@@ -184,9 +208,14 @@ class MethodPanel(QDockWidget):
         return lambda: self.build_steps(state, params)
 
     def commit_function(self):
-        """``commit(before, last_step) -> MeshState`` for the job being started, or None to
-        take the last step's positions (see MainWindow.start_positions_job)."""
-        return None
+        """``commit(before, last_step) -> MeshState`` for the job being started (by default the
+        recipe's ``result`` with this run's options), or None to take the last step's
+        positions (see MainWindow.start_positions_job)."""
+        recipe = self.recipe()
+        if recipe is None:
+            return None
+        options = getattr(self, "_run_options", None) or {}
+        return lambda before, step: recipe.result(before, step, options)
 
     @property
     def merge_id(self) -> int:
@@ -359,8 +388,10 @@ class MethodPanel(QDockWidget):
             # (a result with new faces starts again from the whole previous input)
             start = state.with_positions(prev.V) if prev.F is state.F else prev
         self._pending_input = start
+        # read once, here on the GUI thread: the worker, the commit and the study log use it
+        self._run_options = self.job_options()
         # what this run asks for, read by the study log (app/study/session.py) when it starts
-        self.last_request = {"params": params, "options": self.job_options(), "input": start}
+        self.last_request = {"params": params, "options": self._run_options, "input": start}
         self._debounce.stop()
         self.show_live_state("running" if live else None)
         self.plot.clear()
@@ -442,9 +473,14 @@ class MethodPanel(QDockWidget):
             win.report(f"{self.title} failed: {text}", "error")
             dialogs.error(win, f"{self.title} failed", text)
             return
-        same_faces = F is before.F or (F.shape == before.F.shape and V.shape == before.V.shape
-                                       and np.array_equal(F, before.F))
-        after = before.with_positions(V) if same_faces else MeshState.make(V, F)
+        recipe = self.recipe()
+        if recipe is not None:
+            after = recipe.result(before, step, self._run_options or {})
+        else:
+            same_faces = F is before.F or (F.shape == before.F.shape
+                                           and V.shape == before.V.shape
+                                           and np.array_equal(F, before.F))
+            after = before.with_positions(V) if same_faces else MeshState.make(V, F)
         self._shown_F = None  # the document's change redraws the view with the new faces
         win.undo_stack.push(StateCommand(doc, before, after, self.title,
                                          merge_id=job["merge_id"]))

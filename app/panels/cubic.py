@@ -30,9 +30,8 @@ from app.gaussmap import GaussMapPainter
 from app.panels.base import MethodPanel
 from app.tools import BrushSettings, FieldBrush, HandleTool, StampBrush
 
-# the painted fields and the run itself are the Qt-free recipe's (replayed by the study log)
-from app.recipes import (FIXED_FIELD, FRAME_FIELDS, LAMBDA_FIELD, PLANE_FIELD,  # noqa: E402,F401
-                         constraints_of, cubic_steps, frames_of)
+# the painted fields and the run itself are the Qt-free recipe's (app/recipes/cubic.py)
+from app.recipes import FIXED_FIELD, FRAME_FIELDS, LAMBDA_FIELD, PLANE_FIELD  # noqa: E402,F401
 
 
 class CubicPanel(MethodPanel):
@@ -51,8 +50,6 @@ class CubicPanel(MethodPanel):
 
     def __init__(self, window):
         super().__init__(window)
-        self._recipe_cache: dict = {}  # the recipe's precomputation, reused between runs
-        self._options: dict = {}
         self.brush_settings = BrushSettings(radius=0.06, strength=0.5)
         self.lambda_brush = FieldBrush(window, LAMBDA_FIELD, low=0.0, high=2.0, default=1.0,
                                        label="λ", settings=self.brush_settings, cmap="coolwarm")
@@ -254,9 +251,12 @@ class CubicPanel(MethodPanel):
                 "progressive": None if prog is None else params_to_dict(prog),
                 "multigrid": self.multigrid_box.isChecked() and prog is None}
 
-    def build_steps(self, state, params):
-        return cubic_steps(state, params, self._options, self._recipe_cache)
+    def restore_options(self, options: dict) -> None:
+        from algorithms.params import params_from_dict
 
-    def run(self, live: bool = False) -> None:
-        self._options = self.job_options()  # read on the GUI thread; the worker only reads this
-        super().run(live)
+        self.plane_axis.setCurrentIndex(int(options.get("plane_axis", 0)))
+        prog = options.get("progressive")
+        self.progressive_box.setChecked(prog is not None)
+        if prog is not None:
+            self.progressive_form.set_params(params_from_dict(ProgressiveParams, prog))
+        self.multigrid_box.setChecked(bool(options.get("multigrid", False)) and prog is None)

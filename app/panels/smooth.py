@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from algorithms.smoothing import SmoothParams
-from app.recipes import smooth_steps
+from app.recipes.smooth import smooth_steps
 from app.panels.base import MethodPanel
 
 

@@ -152,7 +152,7 @@ def test_frame_brush_paints_a_local_cube_frame(window, dialogs, qtbot):
     ry = st.fields["frame_ry"]
     assert ry[v] == 45.0 and np.isnan(ry).sum() > 0.5 * len(V)
     assert window.undo_stack.undoText() == "Paint cube frame"
-    from app.panels.cubic import frames_of
+    from app.recipes.cubic import frames_of
 
     frames = frames_of(st, np.eye(3))
     np.testing.assert_allclose(frames[v] @ np.array([1.0, 0, 0]),

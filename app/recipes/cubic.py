@@ -1,66 +1,22 @@
-"""Job recipes: what a panel's Run computes, as a Qt-free function of the document state.
+"""Recipe "Cubic": cubic stylization (thesis ch. 5) with what the user painted and placed.
 
-A recipe turns ``(state, params, options)`` into the method's Step generator, where ``state`` is
-an immutable :class:`~app.document.MeshState`, ``params`` the panel's Params and ``options`` the
-JSON-able settings that are not in its form (``MethodPanel.job_options()``). The panel's
-``build_steps`` calls its recipe, and the study replay (``stylize3d study replay``) calls the same
-recipe headless, so a logged run can be re-computed exactly as the app computed it.
-
-``cache`` is a dict the caller keeps between runs (the panel keeps one; replay passes a fresh
-one): recipes put their precomputation there (factorizations, decimations).
-
-Panels without a recipe still run and are logged; replay reports their runs as not replayable.
+Inputs from the document state: the λ scale field (``lambda_scale``, times ``params.lam``), the
+fixed region (``fixed``), the plane region (``plane``, flattened along ``options["plane_axis"]``
+at its mean coordinate), point handles and painted local cube frames (``frame_r*``, degrees).
+Options: ``plane_axis`` (0-2), ``progressive`` (a ProgressiveParams dict, or None for every
+triangle), ``multigrid`` (bool: the multigrid global solve).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable, Iterator
+from typing import Iterator
 
 import numpy as np
 
 from algorithms.steps import Step
-
-#: Per-vertex fields the Cubic panel paints (names shared with its tools).
-LAMBDA_FIELD = "lambda_scale"
-FIXED_FIELD = "fixed"
-PLANE_FIELD = "plane"
-FRAME_FIELDS = ("frame_rx", "frame_ry", "frame_rz")
+from app.recipes import FIXED_FIELD, FRAME_FIELDS, LAMBDA_FIELD, PLANE_FIELD, Recipe, register
 
 
-@dataclass(frozen=True)
-class Recipe:
-    """A panel's job as a function of the document state (module docstring)."""
-
-    title: str
-    params: Callable[[], type]  # the Params dataclass (resolved lazily: light imports)
-    steps: Callable[..., Iterator[Step]]  # (state, params, options, cache) -> steps
-    deterministic: bool = True
-    note: str = ""
-
-
-RECIPES: dict[str, Recipe] = {}
-
-
-def register(recipe: Recipe) -> Recipe:
-    RECIPES[recipe.title] = recipe
-    return recipe
-
-
-# ------------------------------------------------------------------------------ Smooth
-def smooth_steps(state, params, options=None, cache=None) -> Iterator[Step]:
-    from algorithms.smoothing import smooth_iter
-
-    return smooth_iter(state.V, state.F, params)
-
-
-def _smooth_params():
-    from algorithms.smoothing import SmoothParams
-
-    return SmoothParams
-
-
-# ------------------------------------------------------------------------------ Cubic
 def frames_of(state, global_rotation: np.ndarray) -> np.ndarray | None:
     """(n, 3, 3) per-vertex cube frames from the painted angles, or None when none is painted;
     vertices without a painted frame use ``global_rotation``."""
@@ -153,19 +109,8 @@ def _cubic_params():
     return CubicParams
 
 
-register(Recipe("Smooth", _smooth_params, smooth_steps))
-register(Recipe("Cubic", _cubic_params, cubic_steps))
+def _cubic_outcome(last: Step) -> dict:
+    return {"iterations": int(last.iteration), **{k: float(v) for k, v in last.metrics.items()}}
 
 
-def run_recipe(title: str, state, params_dict: dict, options: dict | None = None,
-               cache: dict | None = None) -> Step | None:
-    """Run a recipe to its end; returns the last Step (None if it yielded nothing)."""
-    from algorithms.params import params_from_dict
-
-    recipe = RECIPES[title]
-    params = params_from_dict(recipe.params(), params_dict)
-    last = None
-    for last in recipe.steps(state, params, options or {}, cache):
-        pass
-    return last
-
+register(Recipe("Cubic", "cubic", _cubic_params, cubic_steps, outcome=_cubic_outcome))
