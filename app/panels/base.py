@@ -182,13 +182,17 @@ class MethodPanel(QDockWidget):
         """Set the panel's own widgets from ``options`` saved by :meth:`job_options` (a project
         file being opened). The default has nothing to restore."""
 
-    @classmethod
-    def recipe(cls):
-        """The panel's Qt-free recipe (:mod:`app.recipes`, registered under the panel's
-        title), or None for a panel that computes nothing of its own."""
+    #: the recipe a plain Run computes (default: the one registered under the panel's title)
+    recipe_name: str = ""
+
+    def recipe(self, name: str | None = None):
+        """A Qt-free recipe of this panel (:mod:`app.recipes`): ``name``, else the one of the
+        run being started (``self._run_recipe``), else ``recipe_name`` or the panel's title;
+        None when none is registered."""
         from app.recipes import recipes
 
-        return recipes().get(cls.title)
+        name = name or getattr(self, "_run_recipe", None) or self.recipe_name or self.title
+        return recipes().get(name)
 
     def build_steps(self, state: MeshState, params: Any) -> Iterator[Step]:
         """The run's Step generator (worker thread): the panel's recipe with the options read
@@ -390,8 +394,11 @@ class MethodPanel(QDockWidget):
         self._pending_input = start
         # read once, here on the GUI thread: the worker, the commit and the study log use it
         self._run_options = self.job_options()
-        # what this run asks for, read by the study log (app/study/session.py) when it starts
-        self.last_request = {"params": params, "options": self._run_options, "input": start}
+        self._run_recipe = self.recipe_name or self.title
+        # what this run asks for, read by the study log (app/study/session.py) when it starts:
+        # a panel that starts other jobs (recipes of other names) sets the same four keys
+        self.last_request = {"params": params, "options": self._run_options, "input": start,
+                             "recipe": self._run_recipe}
         self._debounce.stop()
         self.show_live_state("running" if live else None)
         self.plot.clear()
