@@ -161,26 +161,30 @@ class Document:
                 self._notify("handles")
 
     def remapped(self, V, F, vertex_map: np.ndarray) -> MeshState:
-        """A new state on (V, F) whose per-vertex fields and selection follow ``vertex_map``
-        (old vertex -> new vertex, -1 deleted). New vertices without a preimage (copies made by
-        splitting a vertex) take the field's mean value and are not selected. Handles follow
-        their vertex (dropped with it)."""
-        old = self.state
-        vmap = np.asarray(vertex_map, dtype=np.int64)
-        keep = vmap >= 0
-        n = len(V)
-
-        def move(values, fill):
-            out = np.full(n, fill, dtype=np.asarray(values).dtype)
-            out[vmap[keep]] = np.asarray(values)[keep]
-            return out
-
-        fields = {k: move(v, float(np.mean(v)) if len(v) else 0.0) for k, v in old.fields.items()}
-        sel = None if old.selection is None else move(old.selection, False)
-        new = MeshState.make(V, F, fields, sel)
-        return new.with_handles({int(vmap[v]): t for v, t in old.handles if vmap[v] >= 0})
+        """A new state on (V, F) from the current one, see :func:`remap_state`."""
+        return remap_state(self.state, V, F, vertex_map)
 
     def mark_saved(self, path: str | Path) -> None:
         self.path = Path(path)
         self.modified = False
         self._notify("path")
+
+
+def remap_state(old: MeshState, V, F, vertex_map: np.ndarray) -> MeshState:
+    """A new state on (V, F) whose per-vertex fields and selection follow ``vertex_map``
+    (old vertex -> new vertex, -1 deleted). New vertices without a preimage (copies made by
+    splitting a vertex) take the field's mean value and are not selected. Handles follow
+    their vertex (dropped with it)."""
+    vmap = np.asarray(vertex_map, dtype=np.int64)
+    keep = vmap >= 0
+    n = len(V)
+
+    def move(values, fill):
+        out = np.full(n, fill, dtype=np.asarray(values).dtype)
+        out[vmap[keep]] = np.asarray(values)[keep]
+        return out
+
+    fields = {k: move(v, float(np.mean(v)) if len(v) else 0.0) for k, v in old.fields.items()}
+    sel = None if old.selection is None else move(old.selection, False)
+    new = MeshState.make(V, F, fields, sel)
+    return new.with_handles({int(vmap[v]): t for v, t in old.handles if vmap[v] >= 0})

@@ -34,6 +34,7 @@ class GaussMapBrush(FieldBrush):
         super().__init__(window, **kw)
         self.painter = painter
         self._normals: np.ndarray | None = None
+        self.space = "gauss"
 
     def press(self, hit: PickResult) -> bool:
         doc = self.window_.document
@@ -43,12 +44,9 @@ class GaussMapBrush(FieldBrush):
         return super().press(hit)
 
     def weights(self, hit: PickResult):
-        d = hit.position / max(np.linalg.norm(hit.position), 1e-12)
-        theta_r = max(self.settings.radius, 1e-6) * np.pi
-        cos_t = np.clip(self._normals @ d, -1.0, 1.0)
-        theta = np.arccos(cos_t)
-        near = np.flatnonzero(theta < theta_r)
-        return near, (1.0 - (theta[near] / theta_r) ** 2) ** 2
+        from app.edits import gauss_weights
+
+        return gauss_weights(self._normals, hit.position, self.settings.radius)
 
     def _dab(self, hit: PickResult) -> None:
         super()._dab(hit)

@@ -87,6 +87,7 @@ class MainWindow(QMainWindow):
         self.last_job_name: str | None = None
         self._job_before = None
         self._ever_saved_here: set[str] = set()
+        self.project_path: Path | None = None  # the .s3d file the document came from / went to
 
         self.viewport = Viewport(self)
         # View > Before / After: the mesh as opened, side by side, through the same camera
@@ -148,6 +149,13 @@ class MainWindow(QMainWindow):
         A("save", "&Save", lambda: self.save(), tip="Save the mesh")
         A("save_as", "Save &As…", lambda: self.save_as(),
           tip="Save the mesh under a new name or format (OBJ, PLY, STL, OFF, glTF .glb)")
+        A("open_project", "Open &Project…", lambda: self.open_project_dialog(),
+          tip="Open a Stylize3D project (.s3d): the mesh with everything painted and placed, "
+              "and every panel's settings")
+        A("save_project", "Save Pro&ject As…", lambda: self.save_project_dialog(),
+          tip="Save the mesh, what you painted and placed (λ, fixed regions, planes, handles, "
+              "capture sphere, loaded images and styles) and every panel's settings in one "
+              ".s3d file; `stylize3d cubic scene.s3d -o out.obj` re-makes the result")
         A("screenshot", "Export &Screenshot…", lambda: self.export_screenshot_dialog(),
           tip="Save the 3D view as a PNG image")
         A("export_field", "Export Shown &Field…", lambda: self.export_field_dialog(),
@@ -198,8 +206,11 @@ class MainWindow(QMainWindow):
         self.recent_menu = m.addMenu("Open &Recent")
         self.recent_menu.aboutToShow.connect(self._fill_recent_menu)
         m.addSeparator()
+        m.addAction(a["open_project"])
+        m.addSeparator()
         m.addAction(a["save"])
         m.addAction(a["save_as"])
+        m.addAction(a["save_project"])
         m.addAction(a["screenshot"])
         m.addAction(a["export_field"])
         m.addAction(a["export_colored"])
@@ -409,10 +420,118 @@ class MainWindow(QMainWindow):
         path = dialogs.open_file(self, "Open mesh", file_filter(), self._last_dir())
         return self.open_path(path) if path else False
 
+    # ------------------------------------------------------------------------------ projects
+    def panel_settings(self) -> dict:
+        """Every panel's Params and options ({title: {"params", "options"}}), as a project
+        file keeps them. A panel whose options cannot be read now keeps only its Params."""
+        from algorithms.params import params_to_dict
+
+        out = {}
+        for title, panel in self.panels.items():
+            entry = {"params": params_to_dict(panel.form.params()), "options": {}}
+            try:
+                entry["options"] = panel.job_options()
+            except Stylize3DError:
+                pass
+            out[title] = entry
+        return out
+
+    def current_project(self):
+        from app.project import project_of_document
+
+        return project_of_document(self.document, self.panel_settings())
+
+    def save_project_to(self, path: str) -> bool:
+        from app.project import save_project
+
+        if self.document.is_empty:
+            return False
+        try:
+            p = save_project(path, self.current_project())
+        except Stylize3DError as e:
+            self._error("Could not save the project", str(e))
+            return False
+        self.project_path = p
+        self._ever_saved_here.add(str(p.resolve()))
+        self._add_recent(str(p))
+        self.undo_stack.setClean()
+        self.document.modified = False
+        self._update_title()
+        self.report(f"Saved the project {p}", timeout_ms=5000)
+        return True
+
+    def save_project_dialog(self) -> bool:
+        if self.document.is_empty:
+            return False
+        path = dialogs.save_file(self, "Save project as", "Stylize3D project (*.s3d)",
+                                 self._last_dir())
+        if not path:
+            return False
+        if not path.lower().endswith(".s3d"):
+            path += ".s3d"
+        if not self._may_overwrite(path):
+            return False
+        return self.save_project_to(path)
+
+    def open_project_dialog(self) -> bool:
+        path = dialogs.open_file(self, "Open project", "Stylize3D project (*.s3d)",
+                                 self._last_dir())
+        return self.open_project(path) if path else False
+
+    def open_project(self, path) -> bool:
+        """Open a ``.s3d`` project: its mesh, painting and handles become the document (the
+        mesh as first opened is the Before / ghost view) and each panel takes its saved
+        settings. A damaged or newer file gets a plain message; nothing changes then."""
+        from algorithms.params import params_from_dict, params_to_dict
+        from app.project import read_project
+
+        if self.runner.busy:
+            self._error("A job is running", "Stop the running job (Esc) before opening a file.")
+            return False
+        try:
+            project = read_project(path)
+        except Stylize3DError as e:
+            self._error("Cannot open the project", str(e))
+            return False
+        if not self._confirm_discard():
+            return False
+        self.undo_stack.clear()
+        orig = project.original or project.state
+        self.document.load(orig.V, orig.F, None, validate_mesh(orig.V, orig.F))
+        self.document.original = orig
+        self.document.set_state(project.state, modified=False)
+        self.undo_stack.setClean()
+        self.project_path = Path(path)
+        problems = []
+        for title, entry in project.panels.items():
+            panel = self.panels.get(title)
+            if panel is None:
+                problems.append(f"{title}: this version has no such panel")
+                continue
+            try:
+                cls = panel.form.params_cls
+                panel.form.set_params(params_from_dict(
+                    cls, {**params_to_dict(cls()), **(entry.get("params") or {})}))
+                panel.restore_options(entry.get("options") or {})
+            except Stylize3DError as e:
+                problems.append(f"{title}: {e}")
+        self._add_recent(str(path))
+        self._update_title()
+        st = project.state
+        msg = (f"Opened the project {Path(path).name}: {len(st.V):,} vertices, "
+               f"{len(st.F):,} triangles, {len(st.fields)} painted field(s), "
+               f"{len(st.handles)} handle(s).")
+        if problems:
+            msg += " Some panel settings were not restored: " + "; ".join(problems)
+        self.report(msg)
+        return True
+
     def open_path(self, path: str | os.PathLike) -> bool:
-        """Open a mesh file. On any problem the user gets a plain message and the open document
-        stays as it was. Returns True when the mesh was opened."""
+        """Open a mesh file (or a ``.s3d`` project). On any problem the user gets a plain
+        message and the open document stays as it was. Returns True when it was opened."""
         path = str(path)
+        if path.lower().endswith(".s3d"):
+            return self.open_project(path)
         if self.runner.busy:
             self._error("A job is running", "Stop the running job (Esc) before opening a file.")
             return False
@@ -449,6 +568,7 @@ class MainWindow(QMainWindow):
         if not self._confirm_discard():
             return False
         self.undo_stack.clear()
+        self.project_path = None
         self.document.load(V, F, path, report)
         self.undo_stack.setClean()
         self._add_recent(path)
@@ -469,6 +589,7 @@ class MainWindow(QMainWindow):
             return False
         self._ever_saved_here.add(str(Path(path).resolve()))
         if Path(path).suffix.lower() in SUPPORTED_READ:
+            self.project_path = None  # the window is about this mesh file now
             self.document.mark_saved(path)
             self.undo_stack.setClean()
             self._add_recent(path)
@@ -657,7 +778,9 @@ class MainWindow(QMainWindow):
             return False
         before = doc.state
         after = doc.remapped(res.V, res.F, res.vertex_map)
-        self.undo_stack.push(StateCommand(doc, before, after, "Clean mesh"))
+        cmd = StateCommand(doc, before, after, "Clean mesh")
+        cmd.log_details = {"tool": "clean"}  # app.edits.clean re-computes it (study replay)
+        self.undo_stack.push(cmd)
         dialogs.info(self, "Clean mesh", "\n".join(res.actions) + "\n\nUndo with Ctrl+Z.")
         return True
 
@@ -796,6 +919,8 @@ class MainWindow(QMainWindow):
 
     def _update_title(self) -> None:
         t = self.document.title.removesuffix(" *")
+        if self.project_path is not None:  # the work was saved as / opened from a project
+            t = self.project_path.name
         self.setWindowTitle(f"{t}[*] — {APP_NAME}" if t else f"{APP_NAME}[*]")
         self.setWindowModified(self.document.modified)
 
@@ -880,7 +1005,7 @@ class MainWindow(QMainWindow):
     # ------------------------------------------------------------------------------ Qt events
     def dragEnterEvent(self, event) -> None:  # noqa: N802
         urls = event.mimeData().urls() if event.mimeData().hasUrls() else []
-        if any(Path(u.toLocalFile()).suffix.lower() in SUPPORTED_READ for u in urls):
+        if any(Path(u.toLocalFile()).suffix.lower() in (*SUPPORTED_READ, ".s3d") for u in urls):
             event.acceptProposedAction()
         else:
             event.ignore()
@@ -888,7 +1013,7 @@ class MainWindow(QMainWindow):
     def dropEvent(self, event) -> None:  # noqa: N802
         for u in event.mimeData().urls():
             p = u.toLocalFile()
-            if Path(p).suffix.lower() in SUPPORTED_READ:
+            if Path(p).suffix.lower() in (*SUPPORTED_READ, ".s3d"):
                 event.acceptProposedAction()
                 QTimer.singleShot(0, lambda p=p: self.open_path(p))
                 return

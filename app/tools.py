@@ -47,6 +47,9 @@ class FieldBrush(QObject):
         self.cmap = cmap
         self._values: np.ndarray | None = None
         self._before = None
+        self._dabs: list[list[float]] = []
+        #: where the falloff is measured: "surface" (3D distance) or "gauss" (normal angle)
+        self.space = "surface"
 
     def current(self) -> np.ndarray:
         st = self.window_.document.state
@@ -68,6 +71,7 @@ class FieldBrush(QObject):
             return False
         self._before = doc.state
         self._values = self.current()
+        self._dabs = []
         self._dab(hit)
         return True
 
@@ -86,24 +90,27 @@ class FieldBrush(QObject):
         after = before.with_field(self.field, values)
         cmd = StateCommand(self.window_.document, before, after, f"Paint {self.label}")
         # what a study log records with the stroke (app/study/session.py)
-        cmd.log_details = {"tool": "brush", "field": self.field,
+        # everything app.edits.brush_stroke needs to re-compute the stroke (study replay)
+        cmd.log_details = {"tool": "brush", "space": self.space, "field": self.field,
+                           "low": self.low, "high": self.high, "default": self.default,
                            "radius": self.settings.radius, "strength": self.settings.strength,
-                           "erase": self.settings.erase}
+                           "erase": self.settings.erase, "dabs": self._dabs}
+        self._dabs = []
         self.window_.undo_stack.push(cmd)
 
     def weights(self, hit: PickResult) -> tuple[np.ndarray, np.ndarray]:
         """Vertices touched by a dab at ``hit`` and their falloff weights in (0, 1]."""
-        V = self.window_.document.V
-        diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
-        r = max(self.settings.radius * diag, 1e-12)
-        d2 = ((V - hit.position) ** 2).sum(axis=1)
-        near = np.flatnonzero(d2 < r * r)
-        return near, (1.0 - d2[near] / (r * r)) ** 2
+        from app.edits import surface_weights
+
+        return surface_weights(self.window_.document.V, hit.position, self.settings.radius)
 
     def _dab(self, hit: PickResult) -> None:
+        from app.edits import apply_dab
+
         idx, w = self.weights(hit)
         target = self.low if self.settings.erase else self.high
-        self._values[idx] += self.settings.strength * w * (target - self._values[idx])
+        apply_dab(self._values, idx, w, self.settings.strength, target)
+        self._dabs.append([float(x) for x in np.asarray(hit.position, dtype=np.float64)])
         self.window_.viewport.show_field(self.field, self._values, self.cmap, (self.low, self.high))
         self.changed.emit(self._values)
 
@@ -140,8 +147,9 @@ class HandleTool(QObject):
                 tgt = np.array([handles[k] for k in keys])
                 k = int(keys[np.argmin(((tgt - hit.position) ** 2).sum(axis=1))])
                 del handles[k]
-                self.window_.undo_stack.push(StateCommand(doc, st, st.with_handles(handles),
-                                                          "Remove handle"))
+                cmd = StateCommand(doc, st, st.with_handles(handles), "Remove handle")
+                cmd.log_details = _handles_details(cmd.after)
+                self.window_.undo_stack.push(cmd)
                 self.changed.emit()
             return True
         self._before = st
@@ -175,8 +183,9 @@ class HandleTool(QObject):
         handles = self._preview(dict(st.handles))
         text = "Move handle" if self._vertex in st.handles else "Add handle"
         self._vertex = self._before = None
-        self.window_.undo_stack.push(StateCommand(self.window_.document, st,
-                                                  st.with_handles(handles), text))
+        cmd = StateCommand(self.window_.document, st, st.with_handles(handles), text)
+        cmd.log_details = _handles_details(cmd.after)
+        self.window_.undo_stack.push(cmd)
         self.changed.emit()
 
 
@@ -217,6 +226,8 @@ class StampBrush(QObject):
         self._arrays = [np.array(st.fields[f]) if f in st.fields else np.full(n, np.nan)
                         for f in self.fields]
         self._touched = np.zeros(n, bool)
+        self._dabs: list[list[float]] = []
+        self._stamp_values = tuple(float(v) for v in self.values())
         self._dab(hit)
         return True
 
@@ -225,14 +236,14 @@ class StampBrush(QObject):
             self._dab(hit)
 
     def _dab(self, hit: PickResult) -> None:
-        V = self.window_.document.V
-        diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
-        r = max(self.settings.radius * diag, 1e-12)
-        near = ((V - hit.position) ** 2).sum(axis=1) < r * r
-        vals = (np.nan,) * len(self.fields) if self.settings.erase else tuple(self.values())
+        from app.edits import stamp_mask
+
+        near = stamp_mask(self.window_.document.V, hit.position, self.settings.radius)
+        vals = (np.nan,) * len(self.fields) if self.settings.erase else self._stamp_values
         for arr, v in zip(self._arrays, vals):
             arr[near] = v
         self._touched |= near
+        self._dabs.append([float(x) for x in np.asarray(hit.position, dtype=np.float64)])
         self.window_.viewport.show_field(self.fields[0] + "_mask",
                                          np.isfinite(self._arrays[0]).astype(float), "Purples",
                                          (0.0, 1.0))
@@ -247,6 +258,16 @@ class StampBrush(QObject):
         after = before
         for f, arr in zip(self.fields, arrays):
             after = after.with_field(f, None if np.isnan(arr).all() else arr)
-        self.window_.undo_stack.push(StateCommand(self.window_.document, before, after,
-                                                  f"Paint {self.label}"))
+        cmd = StateCommand(self.window_.document, before, after, f"Paint {self.label}")
+        # everything app.edits.stamp_stroke needs to re-compute the stroke (study replay)
+        cmd.log_details = {"tool": "stamp", "fields": list(self.fields),
+                           "values": list(self._stamp_values), "radius": self.settings.radius,
+                           "erase": self.settings.erase, "dabs": self._dabs}
+        self.window_.undo_stack.push(cmd)
         self.changed.emit()
+
+
+def _handles_details(after) -> dict:
+    """What app.edits.set_handles needs to re-compute a handle edit (study replay)."""
+    return {"tool": "handles",
+            "handles": [[int(v), [float(x) for x in p]] for v, p in after.handles]}

@@ -234,7 +234,10 @@ class CubicPanel(MethodPanel):
             after = after.with_field(f, None)
         after = after.with_handles({})
         if after.fields != st.fields or after.handles != st.handles:
-            self.window_.undo_stack.push(StateCommand(doc, st, after, "Clear painting"))
+            cmd = StateCommand(doc, st, after, "Clear painting")
+            cmd.log_details = {"tool": "clear", "handles": True,
+                               "fields": [LAMBDA_FIELD, FIXED_FIELD, PLANE_FIELD, *FRAME_FIELDS]}
+            self.window_.undo_stack.push(cmd)
 
     def _on_multigrid_toggled(self, on: bool) -> None:
         if on and self.progressive_box.isChecked():

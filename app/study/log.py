@@ -71,6 +71,69 @@ def state_hash(V, F, fields: dict | None = None, handles=()) -> str:
     return h.hexdigest()
 
 
+def _save_array(base: Path, a: np.ndarray) -> str:
+    """Write an array once per content under ``base/arrays/``; returns its relative path."""
+    import io
+
+    buf = io.BytesIO()
+    np.save(buf, np.ascontiguousarray(a), allow_pickle=False)
+    data = buf.getvalue()
+    rel = f"arrays/{hashlib.sha256(data).hexdigest()[:40]}.npy"
+    dest = base / rel
+    if not dest.is_file():
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        tmp = dest.with_suffix(".part")
+        tmp.write_bytes(data)
+        os.replace(tmp, dest)
+    return rel
+
+
+def save_state(base, state, rel: str) -> None:
+    """Save a document state for replay as ``base/rel`` (a small JSON file) whose arrays (V, F,
+    each field, the selection) are stored once per content under ``base/arrays/``."""
+    base = Path(base)
+    doc = {"V": _save_array(base, np.asarray(state.V, np.float64)),
+           "F": _save_array(base, np.asarray(state.F, np.int64)),
+           "fields": {k: _save_array(base, np.asarray(v, np.float64))
+                      for k, v in sorted(state.fields.items())},
+           "selection": (None if state.selection is None
+                         else _save_array(base, np.asarray(state.selection, bool))),
+           "handles": [[int(v), [float(x) for x in p]] for v, p in state.handles]}
+    dest = base / rel
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = dest.with_suffix(".part")
+    tmp.write_text(json.dumps(doc))
+    os.replace(tmp, dest)
+
+
+def load_state(path):
+    """A MeshState saved by :func:`save_state` (``.json``) or by older sessions (``.npz``)."""
+    from dataclasses import replace
+
+    from app.document import MeshState
+
+    path = Path(path)
+    if path.suffix == ".json":
+        base = path.parent.parent
+        doc = json.loads(path.read_text())
+
+        def arr(rel):
+            return np.load(base / rel, allow_pickle=False)
+
+        state = MeshState.make(arr(doc["V"]), arr(doc["F"]),
+                               {k: arr(r) for k, r in doc.get("fields", {}).items()},
+                               None if doc.get("selection") is None else arr(doc["selection"]))
+        return state.with_handles({int(v): tuple(p) for v, p in doc.get("handles", [])})
+    with np.load(path, allow_pickle=False) as z:
+        fields = {k[len("field_"):]: z[k] for k in z.files if k.startswith("field_")}
+        state = MeshState.make(z["V"], z["F"], fields)
+        if "handle_ids" in z.files:
+            handles = tuple((int(v), tuple(float(x) for x in p))
+                            for v, p in zip(z["handle_ids"], z["handle_pos"]))
+            state = replace(state, handles=handles)
+    return state
+
+
 def _jsonable(x: Any) -> Any:
     if isinstance(x, dict):
         return {str(k): _jsonable(v) for k, v in x.items()}

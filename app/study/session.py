@@ -271,7 +271,7 @@ class StudySession(QObject):
         # logging hooks: the one job runner, the one undo stack
         r = window.runner
         r.started.connect(self._on_run_started)
-        r.finished.connect(lambda step: self._on_run_ended("done", ""))
+        r.finished.connect(lambda step: self._on_run_ended("done", "", step))
         r.cancelled.connect(lambda msg: self._on_run_ended("cancelled", msg))
         r.failed.connect(lambda msg, _d: self._on_run_ended("failed", msg))
         window.job_committed.connect(self._on_committed)
@@ -318,14 +318,21 @@ class StudySession(QObject):
             mesh = str(sample_path(mesh.split(":", 1)[1]))
         self.window.undo_stack.setClean()
         self.window.document.modified = False
-        if not self.window.open_path(mesh):
+        # opening clears the undo stack: that is not an undo of the participant's
+        self._opening = True
+        try:
+            opened = self.window.open_path(mesh)
+        finally:
+            self._opening = False
+        if not opened:
             self._log("task_end", status="failed", message=f"could not open {mesh}")
             self.task_ended.emit(task.id, "failed")
             self._next()
             return
         self._snapshot_undo()
         st = self.window.document.state
-        self._log("open", mesh=task.mesh, mesh_hash=_state_hash(st))
+        self._log("open", mesh=task.mesh, mesh_hash=_state_hash(st),
+                  state_file=self._save_state(st)[1])
         self._apply_setup(task)
         self.bar.title.setText(f"Task {len(self.order) - len(self.remaining)} of "
                                f"{len(self.order)}: {task.title}")
@@ -470,20 +477,28 @@ class StudySession(QObject):
             dialogs.error(self.window, "Study log", f"The session log could not be written: {e}")
 
     def _save_state(self, state) -> tuple[str, str]:
-        """Save a document state for replay (once per hash); returns (hash, relative file)."""
+        """Save a document state for replay (once per hash); returns (hash, relative file).
+        Arrays are stored once per content (a brush stroke adds one field's values, not a
+        copy of the mesh), see :func:`app.study.log.save_state`."""
+        from .log import save_state
+
         h = _state_hash(state)
-        rel = f"states/{h[:32]}.npz"
+        rel = f"states/{h[:32]}.json"
         if h not in self._saved_states:
-            d = self.log.results_dir / "states"
-            d.mkdir(exist_ok=True)
-            arrays = {"V": state.V, "F": state.F}
-            arrays.update({f"field_{k}": v for k, v in state.fields.items()})
-            if state.handles:
-                arrays["handle_ids"] = np.array([v for v, _ in state.handles], np.int64)
-                arrays["handle_pos"] = np.array([p for _, p in state.handles], np.float64)
-            np.savez(d / f"{h[:32]}.npz", **arrays)
+            save_state(self.log.results_dir, state, rel)
             self._saved_states.add(h)
         return h, rel
+
+    def _save_blobs(self, options) -> None:
+        """Keep the binary inputs a run's options refer to (images, meshes) for replay."""
+        from app.recipes import blob_bytes, blob_refs
+
+        for ref in blob_refs(options):
+            digest, name = ref[len("blob:"):].split("/", 1)
+            d = self.log.results_dir / "blobs" / digest
+            if not (d / name).is_file():
+                d.mkdir(parents=True, exist_ok=True)
+                (d / name).write_bytes(blob_bytes(ref))
 
     def _on_run_started(self, name: str) -> None:
         if self.log.task is None:
@@ -492,8 +507,13 @@ class StudySession(QObject):
         req = getattr(panel, "last_request", None) if panel is not None else None
         rec: dict = {"method": name}
         if req is not None:
+            rec["recipe"] = req.get("recipe") or name
             rec["params"] = params_to_dict(req["params"])
             rec["options"] = req.get("options", {})
+            try:
+                self._save_blobs(rec["options"])
+            except (OSError, Stylize3DError) as e:
+                self._log("note", message=f"an input of this run was not saved: {e}")
             h, rel = self._save_state(req["input"])
             rec["input_hash"], rec["input_file"] = h, rel
         elif self.window.document.state is not None:
@@ -501,21 +521,42 @@ class StudySession(QObject):
         self._pending_runs[name] = rec
         self._log("run", **rec)
 
-    def _on_run_ended(self, status: str, message: str) -> None:
+    def _on_run_ended(self, status: str, message: str, step=None) -> None:
         name = self.window.runner.name or getattr(self.window, "last_job_name", None)
         name = name or "?"
         rec = self._pending_runs.get(name, {"method": name})
+        if status == "done" and name in self._pending_runs and step is not None:
+            self._log_analysis(name, rec, step)
         if status != "done":
             self._pending_runs.pop(name, None)
             self._log("result", method=name, status=status, message=message,
                       params=rec.get("params", {}),
                       seconds=round(self.window.runner.last_duration, 3))
 
+    def _log_analysis(self, name: str, rec: dict, step) -> None:
+        """A finished run that changed nothing in the document (an analysis recipe: spectral
+        coarsening, a lighting attack, a training run): logged with the hash of its outcome."""
+        from app.recipes import outcome_hash, recipes, unchanged_result
+
+        recipe = recipes().get(rec.get("recipe", name))
+        if recipe is None or recipe.result is not unchanged_result:
+            return  # a result that was not committed (e.g. the mesh changed meanwhile)
+        self._pending_runs.pop(name, None)
+        out = recipe.outcome(step) if recipe.outcome is not None else {}
+        st = self.window.document.state
+        self._log("result", method=name, recipe=recipe.name, status="done",
+                  params=rec.get("params", {}), options=rec.get("options", {}),
+                  input_hash=rec.get("input_hash", ""),
+                  result_hash=_state_hash(st) if st is not None else "",
+                  outcome_hash=outcome_hash(out or {}),
+                  seconds=round(self.window.runner.last_duration, 3))
+
     def _on_committed(self, name: str, after) -> None:
         rec = self._pending_runs.pop(name, {"method": name})
         self._snapshot_undo()
         h, rel = self._save_state(after)
-        self._log("result", method=name, status="done", params=rec.get("params", {}),
+        self._log("result", method=name, recipe=rec.get("recipe", name), status="done",
+                  params=rec.get("params", {}),
                   options=rec.get("options", {}), input_hash=rec.get("input_hash", ""),
                   result_hash=h, result_file=rel,
                   seconds=round(self.window.runner.last_duration, 3))
@@ -529,24 +570,34 @@ class StudySession(QObject):
         import shiboken6
 
         st = self.window.undo_stack
+        if getattr(self, "_opening", False):
+            self._snapshot_undo()
+            return
         old, cmds = self._undo_index, self._undo_cmds
         now = [st.command(i) for i in range(st.count())]
         doc = self.window.document.state
         h = _state_hash(doc) if doc is not None else ""
+        rel = self._save_state(doc)[1] if doc is not None and index != old else None
         if index < old:
             for i in range(old - 1, index - 1, -1):
-                self._log("undo", text=cmds[i][1] if i < len(cmds) else "", result_hash=h)
+                self._log("undo", text=cmds[i][1] if i < len(cmds) else "", result_hash=h,
+                          result_file=rel)
         elif index > old:
             for i in range(old, index):
                 redo = (i < len(cmds) and shiboken6.isValid(cmds[i][0])
                         and cmds[i][0] is now[i])
                 if redo:
-                    self._log("redo", text=cmds[i][1], result_hash=h)
+                    self._log("redo", text=cmds[i][1], result_hash=h, result_file=rel)
                 elif not now[i].text().startswith(tuple(self.window.panels)):
                     # runs are logged as run/result; every other undoable change is an edit,
-                    # with the vertices it changed (brush strokes: also the brush's settings)
-                    self._log("edit", text=now[i].text(), after_hash=h,
-                              **_edit_details(now[i]))
+                    # with what it changed and the tool's inputs (app.edits re-computes it
+                    # from the saved input state)
+                    extra = {}
+                    before = getattr(now[i], "before", None)
+                    if before is not None and hasattr(before, "V"):
+                        extra["before_hash"], extra["before_file"] = self._save_state(before)
+                    self._log("edit", text=now[i].text(), after_hash=h, after_file=rel,
+                              **extra, **_edit_details(now[i]))
         self._snapshot_undo()
 
     def _poll_camera(self) -> None:
