@@ -2,41 +2,37 @@
 AMG; see the energy per iteration, the clusters and root nodes on the mesh, the |C| heat maps of
 the three methods side by side (Fig. 7.1), the eigenvalues (Fig. 7.2), and browse eigenfunctions:
 Φ_i on the fine mesh next to the prolonged coarse eigenvector. The mesh itself never changes.
+
+The run is the recipe "Spectral coarsening" (:mod:`app.recipes.spectral`) in a child process
+(option ``isolated``); the views read its outcome (``self.outcome``) through that module's
+plain functions.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from PySide6.QtCore import Qt
-from PySide6.QtGui import QColor, QImage, QPixmap
+from PySide6.QtGui import QImage, QPixmap
 from PySide6.QtWidgets import (QComboBox, QGridLayout, QGroupBox, QHBoxLayout, QLabel,
-                               QSpinBox, QVBoxLayout, QWidget)
+                               QSpinBox, QVBoxLayout)
 
 from algorithms.errors import Stylize3DError
-from algorithms.spectral.coarsen import CoarsenParams, generalized_eigs, suggested_coarse_size
-from algorithms.spectral.compare import compare_coarsenings_iter
-from algorithms.steps import Step, isolated_iter
+from algorithms.spectral.coarsen import CoarsenParams
 from app.panels.base import MethodPanel
+from app.recipes import spectral as recipe_mod
 from app.widgets import LinePlot
 
 OPERATORS = {"cotangent": "cotangent", "intrinsic Delaunay": "intrinsic_delaunay",
              "anisotropic (α 70)": "anisotropic", "graph": "graph",
              "point cloud (vertices only)": "point_cloud"}
-METHODS = ("ours", "qslim", "amg")
+#: the anisotropy the panel uses for "anisotropic (α 70)" (the others ignore it)
+ANISOTROPIC_ALPHA = 70.0
+METHODS = recipe_mod.METHODS
 
 
 def heatmap_image(C: np.ndarray, size: int = 140) -> QImage:
-    """|C| as a white-to-dark-blue image (size × size)."""
-    A = np.abs(np.asarray(C, dtype=np.float64))
-    A = A / max(A.max(), 1e-12)
-    k = A.shape[0]
-    idx = (np.arange(size) * k // size).clip(0, k - 1)
-    A = A[np.ix_(idx, idx)]
-    rgb = np.empty(A.shape + (3,), dtype=np.uint8)
-    rgb[..., 0] = (255 * (1 - 0.85 * A)).astype(np.uint8)
-    rgb[..., 1] = (255 * (1 - 0.7 * A)).astype(np.uint8)
-    rgb[..., 2] = (255 * (1 - 0.35 * A)).astype(np.uint8)
-    buf = np.ascontiguousarray(rgb)
+    """|C| as a white-to-dark-blue image (size × size), see recipes.spectral.heatmap_rgb."""
+    buf = recipe_mod.heatmap_rgb(C, size)
     return QImage(buf.data, size, size, 3 * size, QImage.Format.Format_RGB888).copy()
 
 
@@ -53,7 +49,9 @@ class SpectralPanel(MethodPanel):
 
     def __init__(self, window):
         super().__init__(window)
-        self.result = None
+        self.outcome: dict | None = None   # the last finished run's recipe outcome
+        self._outcome_shape: tuple | None = None   # the shape of V it was computed on
+        self._coarse_eigs = None
         self.live_box.setChecked(False)
         self.live_box.setVisible(False)
         lay = self.body_layout
@@ -123,7 +121,7 @@ class SpectralPanel(MethodPanel):
         if doc.is_empty:
             return
         n = len(doc.V)
-        m = suggested_coarse_size(n, CoarsenParams().m)
+        m = recipe_mod.suggested_coarse_size(n, CoarsenParams().m)
         current = self.form.editors["m"].value()
         # never override a size the user chose: only the default or our last suggestion
         untouched = current in (CoarsenParams().m, getattr(self, "_suggested_m", None))
@@ -136,76 +134,78 @@ class SpectralPanel(MethodPanel):
                 f"is made for strong reductions: at most n/8), k = {round(m / 3)} eigenvectors.")
 
     # -- the job ---------------------------------------------------------------------------------
+    def job_options(self) -> dict:
+        """The operator (and its anisotropy), both baselines, and the child process the
+        computation runs in (see app.recipes.spectral)."""
+        op = OPERATORS[self.operator_combo.currentText()]
+        return {"operator": op, "alpha": ANISOTROPIC_ALPHA if op == "anisotropic" else 10.0,
+                "compare": list(recipe_mod.BASELINES), "isolated": True}
+
+    def restore_options(self, options: dict) -> None:
+        op = options.get("operator", "cotangent")
+        for label, name in OPERATORS.items():
+            if name == op:
+                self.operator_combo.setCurrentText(label)
+                break
+
+    def job_factory(self, state, params):
+        """The recipe's steps with this run's options (read on the GUI thread at Run)."""
+        recipe, options, cache = self.recipe(), dict(self._run_options or {}), self._recipe_cache
+        return lambda: recipe.steps(state, params, options, cache)
+
     def run(self, live: bool = False) -> None:
         state = self.window_.document.state
         if state is None:
             self.status_label.setText("Open a mesh first (File > Open).")
             return
         params = self.form.params()
-        op = OPERATORS[self.operator_combo.currentText()]
-        alpha = 70.0 if op == "anisotropic" else 10.0
+        self._pending_input = state
+        # read once, here on the GUI thread: the worker and the study log use it
+        self._run_options = self.job_options()
+        self._run_recipe = self.recipe_name or self.title
+        self.last_request = {"params": params, "options": self._run_options, "input": state,
+                             "recipe": self._run_recipe}
         self.plot.clear()
         self.status_label.setText("Eigenvectors of the fine operator…")
-        holder = self._holder = {}
-
-        def steps():
-            # in a child process: ARPACK, SciPy's sparse products and PyAMG hold the GIL for
-            # seconds, which would freeze the window even from the worker thread
-            gen = isolated_iter(compare_coarsenings_iter, state.V, state.F, op, params.m,
-                                params.k or None, params, alpha=alpha, eig_progress=True)
-            while True:
-                try:
-                    cs = next(gen)
-                except StopIteration as stop:
-                    holder["result"] = stop.value
-                    holder["state"] = state
-                    yield Step(holder.get("it", 0) + 1, None, state.V, {}, "done")
-                    return
-                if np.isnan(cs.energy):      # the eigenvector stage: its own progress
-                    yield Step(cs.iteration, cs.total, state.V, {}, cs.message)
-                    continue
-                holder["it"] = cs.iteration
-                yield Step(cs.iteration, cs.total, state.V, {"energy": cs.energy},
-                           f"iteration {cs.iteration}")
-
-        self.window_.start_analysis_job(self.title, steps)
+        self.window_.start_analysis_job(self.title, self.job_factory(state, params))
 
     def _on_finished(self, step) -> None:
         super()._on_finished(step)
-        holder = getattr(self, "_holder", {})
-        if self.window_.last_job_name == self.title and "result" in holder:
-            self.result = holder["result"]
-            self._result_state = holder["state"]
+        if self.window_.last_job_name != self.title:
+            return
+        recipe = self.recipe()
+        outcome = recipe.outcome(step) if recipe is not None else {}
+        if outcome:
+            self.outcome = outcome
+            self._outcome_shape = np.shape(step.V)
             self._coarse_eigs = None
             self.show_comparison()
 
     # -- display -----------------------------------------------------------------------------------
     def show_comparison(self) -> None:
-        r = self.result
+        r = self.outcome
         for name in METHODS:
-            mr = r.methods.get(name)
-            if mr is None:
+            if name not in r["methods"]:
                 self.heatmaps[name].clear()
                 self.scores[name].setText("left out" if name != "ours" else "")
                 continue
-            self.heatmaps[name].setPixmap(QPixmap.fromImage(heatmap_image(mr.spectral.C, 110)))
-            self.scores[name].setText(f"C diag {mr.metrics['c_diag_score']:.3f}\n"
-                                      f"eig err {mr.metrics['eig_rel_error_mean']:.3f}")
+            self.heatmaps[name].setPixmap(QPixmap.fromImage(heatmap_image(r[f"{name}.C"], 110)))
+            self.scores[name].setText(f"C diag {r[f'{name}.c_diag_score']:.3f}\n"
+                                      f"eig err {r[f'{name}.eig_rel_error_mean']:.3f}")
         self.eig_plot.clear()
-        ours = r.methods["ours"].spectral
-        k = r.k
-        for v in ours.lam_fine[:k]:
+        k = r["k"]
+        for v in r["fine.eigenvalues"][:k]:
             self.eig_plot.append("fine", float(v))
         for name in METHODS:
-            if name in r.methods:
-                for v in r.methods[name].spectral.lam_coarse[:k]:
+            if name in r["methods"]:
+                for v in r[f"{name}.eigenvalues"][:k]:
                     self.eig_plot.append(name, float(v))
         self.eig_index.setRange(1, max(1, k - 1))
         self.status_label.setText(
-            f"n = {r.n} → m = {r.m}, k = {r.k}. Ours: C diag "
-            f"{r.methods['ours'].metrics['c_diag_score']:.3f}, mean eigenvalue error "
-            f"{r.methods['ours'].metrics['eig_rel_error_mean']:.3f}."
-            + "".join(f"\n{note}" for note in getattr(r, "notes", [])))
+            f"n = {r['n']} → m = {r['m']}, k = {r['k']}. Ours: C diag "
+            f"{r['ours.c_diag_score']:.3f}, mean eigenvalue error "
+            f"{r['ours.eig_rel_error_mean']:.3f}."
+            + "".join(f"\n{note}" for note in r["notes"]))
         if self.show_combo.currentIndex() == 0:
             self.show_combo.setCurrentIndex(1)
         else:
@@ -214,41 +214,31 @@ class SpectralPanel(MethodPanel):
     def show_result(self) -> None:
         vp = self.window_.viewport
         doc = self.window_.document
-        r = self.result
-        if r is None or doc.is_empty or doc.state.V.shape != self._result_state.V.shape:
+        r = self.outcome
+        if r is None or doc.is_empty or doc.state.V.shape != self._outcome_shape:
             vp.show_field(None)
             vp.show_points(None)
             return
         i = self.show_combo.currentIndex()
-        ours = r.methods["ours"]
         vp.show_points(None)
         if i == 0:
             vp.show_field(None)
         elif i == 1:
-            K = ours.extra["K"].tocsc()
-            labels = np.asarray(K.argmax(axis=0)).ravel().astype(float)
-            rng = np.random.default_rng(0).permutation(r.m).astype(float)
-            vp.show_field("clusters", rng[labels.astype(int)], "tab20", (0.0, float(r.m - 1)),
-                          categorical=True)
-            roots = np.asarray(ours.P.tocsr().argmax(axis=1)).ravel()
-            vp.show_points(doc.V[roots])
+            vp.show_field("clusters", recipe_mod.cluster_field(r), "tab20",
+                          (0.0, float(r["m"] - 1)), categorical=True)
+            vp.show_points(doc.V[r["ours.roots"]])
         else:
-            lam_f, phi_f = r.fine_eigs
-            j = min(self.eig_index.value(), phi_f.shape[1] - 1)
             if i == 2:
-                f = phi_f[:, j]
+                f = recipe_mod.fine_eigenfunction(r, self.eig_index.value())
             else:
                 if self._coarse_eigs is None:
                     try:
-                        self._coarse_eigs = generalized_eigs(ours.L, ours.M,
-                                                             min(r.k + 1, r.m - 1))
+                        self._coarse_eigs = recipe_mod.coarse_eigenpairs(r)
                     except Stylize3DError as e:   # a plain message, never a traceback
                         self.status_label.setText(f"Cannot show the coarse eigenvectors: {e}")
                         vp.show_field(None)
                         return
-                phi_c = self._coarse_eigs[1]
-                f = ours.extra["G"] @ phi_c[:, min(j, phi_c.shape[1] - 1)]
-                if f @ phi_f[:, j] < 0:  # eigenvectors have arbitrary signs
-                    f = -f
+                f = recipe_mod.prolonged_eigenvector(r, self.eig_index.value(),
+                                                     self._coarse_eigs)
             lim = float(np.abs(f).max()) or 1.0
             vp.show_field("eigenfunction", f, "RdBu", (-lim, lim))

@@ -17,7 +17,7 @@ def test_panel_produces_heatmaps_eigenvalue_plot_and_browser(window, dialogs, qt
     panel.form.editors["max_iterations"].setValue(60)
     with qtbot.waitSignal(window.runner.finished, timeout=120000):
         panel.run_button.click()
-    qtbot.waitUntil(lambda: panel.result is not None, timeout=5000)
+    qtbot.waitUntil(lambda: panel.outcome is not None, timeout=5000)
     for name in ("ours", "qslim", "amg"):
         pm = panel.heatmaps[name].pixmap()
         assert pm is not None and not pm.isNull() and "C diag" in panel.scores[name].text()
@@ -45,9 +45,9 @@ def test_point_cloud_operator_from_the_panel(window, dialogs, qtbot):
     panel.form.editors["max_iterations"].setValue(40)
     with qtbot.waitSignal(window.runner.finished, timeout=120000):
         panel.run_button.click()
-    qtbot.waitUntil(lambda: panel.result is not None, timeout=5000)
-    ours = panel.result.methods["ours"].metrics
-    assert 0.0 < ours["c_diag_score"] <= 1.0 and np.isfinite(ours["eig_rel_error_mean"])
+    qtbot.waitUntil(lambda: panel.outcome is not None, timeout=5000)
+    out = panel.outcome
+    assert 0.0 < out["ours.c_diag_score"] <= 1.0 and np.isfinite(out["ours.eig_rel_error_mean"])
 
 
 # ---------------------------------------------------------------------------- issue 10
@@ -86,7 +86,7 @@ def test_failure_shows_a_plain_message_and_leaves_the_document(window, dialogs, 
     monkeypatch.setattr(co, "eigsh", boom)
     # the patch lives in this process: run the computation here, not in the panel's child
     # process (that errors cross the process boundary is tested in tests/algorithms/test_steps.py)
-    monkeypatch.setattr(sys.modules["app.panels.spectral"], "isolated_iter",
+    monkeypatch.setattr(sys.modules["app.recipes.spectral"], "isolated_iter",
                         lambda fn, *a, **k: fn(*a, **k))
     assert window.open_path(SAMPLES / "blob.obj")
     V0, F0 = window.document.V.copy(), window.document.F.copy()
@@ -103,7 +103,7 @@ def test_failure_shows_a_plain_message_and_leaves_the_document(window, dialogs, 
     np.testing.assert_array_equal(window.document.V, V0)
     np.testing.assert_array_equal(window.document.F, F0)
     assert window.undo_stack.count() == count
-    assert panel.result is None
+    assert panel.outcome is None
 
 
 def test_too_few_rows_for_the_parts_is_a_plain_message(window, dialogs, qtbot, tmp_path):
@@ -132,15 +132,17 @@ def test_non_orientable_parts_leave_qslim_out_and_say_so(window, dialogs, qtbot,
     panel.form.editors["k"].setValue(30)
     with qtbot.waitSignal(window.runner.finished, timeout=120000):
         panel.run_button.click()
-    qtbot.waitUntil(lambda: panel.result is not None, timeout=5000)
-    assert set(panel.result.methods) == {"ours", "amg"}
+    qtbot.waitUntil(lambda: panel.outcome is not None, timeout=5000)
+    assert panel.outcome["methods"] == ["ours", "amg"]
+    assert "qslim.C" not in panel.outcome and "amg.C" in panel.outcome
     assert panel.scores["qslim"].text() == "left out"
     assert "QSlim" in panel.status_label.text() and "left out" in panel.status_label.text()
 
 
 def test_coarse_eigenvector_view_failure_is_a_plain_message(window, dialogs, qtbot,
                                                            monkeypatch):
-    import app.panels.spectral as mod
+    import sys
+
     from algorithms.errors import ParameterError
     assert window.open_path(SAMPLES / "blob.obj")
     panel = window.panels["Spectral coarsening"]
@@ -148,10 +150,79 @@ def test_coarse_eigenvector_view_failure_is_a_plain_message(window, dialogs, qtb
         panel.form.editors[name].setValue(v)
     with qtbot.waitSignal(window.runner.finished, timeout=120000):
         panel.run_button.click()
-    qtbot.waitUntil(lambda: panel.result is not None, timeout=5000)
+    qtbot.waitUntil(lambda: panel.outcome is not None, timeout=5000)
 
     def boom(*a, **k):
         raise ParameterError("the mass matrix has zero entries")
-    monkeypatch.setattr(mod, "generalized_eigs", boom)
+    monkeypatch.setattr(sys.modules["algorithms.spectral.coarsen"], "generalized_eigs", boom)
     panel.show_combo.setCurrentIndex(3)                  # prolonged coarse eigenvector
     assert "Cannot show the coarse eigenvectors" in panel.status_label.text()
+
+
+# ---------------------------------------------------------------------------- issue 20: recipe
+def test_panel_run_is_the_recipe_bit_for_bit(window, dialogs, qtbot, monkeypatch):
+    """The panel's Run is the recipe "Spectral coarsening" in a child process; a headless run
+    with the same state, params and job_options() gives the same outcome, bit for bit; the
+    views draw the outcome."""
+    import json
+
+    import app.recipes.spectral as mod
+    from app.recipes import outcome_hash, run
+
+    calls = []
+    real = mod.isolated_iter
+
+    def spy(fn, *a, **k):
+        calls.append(fn)
+        return real(fn, *a, **k)
+    monkeypatch.setattr(mod, "isolated_iter", spy)
+    assert window.open_path(SAMPLES / "blob.obj")
+    panel = window.panels["Spectral coarsening"]
+    for name, v in (("m", 60), ("k", 15), ("max_iterations", 30), ("balance_iterations", 10)):
+        panel.form.editors[name].setValue(v)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.run_button.click()
+    qtbot.waitUntil(lambda: panel.outcome is not None, timeout=5000)
+    assert len(calls) == 1                                   # ARPACK & co. in a child process
+    req = panel.last_request
+    assert req["recipe"] == "Spectral coarsening" and req["input"] is window.document.state
+    assert req["options"] == panel.job_options()
+    assert json.loads(json.dumps(req["options"])) == req["options"]
+    headless = run("Spectral coarsening", window.document.state, panel.form.params(),
+                   panel.job_options())
+    a, b = panel.outcome, headless.outcome
+    assert sorted(a) == sorted(b)
+    for key in a:
+        if isinstance(a[key], np.ndarray):
+            assert a[key].dtype == b[key].dtype and a[key].tobytes() == b[key].tobytes(), key
+        else:
+            assert a[key] == b[key], key
+    assert outcome_hash(a) == outcome_hash(b)
+    assert headless.state is window.document.state and window.undo_stack.count() == 0
+    # the views read the outcome
+    shown = np.array(window.viewport.poly.point_data["clusters"])
+    np.testing.assert_array_equal(shown, mod.cluster_field(a))
+    assert f"C diag {a['amg.c_diag_score']:.3f}" in panel.scores["amg"].text()
+    panel.show_combo.setCurrentIndex(2)
+    panel.eig_index.setValue(3)
+    np.testing.assert_allclose(np.array(window.viewport.poly.point_data["eigenfunction"]),
+                               a["fine.eigenvectors"][:, 3])
+
+
+def test_job_options_are_json_and_restore_the_operator(window, dialogs, qtbot):
+    import json
+
+    from app.panels.spectral import OPERATORS
+
+    panel = window.panels["Spectral coarsening"]
+    labels = list(OPERATORS)
+    for label in labels:
+        panel.operator_combo.setCurrentText(label)
+        opts = panel.job_options()
+        saved = json.loads(json.dumps(opts))
+        assert saved == opts and saved["operator"] == OPERATORS[label]
+        assert saved["isolated"] is True and saved["compare"] == ["qslim", "amg"]
+        assert saved["alpha"] == (70.0 if OPERATORS[label] == "anisotropic" else 10.0)
+        panel.operator_combo.setCurrentText(labels[(labels.index(label) + 1) % len(labels)])
+        panel.restore_options(saved)
+        assert panel.operator_combo.currentText() == label and panel.job_options() == opts

@@ -1,0 +1,267 @@
+"""Recipe "Spectral coarsening" (thesis ch. 7): coarsen the mesh's operator with ours, QSlim and
+AMG and score them. An analysis: the document never changes; the run's figures and arrays are
+its outcome (:func:`comparison_outcome`), which the panel's views read.
+
+Options (all optional; the defaults are the command line's):
+
+* ``operator`` (str): the operator to coarsen, one of :data:`OPERATOR_NAMES`
+  ("cotangent", "intrinsic_delaunay", "anisotropic", "graph", "point_cloud");
+* ``alpha`` (float, default 10): the anisotropy of the "anisotropic" operator (the panel's
+  "anisotropic (α 70)" passes 70; the other operators ignore it);
+* ``compare`` (list of str, default ["qslim", "amg"]): the baselines run besides ours;
+* ``isolated`` (bool, default False): run the computation in a child process
+  (:func:`algorithms.steps.isolated_iter`). ARPACK, SciPy's sparse products and PyAMG hold
+  Python's GIL for seconds, which freezes a window even from its worker thread: the panel asks
+  for it. The child runs with one BLAS thread, so its last bits may differ from an in-process
+  run's; a replay of the logged options runs where the original did.
+
+Determinism: the random initial cluster roots (graph k-medoids) and PyAMG's Lloyd seeds come
+from ``params.seed``; ARPACK's start vector is a fixed one (see
+:func:`algorithms.spectral.coarsen.generalized_eigs`); the outcome holds no timings. Two runs
+with the same (state, params, options) give the same bits on the same machine.
+
+The view helpers below (:func:`heatmap_rgb`, :func:`cluster_field`, :func:`fine_eigenfunction`,
+:func:`coarse_eigenpairs`, :func:`prolonged_eigenvector`) are plain NumPy functions of an
+outcome; the panel calls them on the GUI thread.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Iterator
+
+import numpy as np
+
+from algorithms.steps import Step, isolated_iter
+from app.recipes import Recipe, register, unchanged_result
+
+#: the operators the recipe coarsens (algorithms.spectral.operators.build_operator's names)
+OPERATOR_NAMES = ("cotangent", "intrinsic_delaunay", "anisotropic", "graph", "point_cloud")
+#: ours first, then the baselines, in the order the panel shows them
+METHODS = ("ours", "qslim", "amg")
+BASELINES = ("qslim", "amg")
+#: the metrics of every method in the outcome (``"<method>.<metric>"``)
+METRICS = ("c_diag_score", "eig_rel_error_mean", "eig_rel_error_max")
+DEFAULT_OPTIONS = {"operator": "cotangent", "alpha": 10.0, "compare": list(BASELINES),
+                   "isolated": False}
+
+
+@dataclass
+class ComparisonStep(Step):
+    """The recipe's last Step: ``outcome`` is the run's :func:`comparison_outcome`."""
+
+    outcome: dict = field(default_factory=dict)
+
+
+def spectral_options(options: dict | None) -> dict:
+    """``options`` checked and completed with the defaults (module docstring); bad values raise
+    ParameterError with a plain message."""
+    from algorithms.errors import ParameterError
+
+    o = {**DEFAULT_OPTIONS, **(options or {})}
+    unknown = sorted(set(o) - set(DEFAULT_OPTIONS))
+    if unknown:
+        raise ParameterError(f"Spectral coarsening has no option {unknown[0]!r}; its options "
+                             f"are {', '.join(DEFAULT_OPTIONS)}.")
+    if o["operator"] not in OPERATOR_NAMES:
+        raise ParameterError(f"Unknown operator {o['operator']!r}: choose one of "
+                             f"{', '.join(OPERATOR_NAMES)}.")
+    try:
+        alpha = float(o["alpha"])
+    except (TypeError, ValueError):
+        alpha = float("nan")
+    if not np.isfinite(alpha) or alpha <= 0:
+        raise ParameterError(f"The anisotropy alpha must be a positive number (got "
+                             f"{o['alpha']!r}).")
+    compare = o["compare"]
+    if isinstance(compare, str) or not all(isinstance(c, str) for c in compare):
+        raise ParameterError("The option 'compare' is a list of baselines, e.g. "
+                             "['qslim', 'amg'].")
+    bad = [c for c in compare if c not in BASELINES]
+    if bad:
+        raise ParameterError(f"Unknown baseline {bad[0]!r}: compare with qslim and/or amg.")
+    return {"operator": o["operator"], "alpha": alpha,
+            "compare": [c for c in BASELINES if c in compare], "isolated": bool(o["isolated"])}
+
+
+def spectral_steps(state, params, options: dict | None = None, cache: dict | None = None
+                   ) -> Iterator[Step]:
+    """The panel's Run: the eigenvectors of the fine operator (streamed as per-mille progress
+    with no metrics), one Step per optimizer iteration of ours (metric ``energy``), then a
+    :class:`ComparisonStep` carrying the outcome. ``cache`` is not used (every run starts from
+    the mesh)."""
+    from algorithms.spectral.compare import compare_coarsenings_iter
+
+    o = spectral_options(options)
+    args = (state.V, state.F, o["operator"], params.m, params.k or None, params)
+    kwargs = {"methods": ("ours", *o["compare"]), "alpha": o["alpha"], "eig_progress": True}
+    if o["isolated"]:
+        # in a child process: ARPACK, SciPy's sparse products and PyAMG hold the GIL for
+        # seconds, which would freeze the window even from the worker thread
+        gen = isolated_iter(compare_coarsenings_iter, *args, **kwargs)
+    else:
+        gen = compare_coarsenings_iter(*args, **kwargs)
+    last_it = 0
+    try:
+        while True:
+            try:
+                cs = next(gen)
+            except StopIteration as stop:
+                out = comparison_outcome(stop.value)
+                yield ComparisonStep(last_it + 1, None, state.V, {}, "done", outcome=out)
+                return
+            if np.isnan(cs.energy):      # the eigenvector stage: its own progress
+                yield Step(cs.iteration, cs.total, state.V, {}, cs.message)
+                continue
+            last_it = cs.iteration
+            yield Step(cs.iteration, cs.total, state.V, {"energy": cs.energy},
+                       f"iteration {cs.iteration}")
+    finally:
+        gen.close()   # a cancelled run stops the computation (and its child process) now
+
+
+# ------------------------------------------------------------------------------ the outcome
+def _csr_arrays(prefix: str, A) -> dict:
+    """A sparse matrix as ``prefix.data / .indices / .indptr / .shape`` arrays (CSR, sorted
+    column indices, stored zeros kept: the pattern of G is part of the result)."""
+    import scipy.sparse as sp
+
+    C = sp.csr_matrix(A, copy=True)
+    C.sort_indices()
+    return {f"{prefix}.data": np.ascontiguousarray(C.data, dtype=np.float64),
+            f"{prefix}.indices": np.ascontiguousarray(C.indices, dtype=np.int64),
+            f"{prefix}.indptr": np.ascontiguousarray(C.indptr, dtype=np.int64),
+            f"{prefix}.shape": np.array(C.shape, dtype=np.int64)}
+
+
+def outcome_matrix(outcome: dict, prefix: str):
+    """The sparse matrix stored under ``prefix`` ("ours.L", "amg.M", "ours.G", ...)."""
+    import scipy.sparse as sp
+
+    shape = tuple(int(s) for s in outcome[f"{prefix}.shape"])
+    return sp.csr_matrix((outcome[f"{prefix}.data"], outcome[f"{prefix}.indices"],
+                          outcome[f"{prefix}.indptr"]), shape=shape)
+
+
+def comparison_outcome(cmp_) -> dict:
+    """The outcome of a run: a flat dict of numbers, strings and NumPy arrays, no timings.
+
+    * ``n``, ``m``, ``k`` (int): fine size, asked coarse size, eigenvectors compared;
+      ``methods`` (list of str): the methods that ran ("ours" first; a baseline that could not
+      handle the mesh is left out); ``notes`` (list of str): why, in plain words;
+    * ``fine.eigenvalues`` (k',), ``fine.eigenvectors`` (n, k'): the fine operator's first
+      k' = k + (number of parts) eigenpairs, ascending, M-orthonormal;
+    * per method: ``<method>.c_diag_score``, ``.eig_rel_error_mean``, ``.eig_rel_error_max``
+      (float), ``<method>.C`` (k, k) functional map, ``<method>.eigenvalues`` the coarse
+      operator's eigenvalues, ``<method>.L``, ``.M`` (coarse operator and mass) and ``.P``
+      (m, n root selection) as CSR arrays (see :func:`outcome_matrix`);
+    * ours also: ``ours.G`` (n, m) prolongation (CSR), ``ours.clusters`` (n,) int64 cluster of
+      every fine vertex, ``ours.roots`` (m,) int64 fine vertex of every coarse node,
+      ``ours.energy`` (float), ``ours.iterations`` / ``ours.balancing_iterations`` (int);
+    * qslim also: ``qslim.V`` (m', 3), ``qslim.F`` (f', 3) int64, the decimated mesh.
+    """
+    out: dict = {"n": int(cmp_.n), "m": int(cmp_.m), "k": int(cmp_.k),
+                 "methods": [name for name in METHODS if name in cmp_.methods],
+                 "notes": [str(t) for t in getattr(cmp_, "notes", [])]}
+    lam_f, phi_f = cmp_.fine_eigs
+    out["fine.eigenvalues"] = np.array(lam_f, dtype=np.float64)
+    out["fine.eigenvectors"] = np.array(phi_f, dtype=np.float64, order="C")
+    for name in out["methods"]:
+        r = cmp_.methods[name]
+        for metric in METRICS:
+            out[f"{name}.{metric}"] = float(r.metrics[metric])
+        out[f"{name}.C"] = np.array(r.spectral.C, dtype=np.float64, order="C")
+        out[f"{name}.eigenvalues"] = np.array(r.spectral.lam_coarse, dtype=np.float64)
+        for mat in ("L", "M", "P"):
+            out.update(_csr_arrays(f"{name}.{mat}", getattr(r, mat)))
+    if "ours" in cmp_.methods:
+        r = cmp_.methods["ours"]
+        out.update(_csr_arrays("ours.G", r.extra["G"]))
+        K = r.extra["K"].tocsc()
+        out["ours.clusters"] = np.asarray(K.argmax(axis=0)).ravel().astype(np.int64)
+        out["ours.roots"] = np.asarray(r.P.tocsr().argmax(axis=1)).ravel().astype(np.int64)
+        out["ours.energy"] = float(r.extra["energy"])
+        out["ours.iterations"] = int(cmp_.timings.get("ours_iterations", 0))
+        out["ours.balancing_iterations"] = int(cmp_.timings.get("ours_balancing_iterations", 0))
+    if "qslim" in cmp_.methods:
+        ex = cmp_.methods["qslim"].extra
+        out["qslim.V"] = np.array(ex["V"], dtype=np.float64, order="C")
+        out["qslim.F"] = np.array(ex["F"], dtype=np.int64, order="C")
+    return out
+
+
+def _spectral_outcome(last: Step) -> dict:
+    return dict(getattr(last, "outcome", None) or {})
+
+
+def _spectral_params():
+    from algorithms.spectral.coarsen import CoarsenParams
+
+    return CoarsenParams
+
+
+# ------------------------------------------------------------------------------ the views
+def suggested_coarse_size(n: int, m: int = 500) -> int:
+    """The coarse size the panel proposes for an ``n``-vertex mesh (at most n / 8, see
+    :func:`algorithms.spectral.coarsen.suggested_coarse_size`)."""
+    from algorithms.spectral.coarsen import suggested_coarse_size as suggest
+
+    return suggest(n, m)
+
+
+def heatmap_rgb(C: np.ndarray, size: int = 140) -> np.ndarray:
+    """|C| as a white-to-dark-blue picture: (size, size, 3) uint8, C's rows and columns
+    sampled to ``size`` pixels (thesis Fig. 7.1)."""
+    A = np.abs(np.asarray(C, dtype=np.float64))
+    A = A / max(A.max(), 1e-12)
+    k = A.shape[0]
+    idx = (np.arange(size) * k // size).clip(0, k - 1)
+    A = A[np.ix_(idx, idx)]
+    rgb = np.empty(A.shape + (3,), dtype=np.uint8)
+    rgb[..., 0] = (255 * (1 - 0.85 * A)).astype(np.uint8)
+    rgb[..., 1] = (255 * (1 - 0.7 * A)).astype(np.uint8)
+    rgb[..., 2] = (255 * (1 - 0.35 * A)).astype(np.uint8)
+    return np.ascontiguousarray(rgb)
+
+
+def cluster_field(outcome: dict) -> np.ndarray:
+    """(n,) float: a colour index per fine vertex, its cluster shuffled by a fixed permutation
+    of 0..m-1 so that neighbouring clusters get different colours of a categorical map."""
+    m = int(outcome["m"])
+    perm = np.random.default_rng(0).permutation(m).astype(float)
+    return perm[outcome["ours.clusters"]]
+
+
+def fine_eigenfunction(outcome: dict, i: int) -> np.ndarray:
+    """(n,) the fine eigenfunction Φ_i (i = 1: the first non-constant one; clamped to those
+    computed)."""
+    phi = outcome["fine.eigenvectors"]
+    return phi[:, min(int(i), phi.shape[1] - 1)]
+
+
+def coarse_eigenpairs(outcome: dict):
+    """(eigenvalues, eigenvectors) of ours' coarse operator, the first min(k + 1, m - 1);
+    raises a project error with a plain message when they cannot be computed."""
+    from algorithms.spectral.coarsen import generalized_eigs
+
+    L, M = outcome_matrix(outcome, "ours.L"), outcome_matrix(outcome, "ours.M")
+    return generalized_eigs(L, M, min(int(outcome["k"]) + 1, int(outcome["m"]) - 1))
+
+
+def prolonged_eigenvector(outcome: dict, i: int, coarse_eigs=None) -> np.ndarray:
+    """(n,) G φ~_i: ours' coarse eigenvector i prolonged to the fine mesh, signed like the fine
+    Φ_i (eigenvectors have arbitrary signs). ``coarse_eigs``: :func:`coarse_eigenpairs`'s
+    result, computed when not given."""
+    phi_f = outcome["fine.eigenvectors"]
+    j = min(int(i), phi_f.shape[1] - 1)
+    phi_c = (coarse_eigs if coarse_eigs is not None else coarse_eigenpairs(outcome))[1]
+    f = outcome_matrix(outcome, "ours.G") @ phi_c[:, min(j, phi_c.shape[1] - 1)]
+    if f @ phi_f[:, j] < 0:
+        f = -f
+    return f
+
+
+register(Recipe("Spectral coarsening", "coarsen", _spectral_params, spectral_steps,
+                result=unchanged_result, outcome=_spectral_outcome,
+                note="an analysis: the mesh does not change; the outcome holds the coarse "
+                     "operators, eigenvalues, scores, clusters and roots"))
