@@ -4,12 +4,16 @@
   scripts/make_style_thumbnails.py), "Load style…" for a user mesh (closest normals when it is
   convex, a cMCF spherical map otherwise) or a capture .json, and "Capture sphere" mode;
 * the Params form (λ, regularizer, dynamic targets, developable threshold, PolyCube), live by
-  default; the ShapeAnalogy precomputation is cached while only the parameters change;
+  default; a Run computes the recipe "Analogies" (:mod:`app.recipes.analogies`) from the
+  state, the Params and :meth:`AnalogiesPanel.job_options` (the style, the painted capture
+  sphere); its cache keeps the ShapeAnalogy precomputation while only the parameters change;
 * a normal-capture sphere: pick a target direction, paint regions of the sphere of directions;
-  vertices whose normals fall in a region are sent to that direction (one undo step per stroke);
+  vertices whose normals fall in a region are sent to that direction (one undo step per stroke,
+  computed by :func:`app.recipes.analogies.apply_capture_stroke`; the command's
+  ``log_details`` let the study replay check it);
 * views: the mesh coloured by the angle between its normals and their targets (thesis Fig. 6.15),
   by Gaussian curvature (angle defect per Voronoi area, Fig. 6.21), or by its transferred target
-  directions in the same colours as the capture sphere.
+  directions in the same colours as the capture sphere (computed by the recipe module).
 """
 
 from __future__ import annotations
@@ -22,30 +26,25 @@ from PySide6.QtGui import QIcon, QUndoCommand
 from PySide6.QtWidgets import (QComboBox, QGroupBox, QHBoxLayout, QLabel, QListWidget,
                                QListWidgetItem, QPushButton, QVBoxLayout, QWidget)
 
-from algorithms.deform.analogies import AnalogyParams, ShapeAnalogy
-from algorithms.deform.targets import PRIMITIVES, CaptureSphere, load_style
+from algorithms.deform.analogies import AnalogyParams
+from algorithms.deform.targets import PRIMITIVES
 from algorithms.errors import Stylize3DError
-from algorithms.mesh.operators import gaussian_curvature, vertex_normals
 from app import dialogs
 from app.panels.base import MethodPanel
+from app.recipes import put_blob_file
+from app.recipes.analogies import (CAPTURE, HUE_RANGE, angle_to_targets_view,
+                                   apply_capture_stroke, capture_from_dict, capture_hash,
+                                   capture_view_values, direction_hue, gaussian_curvature_view,
+                                   new_capture, style_target_map, target_direction_view)
 from app.tools import BrushSettings
 from app.viewport import PickResult, Viewport
 from app.widgets import article
 
 STYLE_DIR = Path(__file__).resolve().parents[2] / "resources" / "styles"
-CAPTURE = "capture sphere"
 AXES = {"+X": (1, 0, 0), "−X": (-1, 0, 0), "+Y": (0, 1, 0), "−Y": (0, -1, 0),
         "+Z": (0, 0, 1), "−Z": (0, 0, -1)}
 
-
-HUE_RANGE = (-np.pi - 2.0, np.pi + 2.0)
-
-
-def direction_hue(T: np.ndarray) -> np.ndarray:
-    """A scalar per unit direction (k, 3) for an "hsv" colour map: equal directions get equal
-    colours (azimuth plus a lift by z), used for the capture sphere and the mesh alike."""
-    T = np.asarray(T, dtype=np.float64)
-    return np.arctan2(T[:, 1], T[:, 0]) + 2.0 * T[:, 2]
+__all__ = ["AnalogiesPanel", "CaptureBrush", "direction_hue", "HUE_RANGE", "CAPTURE", "AXES"]
 
 
 def _capture_icon(size: int = 56) -> QIcon:
@@ -73,25 +72,38 @@ def _capture_icon(size: int = 56) -> QIcon:
 
 
 class _CaptureCommand(QUndoCommand):
-    def __init__(self, panel: "AnalogiesPanel", before: dict, after: dict):
+    """One capture-sphere stroke. ``log_details`` (written by the study log) holds the sphere
+    before, the stroke and the hash of the sphere after, for
+    :func:`app.recipes.analogies.replay_capture_edit`. (The spheres are ``capture_before`` /
+    ``capture_after``, not ``before`` / ``after``: those names mean document states to the
+    study log.)"""
+
+    def __init__(self, panel: "AnalogiesPanel", before: dict, after: dict, stroke: dict):
         super().__init__("Paint capture sphere")
-        self.panel, self.before, self.after = panel, before, after
+        self.panel, self.capture_before, self.capture_after = panel, before, after
+        self.stroke = stroke
+        self.log_details = {"tool": "capture", "capture_before": before, "stroke": stroke,
+                            "capture_after_hash": capture_hash(after)}
 
     def redo(self) -> None:
-        self.panel.set_capture(CaptureSphere.from_dict(self.after))
+        self.panel.set_capture(capture_from_dict(self.capture_after))
 
     def undo(self) -> None:
-        self.panel.set_capture(CaptureSphere.from_dict(self.before))
+        self.panel.set_capture(capture_from_dict(self.capture_before))
 
 
 class CaptureBrush:
-    """Paints the capture sphere's regions (picks on the sphere view)."""
+    """Paints the capture sphere's regions (picks on the sphere view). A stroke is recorded as
+    its inputs (the picked points, radius, erase, target); after each dab the sphere shown is
+    :func:`~app.recipes.analogies.apply_capture_stroke` of the sphere before the stroke and the
+    stroke so far, and the release commits that as one undo step."""
 
     def __init__(self, panel: "AnalogiesPanel", settings: BrushSettings):
         self.panel = panel
         self.settings = settings
         self._before: dict | None = None
-        self._label: int | None = None
+        self._stroke: dict | None = None
+        self._after: dict | None = None
 
     def press(self, hit: PickResult) -> bool:
         from PySide6.QtCore import Qt
@@ -100,7 +112,9 @@ class CaptureBrush:
             self.panel.set_custom_target(hit.position)
             return True
         self._before = self.panel.capture.to_dict()
-        self._label = None
+        self._stroke = {"dabs": [], "radius": float(self.settings.radius),
+                        "erase": bool(self.settings.erase),
+                        "target": [float(x) for x in self.panel.capture_target()]}
         self._dab(hit)
         return True
 
@@ -109,23 +123,21 @@ class CaptureBrush:
             self._dab(hit)
 
     def _dab(self, hit: PickResult) -> None:
-        cap = self.panel.capture
-        d = hit.position / max(np.linalg.norm(hit.position), 1e-12)
-        theta_r = max(self.settings.radius, 1e-6) * np.pi
-        near = np.flatnonzero(cap.vertices @ d > np.cos(theta_r))
-        if self.settings.erase:
-            cap.erase(near)
-        else:
-            self._label = cap.paint(near, self.panel.capture_target(), self._label)
+        self._stroke["dabs"].append([float(x) for x in np.asarray(hit.position).reshape(3)])
+        after = apply_capture_stroke(self._before, self._stroke)
+        self.panel.capture = capture_from_dict(after)
+        self._after = after
         self.panel.refresh_capture_view()
 
     def release(self) -> None:
         if self._before is None:
             return
         before, self._before = self._before, None
-        after = self.panel.capture.to_dict()
+        stroke, self._stroke = self._stroke, None
+        after, self._after = self._after, None
         if after != before:
-            self.panel.window_.undo_stack.push(_CaptureCommand(self.panel, before, after))
+            self.panel.window_.undo_stack.push(_CaptureCommand(self.panel, before, after,
+                                                               stroke))
 
 
 class AnalogiesPanel(MethodPanel):
@@ -141,9 +153,8 @@ class AnalogiesPanel(MethodPanel):
     def __init__(self, window):
         super().__init__(window)
         self.style_name = "cube"
-        self.custom_style = None  # (target map, description) of a loaded file
-        self.capture = CaptureSphere(3)
-        self._cache: tuple | None = None
+        self.custom_style = None  # (blob reference, description) of a loaded style file
+        self.capture = new_capture()
         self.brush_settings = BrushSettings(radius=0.1, strength=1.0)
         self._build()
         window.document.subscribe(self._on_doc)
@@ -250,12 +261,9 @@ class AnalogiesPanel(MethodPanel):
             self._on_params_changed(None)
 
     def refresh_capture_view(self) -> None:
-        lab = self.capture.labels
-        vals = np.full(len(lab), np.nan)
-        painted = lab >= 0
-        if painted.any():  # colour regions by their target direction
-            vals[painted] = direction_hue(self.capture.targets[lab[painted]])
-        self.capture_view.show_field("capture", vals, "hsv", HUE_RANGE)
+        # regions coloured by their target direction
+        self.capture_view.show_field("capture", capture_view_values(self.capture), "hsv",
+                                     HUE_RANGE)
         if self.view_combo.currentIndex() == 3:
             self.show_view()
 
@@ -275,13 +283,19 @@ class AnalogiesPanel(MethodPanel):
         if not path:
             return False
         try:
-            self.custom_style = load_style(path)
+            ref = put_blob_file(path)
+            # read (and kept in the recipe's cache) now: errors show here, runs reuse the map
+            _tmap, what = style_target_map({"style": ref}, self._recipe_cache)
+        except OSError as e:
+            dialogs.error(self, "Cannot use this style", f"{path} could not be read ({e}).")
+            return False
         except Stylize3DError as e:
             dialogs.error(self, "Cannot use this style", str(e))
             return False
+        self.custom_style = (ref, what)
         self.style_name = path
         self.gallery.clearSelection()
-        self.style_label.setText(self.custom_style[1])
+        self.style_label.setText(what)
         self._on_params_changed(None)
         return True
 
@@ -302,12 +316,53 @@ class AnalogiesPanel(MethodPanel):
             return False
         return True
 
+    def job_options(self) -> dict:
+        """The recipe's options (:mod:`app.recipes.analogies`): ``style`` (a primitive name,
+        "capture sphere", or the blob reference of a loaded style file), ``style_map``
+        ("auto") and ``capture`` (the painted sphere's dict, always: a saved project keeps
+        the painting)."""
+        style = self.custom_style[0] if self.custom_style is not None else self.style_name
+        return {"style": style, "style_map": "auto", "capture": self.capture.to_dict()}
+
+    def restore_options(self, options: dict) -> None:
+        """Set the gallery / loaded style and the capture sphere from saved options (no live
+        re-run). A style file whose data is missing leaves the style as it was and says so."""
+        cap = options.get("capture")
+        if cap is not None:
+            try:
+                self.capture = capture_from_dict(cap)
+            except Stylize3DError as e:
+                self.status_label.setText(f"The saved capture sphere was not restored: {e}")
+            self.refresh_capture_view()
+        style = options.get("style", "cube")
+        if style in PRIMITIVES or style == CAPTURE:
+            rows = [i for i in range(self.gallery.count())
+                    if self.gallery.item(i).data(256) == style]
+            self.gallery.blockSignals(True)
+            self.gallery.setCurrentRow(rows[0])
+            self.gallery.blockSignals(False)
+            self.style_name, self.custom_style = style, None
+            self.style_label.setText("your painted capture sphere" if style == CAPTURE
+                                     else f"closest normals of "
+                                          f"{article(style.replace('_', ' '))}")
+            return
+        mode = options.get("style_map", "auto")
+        try:
+            _tmap, what = style_target_map({"style": style, "style_map": mode},
+                                           self._recipe_cache)
+        except Stylize3DError as e:
+            self.status_label.setText(f"The saved style was not restored: {e}")
+            return
+        self.custom_style = (style, what)
+        self.style_name = str(style).split("/", 1)[-1]
+        self.gallery.blockSignals(True)
+        self.gallery.clearSelection()
+        self.gallery.blockSignals(False)
+        self.style_label.setText(what)
+
     def target_map(self):
-        if self.custom_style is not None:
-            return self.custom_style[0]
-        if self.style_name == CAPTURE:
-            return CaptureSphere.from_dict(self.capture.to_dict())  # a snapshot for the worker
-        return load_style(self.style_name)[0]
+        """The chosen style's target map (a capture sphere: a snapshot of the painting)."""
+        return style_target_map(self.job_options(), self._recipe_cache)[0]
 
     # -- views -----------------------------------------------------------------------------------
     def show_view(self) -> None:
@@ -318,18 +373,14 @@ class AnalogiesPanel(MethodPanel):
         if i == 0:
             self.window_.viewport.show_field(None)
         elif i == 1:
-            N = vertex_normals(doc.V, doc.F)
-            T = self.target_map()(N)
-            ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", N, T), -1.0, 1.0)))
+            ang = angle_to_targets_view(doc.V, doc.F, self.target_map())
             self.window_.viewport.show_field("angle_to_targets", ang, "magma", (0.0, 45.0))
         elif i == 3:  # the transferred targets, in the capture sphere's colours
-            T = self.target_map()(vertex_normals(doc.V, doc.F))
-            self.window_.viewport.show_field("target_direction", direction_hue(T), "hsv",
-                                             HUE_RANGE)
+            hue = target_direction_view(doc.V, doc.F, self.target_map())
+            self.window_.viewport.show_field("target_direction", hue, "hsv", HUE_RANGE)
         else:
-            K = gaussian_curvature(doc.V, doc.F)
-            lim = float(np.percentile(np.abs(K), 95)) or 1.0
-            self.window_.viewport.show_field("gaussian_curvature", K, "coolwarm", (-lim, lim))
+            K, lim = gaussian_curvature_view(doc.V, doc.F)
+            self.window_.viewport.show_field("gaussian_curvature", K, "coolwarm", lim)
 
     def _on_doc(self, what: str) -> None:
         if (what in ("mesh", "positions", "topology") and self.view_combo.currentIndex()
@@ -341,18 +392,11 @@ class AnalogiesPanel(MethodPanel):
 
     # -- the method --------------------------------------------------------------------------------
     def run(self, live: bool = False) -> None:
+        # the style is read here, on the GUI thread, as before: a style that cannot be used is
+        # said in the status line and nothing starts (the run itself is the recipe's)
         try:
-            self._target_map = self.target_map()
+            style_target_map(self.job_options(), self._recipe_cache)
         except Stylize3DError as e:
             self.status_label.setText(str(e))
             return
         super().run(live)
-
-    def build_steps(self, state, params):
-        key = (id(state.V), id(state.F))
-        if self._cache is not None and self._cache[0] == key:
-            sa = self._cache[1]
-        else:
-            sa = ShapeAnalogy(state.V, state.F)
-            self._cache = (key, sa)
-        return sa.steps(params, target_map=self._target_map)
