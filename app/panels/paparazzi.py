@@ -14,6 +14,11 @@
   shows the energy of the fixed monitor view (thesis 353-356).
 * Stop puts the mesh back; the finished result (new vertices and triangles) is one undoable
   command.
+
+The run itself is the Qt-free recipe "Paparazzi" (:mod:`app.recipes.paparazzi`): the panel gives
+it the form's Params and :meth:`PaparazziPanel.job_options` (the filter, its settings, its files
+as blob references, a plug-in's file); the pictures and the plot read the streamed steps through
+that module's view functions.
 """
 
 from __future__ import annotations
@@ -21,22 +26,23 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
-import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QImage, QPixmap
 from PySide6.QtWidgets import (QComboBox, QFormLayout, QGridLayout, QGroupBox, QHBoxLayout,
                                QLabel, QLineEdit, QPushButton, QVBoxLayout, QWidget)
 
 from algorithms.errors import Stylize3DError
-from algorithms.params import describe, param, params_to_dict
-from algorithms.paparazzi import (ImageReadError, PaparazziParams, filter_names, get_filter,
-                                  read_image)
+from algorithms.params import describe, param, params_from_dict
+from algorithms.paparazzi import PaparazziParams
 from algorithms.steps import Step
 from app.document import MeshState
 from app.forms import ParamsForm
 from app.panels.base import MethodPanel
+from app.recipes.paparazzi import (describe_filter_file, ensure_filter, filter_names,
+                                   filter_options, manifold_report, monitor_points, rgb8)
+from app.recipes.paparazzi import filter_spec as get_filter
 from app.widgets import article, plural
 
 #: the panel's default number of iterations: a 3,000-vertex mesh takes about 10-20 s at the
@@ -77,16 +83,10 @@ PLAIN = {
 }
 
 
-def _image_to_qimage(img: np.ndarray, size: int = THUMB) -> QImage:
+def _image_to_qimage(img, size: int = THUMB) -> QImage:
     """An (H, W, C) float image in [0, 1] (C = 1 or 3) as a size × size QImage (nearest pixels,
-    so a 64-pixel rendering stays readable)."""
-    a = np.asarray(img, dtype=np.float64)
-    if a.ndim == 2:
-        a = a[..., None]
-    if a.shape[2] == 1:
-        a = np.repeat(a, 3, axis=2)
-    a = np.nan_to_num(a[..., :3], nan=0.0)
-    rgb = np.ascontiguousarray((np.clip(a, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
+    so a 64-pixel rendering stays readable); the pixels come from :func:`rgb8`."""
+    rgb = rgb8(img)
     h, w = rgb.shape[:2]
     qimg = QImage(rgb.data, w, h, 3 * w, QImage.Format.Format_RGB888).copy()
     return qimg.scaled(size, size, Qt.AspectRatioMode.KeepAspectRatio,
@@ -346,9 +346,7 @@ class PaparazziPanel(MethodPanel):
             self._on_params_changed(None)
             return True
         try:
-            reader = get_filter(name).file_readers.get(field) if name else None
-            note = (self._check_with_reader(reader, kind, path) if reader is not None
-                    else self._check_file(kind, path))
+            note = describe_filter_file(name, field, kind, path)
         except Stylize3DError as e:
             if edit is not None:
                 edit.setText(old)
@@ -365,55 +363,6 @@ class PaparazziPanel(MethodPanel):
         self._on_params_changed(None)
         return True
 
-    @staticmethod
-    def _check_with_reader(reader, kind: str, path: str) -> str:
-        """Check a file with the filter's own reader (``FilterSpec.file_readers``: e.g. the
-        neural-style painting, which may have any shape, since its reader crops the central
-        square); a short description. A reader that fails without a Stylize3DError still gives
-        a plain message."""
-        try:
-            data = reader(str(path))
-        except Stylize3DError:
-            raise
-        except Exception as e:  # noqa: BLE001 - a reader's own defect: still a plain message
-            raise ImageReadError(f"{path} cannot be used ({type(e).__name__}: {e}).") from None
-        if kind != "image":
-            return "file chosen"
-        from PIL import Image
-
-        try:
-            with Image.open(path) as im:
-                w, h = im.size
-        except Exception:  # noqa: BLE001 - the filter's reader reads what PIL cannot: fine
-            return "file chosen"
-        note = f"{w} × {h} pixels"
-        shape = getattr(data, "shape", None)
-        if shape is not None and len(shape) in (2, 3) and tuple(shape[:2]) != (h, w):
-            note += f", used as {shape[1]} × {shape[0]}"
-            if len(shape) == 2 or shape[2] == 1:
-                note += " grey"
-        return note
-
-    @staticmethod
-    def _check_file(kind: str, path: str) -> str:
-        """Read the file as the filter will (raises a Stylize3DError); a short description."""
-        if kind == "image":
-            img = read_image(path)
-            from PIL import Image
-
-            with Image.open(path) as im:
-                grey = im.mode in ("L", "LA", "I", "I;16", "F", "1")
-            return (f"{img.shape[1]} × {img.shape[0]} pixels, {'grey' if grey else 'colour'}"
-                    f"{' (used as colour)' if grey else ''}; resized to the render resolution")
-        if kind == "mesh":
-            from algorithms.mesh import read_mesh
-
-            data = read_mesh(path)
-            return f"{len(data.V):,} vertices, {len(data.F):,} triangles"
-        if not Path(path).is_file():
-            raise ImageReadError(f"{path} is not a file.")
-        return "file chosen"
-
     # -- the run ---------------------------------------------------------------------------------
     def filter_params(self):
         """The current filter's Params (form values and chosen files)."""
@@ -423,26 +372,62 @@ class PaparazziPanel(MethodPanel):
         return dataclasses.replace(p, **files) if files else p
 
     def job_options(self) -> dict:
-        return {"filter": self.filter_name(), "filter_params": params_to_dict(self.filter_params())}
+        """The recipe's options: ``filter``, ``filter_params`` (its files as blob references)
+        and, for a plug-in's filter, ``plugin`` (see :mod:`app.recipes.paparazzi`)."""
+        return filter_options(self.filter_name(), self.filter_params())
+
+    def restore_options(self, options: dict) -> None:
+        """Choose the saved filter (loading its plug-in from the project when it is not
+        registered) and set its form and files from ``options``."""
+        from app.recipes import blob_path, is_blob_ref
+
+        name = str(options.get("filter") or "")
+        if not name:
+            return
+        try:
+            spec = ensure_filter(name, options.get("plugin"))
+        except Stylize3DError as e:
+            self.status_label.setText(f"The saved filter {name!r} cannot be used: {e}")
+            return
+        values = dict(options.get("filter_params") or {})
+        files = {f: values.pop(f) for f in list(values)
+                 if f in {s.name for s in describe(spec.params)
+                          if s.type is str and not s.choices}}
+        problems = []
+        for f, v in files.items():
+            path = ""
+            if is_blob_ref(v):
+                try:
+                    path = str(blob_path(v))
+                except Stylize3DError as e:
+                    problems.append(str(e))
+            elif v:
+                path = str(v)
+            if path:
+                self._paths[(name, f)] = path
+            else:
+                self._paths.pop((name, f), None)
+        try:
+            p = params_from_dict(spec.params, values)
+        except Stylize3DError as e:
+            problems.append(str(e))
+            p = spec.params()
+        if self.filter_form is not None:  # the shown filter's values, before it is replaced
+            self._filter_values[self.filter_form.filter_name] = self.filter_form.params()
+        self._filter_values[name] = p
+        self.refresh_filters()
+        if self.filter_name() == name:
+            self.filter_form = None  # rebuilt from the restored values (not saved over them)
+            self._rebuild_filter_form()
+        else:
+            self.filter_combo.setCurrentText(name)
+        if problems:
+            self.status_label.setText(" ".join(problems))
 
     def job_factory(self, state: MeshState, params: Any):
-        spec = get_filter(self.filter_name())
-        fparams = self.filter_params()
-        run_params = PaparazziParams(**{f.name: getattr(params, f.name)
-                                        for f in dataclasses.fields(PaparazziParams)})
-        self._monitor_every = run_params.monitor_every
+        self._monitor_every = params.monitor_every
         self._first_monitor = None
-        return lambda: self._steps(state, spec, fparams, run_params)
-
-    def build_steps(self, state: MeshState, params: Any) -> Iterator[Step]:
-        return self.job_factory(state, params)()
-
-    @staticmethod
-    def _steps(state: MeshState, spec, fparams, params: PaparazziParams) -> Iterator[Step]:
-        from algorithms.paparazzi import Paparazzi
-
-        run = Paparazzi(np.asarray(state.V), np.asarray(state.F), spec, fparams, params)
-        yield from run.steps()
+        return super().job_factory(state, params)
 
     def run(self, live: bool = False) -> None:
         doc = self.window_.document
@@ -471,15 +456,12 @@ class PaparazziPanel(MethodPanel):
     def _mesh_is_usable(self) -> bool:
         """Paparazzi remeshes as it goes, so it needs a 2-manifold mesh: offer Clean, or say
         plainly why not."""
-        from algorithms.mesh import validate_mesh
-        from algorithms.mesh.topology import is_manifold
-
         from app import dialogs
 
         doc = self.window_.document
-        if is_manifold(doc.F):
+        report = manifold_report(doc.V, doc.F)
+        if report is None:
             return True
-        report = validate_mesh(doc.V, doc.F)
         need = ("Paparazzi needs a 2-manifold mesh: every edge shared by one or two triangles "
                 "and every vertex with a single fan of triangles, because it remeshes the "
                 "surface as it goes. This mesh is not.")
@@ -491,7 +473,8 @@ class PaparazziPanel(MethodPanel):
                                     details=report.summary())
             if choice == "Clean, then run":
                 self.window_.clean_mesh()
-                if is_manifold(self.window_.document.F):
+                cleaned = self.window_.document
+                if manifold_report(cleaned.V, cleaned.F) is None:
                     return True
                 need += " Cleaning did not make it one."
             else:
@@ -532,20 +515,14 @@ class PaparazziPanel(MethodPanel):
         iterations, the end), not its repeated value in between."""
         if not self._mine():
             return
-        every = self._monitor_every
-        for it, metrics in history:
-            if "monitor_energy" not in metrics:
-                continue
-            if self._first_monitor is None:
-                self._first_monitor = metrics.get("initial_monitor_energy")
-                if self._first_monitor is not None:
-                    self.plot.append("monitor_energy", self._first_monitor)
-            if (every and it % every == 0) or self._is_last(it):
-                self.plot.append("monitor_energy", metrics["monitor_energy"])
-
-    def _is_last(self, it: int) -> bool:
         req = getattr(self, "last_request", None)
-        return req is not None and it == req["params"].iterations
+        values, started = monitor_points(history, self._monitor_every,
+                                         None if req is None else req["params"].iterations,
+                                         self._first_monitor is not None)
+        if started and self._first_monitor is None:
+            self._first_monitor = values[0]
+        for value in values:
+            self.plot.append("monitor_energy", value)
 
     def _on_finished(self, step: Step) -> None:
         if self.window_.last_job_name != self.title:

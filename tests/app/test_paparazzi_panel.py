@@ -237,3 +237,180 @@ def test_another_panels_run_replacing_a_remeshed_preview_shows_the_document(wind
     np.testing.assert_array_equal(window.viewport.points, doc.V)
     assert window.undo_stack.count() == 1 and window.undo_stack.undoText() == "Smooth"
     assert not dialogs.errors
+
+
+# ------------------------------------------------------------------------------ the recipe
+def _run_and_replay(window, qtbot, panel):
+    """Run the panel, then the recipe headless from the same input, Params and options (through
+    JSON, as the project file and the study log keep them); both results."""
+    import json
+
+    from algorithms.params import params_to_dict
+    from app.recipes import run
+
+    before = window.document.state
+    params = params_to_dict(panel.form.params())
+    options = json.loads(json.dumps(panel.job_options()))
+    with qtbot.waitSignal(window.job_committed, timeout=60000):
+        panel.run_button.click()
+    assert panel.last_request["options"] == options
+    headless = run("paparazzi", before, params, options)
+    return window.document.state, headless
+
+
+def _assert_same_bits(doc_state, headless):
+    np.testing.assert_array_equal(doc_state.V, headless.state.V)
+    np.testing.assert_array_equal(doc_state.F, headless.state.F)
+    assert doc_state.V.tobytes() == headless.state.V.tobytes()
+
+
+def test_panel_run_is_the_headless_recipe_bit_for_bit(window, dialogs, qtbot):
+    panel = open_panel(window)  # the hand: an open border, remeshed twice
+    short_run(panel, iterations=24, monitor_every=6)
+    panel.form.set_value("seed", 7)
+    V0 = np.array(window.document.V)
+    after, headless = _run_and_replay(window, qtbot, panel)
+    assert after.V.shape != V0.shape or not np.array_equal(after.V, V0)
+    _assert_same_bits(after, headless)
+    assert headless.outcome["iterations"] == 24 and headless.outcome["remeshes"] == 2
+    # the plot shows the monitor energies the steps carried (start, every 6, the end)
+    mon = panel.plot.series["monitor_energy"]
+    assert len(mon) == 5 and mon[0] == headless.outcome["initial_monitor_energy"]
+    assert mon[-1] == headless.outcome["monitor_energy"]
+    # and a second headless run repeats it (the seed is in the Params)
+    from app.recipes import run
+
+    again = run("paparazzi", panel.last_request["input"], headless.params, headless.options)
+    _assert_same_bits(after, again)
+
+
+def test_panel_run_with_a_target_image_replays_from_its_blob(window, dialogs, qtbot, tmp_path):
+    from PIL import Image
+
+    panel = open_panel(window, "spot_lowres.obj")
+    panel.set_filter("target-image")
+    target = tmp_path / "target.png"
+    rng = np.random.default_rng(1)
+    Image.fromarray((rng.random((32, 32, 3)) * 255).astype(np.uint8)).save(target)
+    dialogs.open_paths.append(str(target))
+    panel._path_buttons["image"].click()
+    assert panel.filter_params().image == str(target)
+    options = panel.job_options()
+    ref = options["filter_params"]["image"]
+    assert ref.startswith("blob:") and ref.endswith("/target.png")
+    assert str(tmp_path) not in str(options)
+    short_run(panel, iterations=8, monitor_every=4)
+    after, headless = _run_and_replay(window, qtbot, panel)
+    target.unlink()  # the run's input is the blob, not the file
+    _assert_same_bits(after, headless)
+    from app.recipes import run
+
+    again = run("paparazzi", panel.last_request["input"], headless.params,
+                panel.last_request["options"])
+    _assert_same_bits(after, again)
+
+
+PLUGIN = '''
+from dataclasses import dataclass
+
+import numpy as np
+
+from algorithms.params import param
+from algorithms.paparazzi import register_filter
+
+
+@dataclass(frozen=True)
+class PosterizeParams:
+    levels: int = param(3, label="Levels", minimum=2, maximum=64, tooltip="Colour levels.")
+
+
+@register_filter("test-panel-posterize", kind="iterative", params=PosterizeParams,
+                 resolution=32)
+def posterize(image, params, ctx):
+    return np.round(image * (params.levels - 1)) / (params.levels - 1)
+'''
+
+
+def test_a_plugin_filter_runs_from_the_panel_and_replays_without_it(window, dialogs, qtbot,
+                                                                   tmp_path):
+    from algorithms.paparazzi import get_filter
+    from algorithms.paparazzi.filters import load_filter_plugin
+
+    name = "test-panel-posterize"
+    src = tmp_path / "posterize.py"
+    src.write_text(PLUGIN)
+    panel = open_panel(window, "spot_lowres.obj")
+    try:
+        load_filter_plugin(src)
+        panel.set_filter(name)
+        panel.filter_form.set_value("levels", 5)
+        short_run(panel, iterations=10, monitor_every=5)
+        after, _ = _run_and_replay(window, qtbot, panel)
+        options = panel.last_request["options"]
+        assert options["filter"] == name and options["filter_params"] == {"levels": 5}
+        assert options["plugin"].endswith("/posterize.py")
+        # another process: neither the filter nor its file are there; the blob brings it
+        unregister_filter(name)
+        src.unlink()
+        from app.recipes import run
+
+        replayed = run("paparazzi", panel.last_request["input"],
+                       panel.last_request["params"], options)
+        _assert_same_bits(after, replayed)
+        # a project opened where the plug-in is not loaded: restoring lists and chooses it
+        unregister_filter(name)
+        panel.set_filter("guided")
+        panel.restore_options(options)
+        assert panel.filter_name() == name and get_filter(name).name == name
+        assert panel.filter_form.params().levels == 5
+        assert panel.job_options() == options
+    finally:
+        unregister_filter(name)
+
+
+def test_job_options_are_json_and_restore_round_trips_the_widgets(window, dialogs, qtbot,
+                                                                 tmp_path):
+    import json
+
+    from PIL import Image
+
+    panel = open_panel(window, "spot_lowres.obj")
+    panel.set_filter("slic")
+    panel.filter_form.set_value("segments", 40)
+    slic = panel.job_options()
+    assert json.loads(json.dumps(slic)) == slic
+    assert slic["filter"] == "slic" and slic["filter_params"]["segments"] == 40
+    panel.set_filter("neural-style")
+    painting = tmp_path / "painting.png"
+    Image.new("RGB", (60, 40), (20, 120, 200)).save(painting)
+    assert panel.set_filter_file("style_image", str(painting))
+    style = panel.job_options()
+    assert json.loads(json.dumps(style)) == style
+    assert style["filter_params"]["style_image"].endswith("/painting.png")
+    # other settings on the widgets, then each saved set back
+    panel.set_filter("slic")
+    panel.filter_form.set_value("segments", 200)
+    panel.set_filter("guided")
+    panel.restore_options(slic)
+    assert panel.filter_name() == "slic" and panel.filter_form.params().segments == 40
+    assert panel.job_options() == slic
+    panel.restore_options(slic)  # the filter shown already: its form takes the saved values
+    assert panel.filter_form.params().segments == 40 and panel.job_options() == slic
+    painting.unlink()  # a project opened elsewhere: the painting comes from the blob
+    panel.restore_options(style)
+    assert panel.filter_name() == "neural-style"
+    shown = panel._path_edits["style_image"].text()
+    assert shown.endswith("painting.png") and shown != str(painting)
+    assert panel.job_options() == style
+    # the filters keep their own values when switched
+    panel.set_filter("slic")
+    assert panel.filter_form.params().segments == 40
+    # saved options whose file is missing: a plain note, the widgets stay usable
+    lost = dict(style, filter_params={**style["filter_params"],
+                                      "style_image": "blob:" + "2" * 64 + "/lost.png"})
+    panel.restore_options(lost)
+    assert panel.filter_name() == "neural-style" and "lost.png" in panel.status_label.text()
+    assert panel.job_options()["filter_params"]["style_image"] == ""
+    panel.restore_options({"filter": "no-such-filter"})
+    assert "no-such-filter" in panel.status_label.text()
+    assert panel.filter_name() == "neural-style" and not dialogs.errors
