@@ -8,23 +8,26 @@
   validation losses streamed to the plot; Stop keeps the best weights so far; "Save weights…"
   writes them.
 
-The subdivided mesh has other vertices and faces than the input: the last step is a
-:class:`~app.jobs.MeshStep` carrying them, committed as the new mesh by the shared mechanism of
-:class:`~app.panels.base.MethodPanel` (``changes_faces``).
+Both are computed by the Qt-free recipes of :mod:`app.recipes.subdivision` ("Subdivision" for
+Run, "Subdivision training" for training): a weights file and the weights trained here are
+blobs referenced in :meth:`SubdivisionPanel.job_options`. The subdivided mesh has other vertices
+and faces than the input: the last step carries them and is committed as the new mesh by the
+shared mechanism of :class:`~app.panels.base.MethodPanel` (``changes_faces``).
 """
 
 from __future__ import annotations
 
-from typing import Any, Iterator
+from pathlib import Path
+from typing import Iterator
 
-import numpy as np
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QSpinBox
 
-from algorithms.steps import Step, with_progress
+from algorithms.steps import Step
 from algorithms.subdivision.model import SubdivideParams
-from app.document import MeshState
-from app.jobs import MeshStep
 from app.panels.base import MethodPanel
+from app.recipes import subdivision as recipe_mod
+
+_CHOICE_INDEX = {"shipped": 0, "trained": 1, "file": 2}
 
 
 class SubdivisionPanel(MethodPanel):
@@ -40,10 +43,12 @@ class SubdivisionPanel(MethodPanel):
 
     def __init__(self, window):
         super().__init__(window)
-        self.trained_net = None
-        self.weights_file: str | None = None
+        self.trained_net = None  # the network trained here (for "Save weights…")
+        self.trained_weights: str | None = None  # its weights file, as a blob reference
+        self.weights_file: str | None = None  # the chosen weights file, as a blob reference
+        self.weights_file_name = ""  # where it came from (for messages)
         self.workers = 2
-        self._trainer = None
+        self._training: dict | None = None  # the running training job's last step
         lay = self.body_layout
         row = QHBoxLayout()
         row.addWidget(QLabel("Weights"))
@@ -80,95 +85,128 @@ class SubdivisionPanel(MethodPanel):
         lay.insertLayout(4, row)
         window.runner.finished.connect(self._training_ended)
         window.runner.cancelled.connect(self._training_ended)
+        window.runner.failed.connect(self._training_failed)
 
-    # -- subdividing ----------------------------------------------------------------------------
+    # -- subdividing (recipe "Subdivision") ------------------------------------------------------
     def job_options(self) -> dict:
-        return {"weights": self.weights_combo.currentText(), "weights_file": self.weights_file}
+        """The chosen weights (``weights``: shipped / trained / file) with the blob references
+        of the weights trained here and of the weights file (see
+        :mod:`app.recipes.subdivision`), and the training settings (``training``: coarse
+        meshes, epochs; kept in project files, not read by the subdivide recipe)."""
+        return {"weights": recipe_mod.WEIGHTS_CHOICES[self.weights_combo.currentIndex()],
+                "trained_weights": self.trained_weights, "weights_file": self.weights_file,
+                "training": {"coarse_meshes": self.coarse_spin.value(),
+                             "epochs": self.epochs_spin.value()}}
 
-    def _network(self):
-        from algorithms.subdivision.model import load_weights
+    def restore_options(self, options: dict) -> None:
+        """Set the weights choice, the trained network, the weights file and the training
+        settings from saved :meth:`job_options` (their blobs loaded with the project)."""
+        from algorithms.errors import Stylize3DError
 
-        choice = self.weights_combo.currentIndex()
-        if choice == 1 and self.trained_net is not None:
-            return self.trained_net
-        if choice == 2 and self.weights_file:
-            return load_weights(self.weights_file)[0]
-        return load_weights(None)[0]
+        problems = []
+        try:
+            choice = recipe_mod.weights_choice(options)
+        except Stylize3DError as exc:
+            problems.append(str(exc))
+            choice = "shipped"
+        self.trained_net, self.trained_weights = None, None
+        ref = options.get("trained_weights")
+        if ref:
+            try:
+                self.trained_net = recipe_mod.load_network(ref)
+                self.trained_weights = ref
+            except Stylize3DError as exc:
+                problems.append(str(exc))
+        self.save_button.setEnabled(self.trained_net is not None)
+        self.weights_file, self.weights_file_name = None, ""
+        ref = options.get("weights_file")
+        if ref:
+            try:
+                recipe_mod.load_network(ref, self._recipe_cache)
+                self.weights_file = ref
+                self.weights_file_name = ref.split("/", 1)[1]
+            except Stylize3DError as exc:
+                problems.append(str(exc))
+        training = options.get("training") or {}
+        if "coarse_meshes" in training:
+            self.coarse_spin.setValue(int(training["coarse_meshes"]))
+        if "epochs" in training:
+            self.epochs_spin.setValue(int(training["epochs"]))
+        index = _CHOICE_INDEX[choice]
+        if (index == 1 and self.trained_weights is None) or (index == 2
+                                                             and self.weights_file is None):
+            index = 0
+        self.weights_combo.setCurrentIndex(index)
+        if problems:
+            self.status_label.setText(" ".join(problems))
 
-    def build_steps(self, state: MeshState, params: Any) -> Iterator[Step]:
-        net = self._network() if params.method == "neural" else None
+    # -- training (recipe "Subdivision training") ------------------------------------------------
+    def training_params(self):
+        """The training run's Params: the panel's coarse meshes and epochs, the rest at the
+        thesis' defaults (seeds 0)."""
+        return recipe_mod.training_params_cls()(coarse_meshes=self.coarse_spin.value(),
+                                                epochs=self.epochs_spin.value())
 
-        def work(progress):
-            from algorithms.subdivision.baselines import subdivide_baseline
-            from algorithms.subdivision.metrics import coarsen_to_vertices
-            from algorithms.subdivision.model import neural_subdivide
+    def training_options(self) -> dict:
+        return {"workers": int(self.workers), "cache": True}
 
-            V, F = np.asarray(state.V), np.asarray(state.F)
-            if params.coarsen_first and params.coarsen_first < len(V):
-                progress(0.1, f"QSlim to {params.coarsen_first} vertices")
-                V, F = coarsen_to_vertices(V, F, params.coarsen_first)
-            progress(0.5, f"{params.method} subdivision")
-            if params.method == "neural":
-                return neural_subdivide(V, F, params.levels, net)
-            return subdivide_baseline(V, F, params.levels, params.method)
-
-        box: dict = {}
-        yield from with_progress(work, state.V, box)
-        if "value" in box:
-            V, F = box["value"]
-            yield MeshStep(1, 1, np.asarray(V, dtype=np.float64), {}, f"{len(F):,} triangles",
-                           F=np.asarray(F, dtype=np.int64))
-
-    # -- training -------------------------------------------------------------------------------
     def train(self) -> None:
         state = self.window_.document.state
         if state is None:
             self.status_label.setText("Open a mesh first (File > Open).")
             return
-        from algorithms.subdivision.data import DataParams
-        from algorithms.subdivision.train import TrainParams
-
-        dparams = DataParams(coarse_meshes=self.coarse_spin.value())
-        tparams = TrainParams(epochs=self.epochs_spin.value())
-        workers = self.workers
+        name = recipe_mod.TRAIN_RECIPE
+        recipe = self.recipe(name)
+        params = self.training_params()
+        options = self.training_options()
+        # what this run asks for, read by the study log when it starts
+        self.last_request = {"params": params, "options": options, "input": state,
+                             "recipe": name}
         self.plot.clear()
         self.status_label.setText("Making training data…")
+        holder: dict = {}
 
-        def factory():
-            return self._training_steps(state, dparams, tparams, workers)
+        def factory():  # worker thread, when the job starts: its steps go to ``holder``
+            self._training = holder
+            return self._training_steps(recipe, state, params, options, holder)
 
         self.window_.start_analysis_job(self.title, factory)
 
-    def _training_steps(self, state, dparams, tparams, workers) -> Iterator[Step]:
-        from algorithms.subdivision.data import generate_dataset
-        from algorithms.subdivision.train import Trainer
-
-        box: dict = {}
-        yield from with_progress(
-            lambda progress: generate_dataset([(np.asarray(state.V), np.asarray(state.F))],
-                                              dparams, workers=workers, progress=progress),
-            state.V, box)
-        if "value" not in box:
-            return
-        self._trainer = Trainer(box["value"], tparams)
-        yield from self._trainer.steps()
+    @staticmethod
+    def _training_steps(recipe, state, params, options, holder) -> Iterator[Step]:
+        steps = recipe.steps(state, params, options, {})
+        try:
+            for step in steps:
+                holder["last"] = step
+                yield step
+        finally:
+            steps.close()  # a cancelled run: the recipe keeps the best weights
 
     def _training_ended(self, *_):
-        if self.window_.last_job_name != self.title or self._trainer is None:
+        """A training job finished or was stopped: its best weights become "Trained here"."""
+        holder, self._training = self._training, None
+        if holder is None or holder.get("last") is None:
             return
-        if self._trainer.history:
-            from algorithms.subdivision.model import SubdivisionNet
+        from algorithms.errors import Stylize3DError
 
-            net = SubdivisionNet(seed=None)
-            net.load_state(self._trainer.best_state)
-            self.trained_net = net
-            self.weights_combo.setCurrentIndex(1)
-            self.save_button.setEnabled(True)
-            self.status_label.setText(
-                f"Trained {len(self._trainer.history)} epochs; best validation loss "
-                f"{self._trainer.best_loss:.3g} (epoch {self._trainer.best_epoch}). "
-                f"'Trained here' is selected.")
-        self._trainer = None
+        out = self.recipe(recipe_mod.TRAIN_RECIPE).outcome(holder["last"])
+        if not out:  # stopped while making the data
+            return
+        try:
+            net = recipe_mod.load_network(out["weights"])
+        except Stylize3DError as exc:
+            self.status_label.setText(str(exc))
+            return
+        self.trained_net, self.trained_weights = net, out["weights"]
+        self.weights_combo.setCurrentIndex(1)
+        self.save_button.setEnabled(True)
+        self.status_label.setText(
+            f"Trained {out['epochs']} epochs; best validation loss "
+            f"{out['best_validation_loss']:.3g} (epoch {out['best_epoch']}). "
+            f"'Trained here' is selected.")
+
+    def _training_failed(self, *_):
+        self._training = None
 
     def save_weights(self, path: str) -> None:
         from algorithms.subdivision.model import save_weights
@@ -202,16 +240,21 @@ class SubdivisionPanel(MethodPanel):
             self.weights_combo.setCurrentIndex(0)
 
     def set_weights_file(self, path: str) -> None:
-        """Use a weights file (checked now: a file that is not ours gives a plain message)."""
+        """Use a weights file (checked now: a file that is not ours gives a plain message); it
+        is stored as a blob, so a run does not depend on the file staying where it is."""
         from algorithms.errors import Stylize3DError
-        from algorithms.subdivision.model import load_weights
 
         try:
-            load_weights(path)
+            ref = recipe_mod.weights_blob_from_file(path)
         except Stylize3DError as exc:
             self.status_label.setText(str(exc))
             self.weights_combo.setCurrentIndex(0)
             return
-        self.weights_file = path
+        except OSError as exc:
+            self.status_label.setText(f"Cannot read '{Path(path).name}' "
+                                      f"({exc.strerror or exc}).")
+            self.weights_combo.setCurrentIndex(0)
+            return
+        self.weights_file, self.weights_file_name = ref, str(path)
         self.weights_combo.setCurrentIndex(2)
         self.status_label.setText(f"Using weights {path}.")

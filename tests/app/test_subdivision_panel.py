@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from algorithms.subdivision.model import shipped_weights_path
+from algorithms.subdivision.model import load_weights, shipped_weights_path
 from tests.conftest import SAMPLES
 
 
@@ -59,11 +59,172 @@ def test_tiny_training_streams_losses_and_cancel_keeps_best(window, dialogs, qtb
     assert len(panel.plot.series.get("loss", [])) >= 2
     assert panel.weights_combo.currentText() == "Trained here"
     assert panel.save_button.isEnabled()
+    # the best weights so far, stored as a blob the next Run's options refer to
+    import torch
+
+    from app.recipes import blob_path
+
+    opts = panel.job_options()
+    assert opts["weights"] == "trained" and opts["trained_weights"] == panel.trained_weights
+    kept, _ = load_weights(blob_path(panel.trained_weights))
+    assert all(torch.equal(v, kept.state()[k]) for k, v in panel.trained_net.state().items())
     out = tmp_path / "w.pt"
     panel.save_weights(str(out))
-    from algorithms.subdivision.model import load_weights
-
     net, info = load_weights(out)
     assert info["trained_on"] == "the Subdivision panel"
     # the document was not changed by training
     assert window.undo_stack.count() == 0
+
+
+# ------------------------------------------------------------------------------ recipes
+def _headless(name, before, params, options):
+    from app.recipes import run
+
+    return run(name, before, params, options)
+
+
+def test_run_is_the_headless_recipe_bit_for_bit(window, dialogs, qtbot, tmp_path):
+    """Run = recipe "Subdivision" with the panel's options, for the shipped weights, a
+    weights file and a baseline."""
+    from algorithms.subdivision.model import save_weights
+    from app.recipes import is_blob_ref
+
+    panel = open_panel(window)
+    doc = window.document
+    P = panel.form.params().__class__
+    # a weights file: the shipped weights slightly changed, so they give other positions
+    net, _ = load_weights(None)
+    net.load_state({k: v * 1.01 for k, v in net.state().items()})
+    path = tmp_path / "other.pt"
+    save_weights(path, net, {})
+    cases = [(P(method="neural", levels=1, coarsen_first=300), None),
+             (P(method="neural", levels=1, coarsen_first=300), str(path)),
+             (P(method="butterfly", levels=1, coarsen_first=500), None)]
+    results = []
+    for params, weights in cases:
+        if weights:
+            dialogs.open_paths.append(weights)
+            panel.weights_combo.setCurrentIndex(2)
+            panel.weights_combo.activated.emit(2)
+            assert panel.weights_combo.currentIndex() == 2 and is_blob_ref(panel.weights_file)
+        panel.form.set_params(params)
+        before = doc.state
+        with qtbot.waitSignal(window.job_committed, timeout=120000):
+            panel.run_button.click()
+        options = panel.job_options()
+        assert panel.last_request["recipe"] == "Subdivision"
+        assert panel.last_request["options"] == options
+        head = _headless("Subdivision", before, params, options)
+        assert doc.V.tobytes() == head.state.V.tobytes()
+        assert doc.F.tobytes() == head.state.F.tobytes()
+        results.append(np.array(doc.V))
+        window.undo_stack.undo()
+        assert doc.state is before
+    assert results[0].shape == results[1].shape and not np.array_equal(results[0], results[1])
+    # the run does not need the file any more: its bytes are in the options' blob
+    path.unlink()
+    panel.form.set_params(cases[1][0])
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    assert doc.V.tobytes() == results[1].tobytes()
+    # a file that is not weights: a plain message, back to the shipped weights
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"nothing")
+    dialogs.open_paths.append(str(bad))
+    panel.weights_combo.setCurrentIndex(2)
+    panel.weights_combo.activated.emit(2)
+    assert panel.weights_combo.currentIndex() == 0
+    assert "not a Stylize3D neural-subdivision weights file" in panel.status_label.text()
+
+
+def test_training_is_the_headless_recipe_and_its_weights_subdivide(window, dialogs, qtbot,
+                                                                   tmp_path, monkeypatch):
+    monkeypatch.setenv("STYLIZE3D_CACHE", str(tmp_path / "cache"))
+    panel = open_panel(window)
+    doc = window.document
+    panel.workers = 1
+    panel.coarse_spin.setValue(3)
+    panel.epochs_spin.setValue(3)
+    state = doc.state
+    losses = []
+    window.runner.metrics.connect(lambda h: losses.extend(m["loss"] for _i, m in h
+                                                          if "loss" in m))
+    with qtbot.waitSignal(window.runner.finished, timeout=180000):
+        panel.train_button.click()
+    req = panel.last_request
+    assert req["recipe"] == "Subdivision training" and req["input"] is state
+    assert (req["params"].coarse_meshes, req["params"].epochs, req["params"].seed,
+            req["params"].training_seed) == (3, 3, 0, 0)
+    assert req["options"] == {"workers": 1, "cache": True}
+    head = _headless("Subdivision training", state, req["params"], {"workers": 1,
+                                                                    "cache": False})
+    # the same weights, bit for bit (the weights file's bytes), and the same losses
+    assert panel.trained_weights == head.outcome["weights"]
+    assert losses == list(head.outcome["losses"])
+    assert "Trained 3 epochs" in panel.status_label.text()
+    assert panel.weights_combo.currentText() == "Trained here"
+    assert window.undo_stack.count() == 0 and doc.state is state
+    # subdividing with them: the panel's Run and the headless recipe agree
+    P = panel.form.params().__class__
+    params = P(method="neural", levels=1, coarsen_first=300)
+    panel.form.set_params(params)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    options = panel.job_options()
+    assert options["weights"] == "trained" and options["trained_weights"] == panel.trained_weights
+    sub = _headless("Subdivision", state, params, options)
+    assert doc.V.tobytes() == sub.state.V.tobytes() and doc.F.tobytes() == sub.state.F.tobytes()
+    shipped = _headless("Subdivision", state, params, {**options, "weights": "shipped"})
+    assert not np.array_equal(sub.state.V, shipped.state.V)
+
+
+def test_job_options_are_json_and_restore_round_trips(window, dialogs, qtbot, tmp_path):
+    import json
+
+    from algorithms.subdivision.model import save_weights
+    from app.recipes import put_blob, run
+
+    panel = open_panel(window)
+    # trained weights (a tiny headless training, as the panel's own would give) and a file
+    trained = run("Subdivision training", window.document.state,
+                  {"coarse_meshes": 2, "epochs": 1}, {"workers": 1, "cache": False})
+    path = tmp_path / "w.pt"
+    save_weights(path, load_weights(None)[0], {})
+    dialogs.open_paths.append(str(path))
+    panel.weights_combo.setCurrentIndex(2)
+    panel.weights_combo.activated.emit(2)
+    panel.trained_weights = trained.outcome["weights"]
+    panel.coarse_spin.setValue(17)
+    panel.epochs_spin.setValue(23)
+    for index in (0, 2):
+        panel.weights_combo.setCurrentIndex(index)
+        saved = panel.job_options()
+        text = json.dumps(saved)
+        assert json.loads(text) == saved
+        # change everything, then restore
+        panel.weights_combo.setCurrentIndex(0)
+        panel.trained_net = panel.trained_weights = panel.weights_file = None
+        panel.save_button.setEnabled(False)
+        panel.coarse_spin.setValue(200)
+        panel.epochs_spin.setValue(700)
+        panel.restore_options(json.loads(text))
+        assert panel.job_options() == saved
+        assert panel.weights_combo.currentIndex() == index
+        assert (panel.coarse_spin.value(), panel.epochs_spin.value()) == (17, 23)
+        assert panel.trained_net is not None and panel.save_button.isEnabled()
+        assert panel.weights_file_name == "w.pt"
+    panel.weights_combo.setCurrentIndex(1)
+    saved = panel.job_options()
+    panel.restore_options({})
+    assert panel.job_options()["weights"] == "shipped" and not panel.save_button.isEnabled()
+    panel.restore_options(saved)
+    assert panel.weights_combo.currentText() == "Trained here"
+    # blobs that were not loaded: a plain message, and the shipped weights
+    missing = {**saved, "trained_weights": "blob:" + "1" * 64 + "/gone.pt"}
+    panel.restore_options(missing)
+    assert panel.weights_combo.currentIndex() == 0 and panel.trained_net is None
+    assert "gone.pt" in panel.status_label.text()
+    junk = put_blob(b"junk", "junk.pt")
+    panel.restore_options({"weights": "file", "weights_file": junk})
+    assert panel.weights_combo.currentIndex() == 0 and panel.weights_file is None
+    assert "not a Stylize3D" in panel.status_label.text()

@@ -1,0 +1,315 @@
+"""Recipes "Subdivision" and "Subdivision training": neural subdivision (thesis ch. 4), the
+classic schemes, and training a network on the open mesh.
+
+"Subdivision" (CLI ``subdivide``; params :class:`~algorithms.subdivision.model.SubdivideParams`)
+subdivides the mesh ``levels`` times with neural / Loop / modified butterfly / mid-point
+subdivision, after QSlimming it to about ``coarsen_first`` vertices when that is set (and below
+the vertex count). The last step carries the new faces (:class:`MeshStep`), so the result is the
+new mesh (:func:`app.recipes.positions_result`). Options:
+
+* ``weights`` (str): which network neural subdivision uses — ``"shipped"`` (the project's
+  weights), ``"trained"`` (``trained_weights``) or ``"file"`` (``weights_file``); the panel's
+  older combo texts ("Shipped", "Trained here", "File…") are read too. A choice whose weights
+  are not given falls back to the shipped weights (what the panel always did);
+* ``trained_weights`` (str or None): blob reference of the weights a "Subdivision training" run
+  made (its outcome's ``weights``);
+* ``weights_file`` (str or None): blob reference of a weights file (:func:`weights_blob_from_file`
+  = :func:`app.recipes.put_blob_file` after checking the file);
+* ``training`` (dict, optional): the panel's training settings, kept with its other settings in
+  project files; not read by this recipe.
+
+"Subdivision training" (CLI ``subdivide-train``; params :func:`training_params_cls`, the fields of
+:class:`~algorithms.subdivision.data.DataParams` and
+:class:`~algorithms.subdivision.train.TrainParams` together — ``seed`` seeds the random
+collapses, ``training_seed`` the initial weights (``torch.manual_seed``) and the shuffling
+(a NumPy generator); PyTorch trains on one thread) makes the coarse meshes of the open mesh
+(streamed as progress steps), then trains, one :class:`TrainingStep` per epoch with the training
+and validation losses; stopping early keeps the best weights so far (each step carries them).
+The document does not change; the outcome (:func:`training_outcome`) holds the losses, the best
+epoch and the trained weights as a weights file stored as a blob (``weights``) with its SHA-256
+(``weights_sha256``). Options: ``workers`` (int, default 2: local processes making the coarse
+meshes; 1 = in this process) and ``cache`` (bool, default True: read and write the on-disk data
+cache, ``$STYLIZE3D_CACHE``); neither changes the result (the data module tests that a coarse
+mesh does not depend on where it was made or whether it came from the cache).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tempfile
+import threading
+import typing
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from algorithms.steps import Step
+from app.recipes import Recipe, blob_path, put_blob, put_blob_file, register, unchanged_result
+
+SUBDIVIDE_RECIPE = "Subdivision"
+TRAIN_RECIPE = "Subdivision training"
+#: the ``weights`` option's values
+WEIGHTS_CHOICES = ("shipped", "trained", "file")
+#: the panel's combo texts (read as the choices above)
+_WEIGHTS_TEXTS = {"Shipped": "shipped", "Trained here": "trained", "File…": "file"}
+#: the name a trained network's weights blob gets
+TRAINED_WEIGHTS_NAME = "subdivision_weights.pt"
+
+
+@dataclass
+class MeshStep(Step):
+    """The subdivided mesh: ``V`` (n, 3) float64 with its own faces ``F`` (m, 3) int64 (the
+    Qt-free twin of :class:`app.jobs.MeshStep`)."""
+
+    F: np.ndarray | None = None
+
+
+@dataclass
+class TrainingStep(Step):
+    """One training epoch (``iteration``, ``total``, the first validation mesh's prediction as
+    ``V``, the trainer's ``metrics``), with what training has kept so far.
+
+    best_state : the best validation weights so far (a state dict of tensors; replaced, never
+        changed in place, by later epochs).
+    best_epoch, best_loss : the epoch of those weights and its validation loss.
+    losses, validation_losses : the training and validation loss of every epoch so far.
+    stopped_early : training ends here by its patience rule.
+    info : the data and training settings (for the weights file's ``info``).
+    """
+
+    best_state: dict | None = None
+    best_epoch: int = 0
+    best_loss: float = float("inf")
+    losses: tuple = ()
+    validation_losses: tuple = ()
+    stopped_early: bool = False
+    info: dict = dataclasses.field(default_factory=dict)
+
+
+# ------------------------------------------------------------------------------ weights
+def weights_choice(options: dict | None) -> str:
+    """The ``weights`` option as one of :data:`WEIGHTS_CHOICES` (default "shipped")."""
+    from algorithms.errors import ParameterError
+
+    value = (options or {}).get("weights") or "shipped"
+    value = _WEIGHTS_TEXTS.get(value, value)
+    if value not in WEIGHTS_CHOICES:
+        raise ParameterError(f"Unknown weights {value!r} for neural subdivision: use one of "
+                             f"{', '.join(WEIGHTS_CHOICES)}.")
+    return value
+
+
+def weights_ref(options: dict | None) -> str | None:
+    """The blob reference of the weights the options choose, or None for the shipped ones."""
+    options = options or {}
+    choice = weights_choice(options)
+    if choice == "trained":
+        return options.get("trained_weights") or None
+    if choice == "file":
+        return options.get("weights_file") or None
+    return None
+
+
+def load_network(ref: str | None, cache: dict | None = None):
+    """The :class:`~algorithms.subdivision.model.SubdivisionNet` of a weights blob (None: the
+    shipped weights). A blob's network is kept in ``cache`` (blobs are content addressed).
+    Raises a plain error (WeightsError, ParameterError) for a missing or foreign file."""
+    from algorithms.subdivision.model import load_weights
+
+    if ref is None:
+        return load_weights(None)[0]
+    nets = None if cache is None else cache.setdefault("networks", {})
+    if nets is not None and ref in nets:
+        return nets[ref]
+    net = load_weights(blob_path(ref))[0]
+    if nets is not None:
+        nets[ref] = net
+    return net
+
+
+def weights_blob_from_file(path) -> str:
+    """Check a weights file (a plain error if it is not ours) and store it as a blob; returns
+    the reference for the ``weights_file`` option."""
+    from algorithms.subdivision.model import load_weights
+
+    load_weights(path)
+    return put_blob_file(path)
+
+
+# ------------------------------------------------------------------------------ subdividing
+def subdivision_steps(state, params, options: dict | None = None, cache: dict | None = None
+                      ) -> Iterator[Step]:
+    """The Subdivision panel's Run: progress steps ("QSlim to N vertices", "<method>
+    subdivision"; cancellable), then one :class:`MeshStep` with the subdivided mesh."""
+    from algorithms.steps import with_progress
+
+    options = options or {}
+    cache = {} if cache is None else cache
+    net = load_network(weights_ref(options), cache) if params.method == "neural" else None
+
+    def work(progress):
+        from algorithms.subdivision.baselines import subdivide_baseline
+        from algorithms.subdivision.metrics import coarsen_to_vertices
+        from algorithms.subdivision.model import neural_subdivide
+
+        V, F = np.asarray(state.V), np.asarray(state.F)
+        if params.coarsen_first and params.coarsen_first < len(V):
+            progress(0.1, f"QSlim to {params.coarsen_first} vertices")
+            V, F = coarsen_to_vertices(V, F, params.coarsen_first)
+        progress(0.5, f"{params.method} subdivision")
+        if params.method == "neural":
+            return neural_subdivide(V, F, params.levels, net)
+        return subdivide_baseline(V, F, params.levels, params.method)
+
+    box: dict = {}
+    yield from with_progress(work, state.V, box)
+    if "value" in box:
+        V, F = box["value"]
+        yield MeshStep(1, 1, np.asarray(V, dtype=np.float64), {}, f"{len(F):,} triangles",
+                       F=np.asarray(F, dtype=np.int64))
+
+
+def _subdivide_params():
+    from algorithms.subdivision.model import SubdivideParams
+
+    return SubdivideParams
+
+
+def _subdivision_outcome(last: Step) -> dict:
+    F = getattr(last, "F", None)
+    out = {"vertices": int(len(last.V))}
+    if F is not None:
+        out["faces"] = int(len(F))
+    return out
+
+
+# ------------------------------------------------------------------------------ training
+_params_lock = threading.Lock()
+
+
+def training_params_cls() -> type:
+    """``SubdivisionTrainingParams``: the fields of DataParams then TrainParams (their labels,
+    ranges and defaults), one frozen dataclass (made on first use; also this module's
+    attribute of that name)."""
+    cls = globals().get("SubdivisionTrainingParams")
+    if cls is not None:
+        return cls
+    from algorithms.subdivision.data import DataParams
+    from algorithms.subdivision.train import TrainParams
+
+    with _params_lock:
+        cls = globals().get("SubdivisionTrainingParams")
+        if cls is not None:
+            return cls
+        fields = []
+        for part in (DataParams, TrainParams):
+            hints = typing.get_type_hints(part)
+            for f in dataclasses.fields(part):
+                fields.append((f.name, hints[f.name],
+                               dataclasses.field(default=f.default, metadata=f.metadata)))
+        cls = dataclasses.make_dataclass("SubdivisionTrainingParams", fields, frozen=True)
+        cls.__module__ = __name__
+        cls.__doc__ = ("Training neural subdivision on a mesh: data generation (DataParams) "
+                       "and training (TrainParams) in one form.")
+        globals()["SubdivisionTrainingParams"] = cls
+        return cls
+
+
+def __getattr__(name: str):  # the lazily made Params class (PEP 562)
+    if name == "SubdivisionTrainingParams":
+        return training_params_cls()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def split_training_params(params):
+    """(DataParams, TrainParams) of a training Params instance (validated)."""
+    from algorithms.params import params_from_dict
+    from algorithms.subdivision.data import DataParams
+    from algorithms.subdivision.train import TrainParams
+
+    out = []
+    for part in (DataParams, TrainParams):
+        names = [f.name for f in dataclasses.fields(part)]
+        out.append(params_from_dict(part, {k: getattr(params, k) for k in names}))
+    return tuple(out)
+
+
+def training_steps(state, params, options: dict | None = None, cache: dict | None = None
+                   ) -> Iterator[Step]:
+    """"Train on this mesh": the coarse meshes of the mesh (progress steps, cancellable), then
+    one :class:`TrainingStep` per epoch (stopping keeps the best weights: every step carries
+    them)."""
+    from algorithms.params import params_to_dict
+    from algorithms.steps import with_progress
+    from algorithms.subdivision.data import generate_dataset
+    from algorithms.subdivision.train import Trainer
+
+    options = options or {}
+    dparams, tparams = split_training_params(params)
+    workers = int(options.get("workers", 2))
+    use_cache = bool(options.get("cache", True))
+    V, F = np.asarray(state.V), np.asarray(state.F)
+    box: dict = {}
+    yield from with_progress(
+        lambda progress: generate_dataset([(V, F)], dparams, workers=workers,
+                                          use_cache=use_cache, progress=progress),
+        state.V, box)
+    if "value" not in box:
+        return
+    trainer = Trainer(box["value"], tparams)
+    info = {**params_to_dict(dparams), **params_to_dict(tparams)}
+    losses: list[float] = []
+    vlosses: list[float] = []
+    steps = trainer.steps()
+    try:
+        for s in steps:
+            losses.append(float(s.metrics["loss"]))
+            vlosses.append(float(s.metrics["validation_loss"]))
+            yield TrainingStep(s.iteration, s.total, s.V, s.metrics, s.message,
+                               best_state=trainer.best_state, best_epoch=int(trainer.best_epoch),
+                               best_loss=float(trainer.best_loss), losses=tuple(losses),
+                               validation_losses=tuple(vlosses),
+                               stopped_early=bool(trainer.stopped_early), info=info)
+    finally:
+        steps.close()
+
+
+def trained_weights_bytes(step: TrainingStep) -> bytes:
+    """The weights file (the project's format, :func:`~algorithms.subdivision.model.save_weights`)
+    of a training step's best weights, as bytes (the same bytes for the same weights)."""
+    from algorithms.subdivision.model import SubdivisionNet, save_weights
+
+    net = SubdivisionNet(seed=0)  # seeded: leaves the global torch generator alone
+    net.load_state(step.best_state)
+    info = {"trained_by": TRAIN_RECIPE, "epochs_run": int(step.iteration),
+            "best_epoch": int(step.best_epoch),
+            "best_validation_loss": float(step.best_loss), **step.info}
+    with tempfile.TemporaryDirectory(prefix="stylize3d-weights-") as d:
+        p = Path(d) / TRAINED_WEIGHTS_NAME
+        save_weights(p, net, info)
+        return p.read_bytes()
+
+
+def training_outcome(last: Step) -> dict:
+    """What a training run made: ``epochs`` (run), ``best_epoch``, ``best_validation_loss``,
+    ``losses`` / ``validation_losses`` (per epoch, float64 arrays), ``stopped_early``,
+    ``weights`` (blob reference of the weights file, for the ``trained_weights`` option) and
+    ``weights_sha256`` (of its bytes). Empty when no epoch finished."""
+    if getattr(last, "best_state", None) is None:
+        return {}
+    ref = put_blob(trained_weights_bytes(last), TRAINED_WEIGHTS_NAME)
+    return {"epochs": int(last.iteration), "best_epoch": int(last.best_epoch),
+            "best_validation_loss": float(last.best_loss),
+            "losses": np.asarray(last.losses, dtype=np.float64),
+            "validation_losses": np.asarray(last.validation_losses, dtype=np.float64),
+            "stopped_early": bool(last.stopped_early),
+            "weights": ref, "weights_sha256": ref[len("blob:"):].split("/", 1)[0]}
+
+
+register(Recipe(SUBDIVIDE_RECIPE, "subdivide", _subdivide_params, subdivision_steps,
+                outcome=_subdivision_outcome, changes_faces=True))
+register(Recipe(TRAIN_RECIPE, "subdivide-train", training_params_cls, training_steps,
+                result=unchanged_result, outcome=training_outcome,
+                note="the document does not change; the outcome holds the trained weights"))
