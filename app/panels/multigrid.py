@@ -7,6 +7,13 @@ positions themselves. Scalar results go into the document as the field "smoothed
 saved with "Save field…"); smoothed positions replace the shape (undoable). Live α changes merge
 into one undo step. The hierarchy (geometry only) is built once per mesh connectivity and reused
 by every solve, every α, every energy and every flow step.
+
+Every job is a Qt-free recipe of :mod:`app.recipes.multigrid` (smoothing, hierarchy, solver
+comparison, mean curvature flow), run on the panel's recipe cache; this panel keeps its form, its
+views and its buttons. What a run depends on beyond the document and the form is in its options:
+the signal, the noise level and seed, the α's of the earlier solves it warm-starts from (a live
+slider drag: the recipe's ``warm_start``, so a replay reproduces the bits) and, when the shape
+changed since the hierarchy was built, the positions the hierarchy was built on.
 """
 
 from __future__ import annotations
@@ -14,31 +21,27 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import numpy as np
-import scipy.sparse as sp
 from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QGridLayout, QGroupBox, QHBoxLayout,
                                QLabel, QPushButton, QSpinBox, QVBoxLayout)
 
 from algorithms.errors import Stylize3DError
 from algorithms.mesh.fields import FIELD_EXTENSIONS, field_file_filter, read_field, write_field
-from algorithms.multigrid import greedy_coloring, surface_multigrid
-from algorithms.multigrid.applications import DataSmoother, choose_solver
-from algorithms.multigrid.params import DataSmoothingParams
-from algorithms.smoothing import SmoothParams, noisy_test_field, smooth_iter, unit_area
-from algorithms.steps import Step, with_progress
+from algorithms.multigrid.params import DataSmoothingParams, MultigridParams
+from algorithms.smoothing import SmoothParams
 from app import dialogs
 from app.commands import StateCommand
 from app.panels.base import MethodPanel
+from app.recipes.multigrid import (COMPARE, DEFAULT_NOISE, FLOW, HIERARCHY, LOADED_FIELD,
+                                   NOISY_FIELD, RESULT_FIELD, SIGNALS, SMOOTH,
+                                   coarse_triangle_colors, hierarchy_of, hierarchy_option,
+                                   noisy_field, resolve_solver, signal_range, warm_start_chain)
 from app.widgets import plural
 
-NOISY_FIELD = "noisy input"
-LOADED_FIELD = "loaded field"
-RESULT_FIELD = "smoothed"
-SIGNALS = ("Noisy test field", "Vertex positions", "Loaded field")
+SIGNAL_NAMES = ("Noisy test field", "Vertex positions", "Loaded field")  # order of SIGNALS
 VIEWS = ("Result", "Input signal", "Coarse level mesh", "Fine triangles by coarse triangle")
 SOLVER_NAMES = {"multigrid": "multigrid", "direct": "direct (CHOLMOD)"}
-#: at most this many CG steps per multigrid solve (they also stop early on growth or a stall)
-MAX_ITERATIONS = 100
+#: the undo text (and job name) of mean curvature flow
+FLOW_JOB = "Mean curvature flow"
 
 
 class MultigridPanel(MethodPanel):
@@ -56,25 +59,26 @@ class MultigridPanel(MethodPanel):
 
     def __init__(self, window):
         super().__init__(window)
-        self._hierarchies: dict = {}    # id(F) -> (F, SurfaceMultigrid)
-        self._smoothers: dict = {}      # (id(V), id(F), energy, solver) -> (V, F, DataSmoother)
-        self._last_solution = None      # (key, u) of the last solve, the next α's first guess
+        # the recipes keep the hierarchy, the Galerkin matrices and recent solutions in
+        # self._recipe_cache (one mesh at a time; cleared when the mesh changes)
         self.solve_times: dict[str, str] = {}
-        self._holder: dict = {}
+        self._noise_seed = 0   # the seed of the last noisy test field ("New noise")
+        self._job = ""         # the recipe of the job this panel started last
+        self._starting = False  # inside run(): job_options() adds the run's own options
         lay = self.body_layout
 
         # -- signal ---------------------------------------------------------------------------
         sig = QGroupBox("Signal")
         g = QGridLayout(sig)
         self.signal_combo = QComboBox()
-        self.signal_combo.addItems(SIGNALS)
+        self.signal_combo.addItems(SIGNAL_NAMES)
         self.signal_combo.setToolTip(
             "What to smooth. Noisy test field: a smooth pattern plus noise, made here. Vertex "
             "positions: smooths the shape itself. Loaded field: one number per vertex from a file.")
         self.noise_spin = QDoubleSpinBox()
         self.noise_spin.setRange(0.0, 3.0)
         self.noise_spin.setSingleStep(0.05)
-        self.noise_spin.setValue(0.4)
+        self.noise_spin.setValue(DEFAULT_NOISE)
         self.noise_spin.setToolTip("Noise of the test field, relative to the pattern's spread.")
         self.noise_button = QPushButton("New noise")
         self.noise_button.setToolTip("Make a new noisy test field (undoable).")
@@ -168,21 +172,27 @@ class MultigridPanel(MethodPanel):
     # -- signals -----------------------------------------------------------------------------------
     @property
     def signal(self) -> str:
-        return ("noise", "positions", "loaded")[self.signal_combo.currentIndex()]
+        return SIGNALS[self.signal_combo.currentIndex()]
 
-    def _push(self, after, text: str) -> None:
+    def _push(self, after, text: str, details: dict | None = None) -> None:
         doc = self.window_.document
-        self.window_.undo_stack.push(StateCommand(doc, doc.state, after, text))
+        cmd = StateCommand(doc, doc.state, after, text)
+        if details:
+            cmd.log_details = details  # the study log records the edit's inputs
+        self.window_.undo_stack.push(cmd)
 
     def new_noise(self) -> None:
         doc = self.window_.document
         if doc.is_empty:
             self.status_label.setText("Open a mesh first (File > Open).")
             return
-        seed = int(time.time_ns() % (2**31))
-        _clean, noisy = noisy_test_field(doc.V, doc.F, self.noise_spin.value(), seed)
+        # a new seed per click, kept (job_options: "noise_seed") and logged with the edit
+        self._noise_seed = seed = int(time.time_ns() % (2**31))
+        level = float(self.noise_spin.value())
+        noisy = noisy_field(doc.V, doc.F, level, seed)
         self._push(doc.state.with_field(NOISY_FIELD, noisy).with_field(RESULT_FIELD, None),
-                   "New noisy test field")
+                   "New noisy test field",
+                   {"tool": "new_noise", "field": NOISY_FIELD, "noise": level, "seed": seed})
         self.signal_combo.setCurrentIndex(0)
         self.view_combo.setCurrentIndex(1)
         self.show_view()
@@ -245,23 +255,74 @@ class MultigridPanel(MethodPanel):
         name = NOISY_FIELD if signal == "noise" else LOADED_FIELD
         return state.fields.get(name)
 
-    # -- caches (filled on the worker thread, read on the GUI thread) -------------------------------
-    def hierarchy(self, F):
-        hit = self._hierarchies.get(id(F))
-        return hit[1] if hit is not None and hit[0] is F else None
+    # -- options ---------------------------------------------------------------------------------
+    def job_options(self) -> dict:
+        """The recipe options of the panel (see :mod:`app.recipes.multigrid`): ``signal``,
+        ``noise``, ``noise_seed``, and the flow's ``flow_step_size`` and ``flow_steps`` (kept
+        with a project; the smoothing recipe does not use them). While a smoothing run starts
+        (:meth:`run`), also that run's ``warm_start`` (the α's of the earlier solves of the
+        same input, when the last solve was one) and ``hierarchy_positions`` (when the cached
+        hierarchy was built on other positions)."""
+        opts = {"signal": self.signal, "noise": float(self.noise_spin.value()),
+                "noise_seed": int(self._noise_seed),
+                "flow_step_size": float(self.dt_spin.value()),
+                "flow_steps": int(self.steps_spin.value())}
+        state = self._pending_input if self._starting else None
+        if state is not None:
+            params = self.form.params()
+            if resolve_solver(len(state.V), params)[0] == "multigrid":
+                opts.update(hierarchy_option(self._recipe_cache, state))
+            chain = warm_start_chain(self._recipe_cache, state, params, opts)
+            if chain:
+                opts["warm_start"] = chain
+        return opts
 
-    def _hierarchy_steps(self, V, F, holder):
-        """Steps while the hierarchy of (V, F) is built (nothing when it exists)."""
-        mg = self.hierarchy(F)
-        if mg is None:
-            out: dict = {}
-            yield from with_progress(lambda progress: surface_multigrid(V, F, progress=progress),
-                                     V, out)
-            mg = out["value"]
-            self._hierarchies = {id(F): (F, mg)}  # one mesh at a time
-            self._smoothers = {}
-        holder["mg"] = mg
-        return mg
+    def restore_options(self, options: dict) -> None:
+        if options.get("signal") in SIGNALS:
+            self.signal_combo.setCurrentIndex(SIGNALS.index(options["signal"]))
+        if "noise" in options:
+            self.noise_spin.setValue(float(options["noise"]))
+        if "noise_seed" in options:
+            self._noise_seed = int(options["noise_seed"])
+        if "flow_step_size" in options:
+            self.dt_spin.setValue(float(options["flow_step_size"]))
+        if "flow_steps" in options:
+            self.steps_spin.setValue(int(options["flow_steps"]))
+
+    def _analysis_options(self, state) -> dict:
+        opts = {"signal": self.signal, "noise": float(self.noise_spin.value()),
+                "noise_seed": int(self._noise_seed)}
+        opts.update(hierarchy_option(self._recipe_cache, state))
+        return opts
+
+    def _start_job(self, recipe_name: str, state, params, options: dict,
+                   positions_job: str | None = None) -> None:
+        """Start one of the panel's other recipes on ``state``: an analysis (the document does
+        not change) or, with ``positions_job`` (the job's name, its undo text), a job whose
+        result replaces the positions. Sets the run's options, recipe and request (the study
+        log reads them) first."""
+        recipe = self.recipe(recipe_name)
+        self._job = recipe_name
+        self._run_options = options
+        self._run_recipe = recipe_name
+        self.last_request = {"params": params, "options": options, "input": state,
+                             "recipe": recipe_name}
+        cache = self._recipe_cache
+
+        def factory():
+            return recipe.steps(state, params, options, cache)
+
+        if positions_job is None:
+            self.window_.start_analysis_job(self.title, factory)
+        else:
+            self.window_.start_positions_job(
+                positions_job, factory,
+                commit=lambda before, step: recipe.result(before, step, options))
+
+    # -- caches ------------------------------------------------------------------------------------
+    def hierarchy(self, F):
+        """The hierarchy this panel holds for the faces ``F`` (the same array), or None."""
+        return hierarchy_of(self._recipe_cache, F)
 
     # -- the smoothing job ----------------------------------------------------------------------------
     def run(self, live: bool = False) -> None:
@@ -274,83 +335,27 @@ class MultigridPanel(MethodPanel):
         if self.signal == "loaded" and LOADED_FIELD not in doc.state.fields:
             self.status_label.setText("Load a field first (Load field…).")
             return
-        super().run(live)
+        self._job = SMOOTH
+        self._starting = True
+        try:
+            super().run(live)
+        finally:
+            self._starting = False
 
-    def commit_function(self):
-        # Called on the GUI thread just before the job starts; build_steps (worker thread) fills
-        # this same holder. Only the newest job runs (the runner drops superseded ones), and it
-        # is the one whose commit function the window keeps.
-        holder = self._holder = {"signal": self.signal}  # widgets are read here, not later
-        if self.signal == "positions":
-            return None
-
-        def commit(before, _step):
-            return before.with_field(RESULT_FIELD, holder["u"])
-
-        return commit
-
-    def build_steps(self, state, params):
-        holder = self._holder
-        solver, why = params.solver, None
-        if solver == "auto":
-            solver, why = choose_solver(len(state.V), params.energy)
-        holder["solver"], holder["auto"] = solver, why
-        signal = holder["signal"]
-        f_src = self._input_values(state, signal)
-        if f_src is None:
-            raise Stylize3DError("There is no input signal: make a noisy field or load one.")
-        f = np.array(f_src, dtype=np.float64)
-        V, F = state.V, state.F
-        rtol = 1e-5
-
-        def steps():
-            mg = None
-            if solver == "multigrid":
-                mg = yield from self._hierarchy_steps(V, F, holder)
-            key = (id(V), id(F), params.energy, solver)
-            hit = self._smoothers.get(key)
-            if hit is not None and hit[0] is V and hit[1] is F:
-                sm = hit[2]
-            else:
-                yield Step(0, None, V, {}, "preparing the Galerkin matrices")
-                sm = DataSmoother(unit_area(V, F), F, energy=params.energy,
-                                  solver=solver, mg=mg)
-                self._smoothers[key] = (V, F, sm)
-            # a new α starts from the previous α's solution (same input, same operator): about
-            # half the V-cycles while the slider moves
-            warm_key = key + (id(f_src),)
-            last = self._last_solution
-            x0 = (last[1] if last is not None and last[0] == warm_key
-                  and last[1].shape == f.shape else None)
-            # an unconverged solve falls back to the direct solver when it fits in memory
-            # (info["fallback"] says so) or raises NotConvergedError: the job fails, the
-            # document stays as it was and the message is shown
-            u, info = sm.smooth_checked(f, params.alpha, rtol=rtol, maxiter=MAX_ITERATIONS,
-                                        x0=x0)
-            self._last_solution = (warm_key, u)
-            info["warm_start"] = x0 is not None
-            res = np.asarray(info.get("residuals") or [], dtype=np.float64)
-            if res.size:
-                res = res / (res[0] if res[0] > 0 else 1.0)
-                for k, r in enumerate(res[1:], 1):
-                    yield Step(k, None, V, {"relative residual": float(r)}, "")
-            holder.update(u=u, info=info)
-            Vout = u if signal == "positions" else V
-            yield Step(int(info.get("cycles", 0)), None, Vout, {},
-                       f"{info['seconds']:.3f} s")
-
-        return steps()
+    def job_factory(self, state, params):
+        # the recipe, its options and the cache are taken here, on the GUI thread
+        recipe, options, cache = self.recipe(), self._run_options, self._recipe_cache
+        return lambda: recipe.steps(state, params, options, cache)
 
     def _on_finished(self, step) -> None:
         if self.window_.last_job_name != self.title:
             return
-        holder = self._holder
-        info = holder.get("info")
-        if info is None:  # a hierarchy build or a solver comparison
+        info = getattr(step, "info", None)
+        if self._job != SMOOTH or not info:  # a hierarchy build or a solver comparison
             self.stop_button.setEnabled(False)
-            self.analysis_finished()
+            self.analysis_finished(step)
             return
-        name = holder["solver"]
+        name = info.get("requested_solver", info.get("solver"))
         cyc = f", {plural(info['cycles'], 'cycle')}" if info.get("cycles") else ""
         if info.get("warm_start") and cyc:
             cyc += " from the last α"
@@ -360,8 +365,9 @@ class MultigridPanel(MethodPanel):
         if info.get("fallback"):  # multigrid did not converge: the direct solver's result
             name = "direct"
             cyc = ""
+        auto = info.get("auto")
         pre = f"{info['fallback']} " if info.get("fallback") else (
-            f"{holder['auto'][0].upper()}{holder['auto'][1:]}. " if holder.get("auto") else "")
+            f"{auto[0].upper()}{auto[1:]}. " if auto else "")
         self.status_label.setText(
             f"{pre}Solved with {SOLVER_NAMES.get(name, name)} in "
             f"{info['seconds'] * 1000:.0f} ms{cyc}. Undo with Ctrl+Z.")
@@ -369,7 +375,7 @@ class MultigridPanel(MethodPanel):
 
     def _on_committed(self, name: str, after) -> None:
         super()._on_committed(name, after)
-        if name == "Mean curvature flow":
+        if name == FLOW_JOB:
             self._show_hierarchy_info()
             self.status_label.setText("Flow applied. Undo with Ctrl+Z.")
         if name == self.title:
@@ -389,31 +395,12 @@ class MultigridPanel(MethodPanel):
         if self.signal == "noise" and NOISY_FIELD not in doc.state.fields:
             self.new_noise()
         state = doc.state
-        f = self._input_values(state)
-        if f is None:
+        if self._input_values(state) is None:
             self.status_label.setText("Load a field first (Load field…).")
             return
-        params = self.form.params()
-        V, F = state.V, state.F
-        holder = self._holder = {}
-        f = np.array(f, dtype=np.float64)
-
-        def steps():
-            mg = yield from self._hierarchy_steps(V, F, holder)
-            times = {}
-            for k, solver in enumerate(("multigrid", "direct")):
-                sm = DataSmoother(unit_area(V, F), F, energy=params.energy, solver=solver,
-                                  mg=mg if solver == "multigrid" else None)
-                _u, info = sm.smooth_checked(f, params.alpha, rtol=1e-5,
-                                             maxiter=MAX_ITERATIONS)
-                times[solver] = info
-                yield Step(k + 1, 2, V, {}, f"{solver}: {info['seconds']:.3f} s")
-            holder["times"] = times
-
         self.plot.clear()
         self.status_label.setText("Timing both solvers…")
-        self.window_.start_analysis_job(self.title, steps)
-        self._compare_holder = holder
+        self._start_job(COMPARE, state, self.form.params(), self._analysis_options(state))
 
     # -- hierarchy -------------------------------------------------------------------------------------
     def build_hierarchy(self, force: bool = False) -> None:
@@ -421,17 +408,9 @@ class MultigridPanel(MethodPanel):
         if doc.is_empty:
             return
         if force:
-            self._hierarchies = {}
-            self._smoothers = {}
-        V, F = doc.V, doc.F
-        holder = self._holder = {}
-
-        def steps():
-            yield from self._hierarchy_steps(V, F, holder)
-            yield Step(1, 1, V, {}, "hierarchy built")
-
+            self._recipe_cache.clear()
         self.status_label.setText("Building the hierarchy…")
-        self.window_.start_analysis_job(self.title, steps)
+        self._start_job(HIERARCHY, doc.state, MultigridParams(), {})
 
     def _show_hierarchy_info(self) -> None:
         doc = self.window_.document
@@ -453,19 +432,13 @@ class MultigridPanel(MethodPanel):
             self.status_label.setText("Open a mesh first (File > Open).")
             return
         state = doc.state
-        V, F = state.V, state.F
         # the one implementation of the flows, its linear solves by V-cycles on the hierarchy
         params = SmoothParams(flow="cmcf", step_size=self.dt_spin.value(),
                               iterations=int(steps_count))
-        holder = self._holder = {}
-
-        def steps():
-            mg = yield from self._hierarchy_steps(V, F, holder)
-            yield from smooth_iter(V, F, params, multigrid=mg)
-
         self.plot.clear()
         self.status_label.setText("Mean curvature flow…")
-        self.window_.start_positions_job("Mean curvature flow", steps)
+        self._start_job(FLOW, state, params, hierarchy_option(self._recipe_cache, state),
+                        positions_job=FLOW_JOB)
 
     # -- views -----------------------------------------------------------------------------------------------
     def show_view(self) -> None:
@@ -482,8 +455,7 @@ class MultigridPanel(MethodPanel):
             if vals is None:
                 vp.show_field(None)
                 return
-            lim = (float(np.min(src)), float(np.max(src))) if src is not None else None
-            vp.show_field("signal", vals, "viridis", lim)
+            vp.show_field("signal", vals, "viridis", signal_range(src))
             return
         mg = self.hierarchy(doc.F)
         if mg is None or mg.n_levels < 2:
@@ -496,21 +468,9 @@ class MultigridPanel(MethodPanel):
             vp.show_field(None)
             Vc, Fc = mg.levels[level]
             vp.show_overlay(Vc, Fc)
-        else:
-            labels, _bary = mg.locate(level)  # the coarse triangle of each fine centroid
-            colors = self._coarse_face_colors(mg, level)
-            vp.show_field("coarse_triangle", colors[labels].astype(float), "tab20",
+        else:  # the colour of the coarse triangle of each fine centroid
+            vp.show_field("coarse_triangle", coarse_triangle_colors(mg, level), "tab20",
                           (0.0, 19.0), categorical=True)
-
-    @staticmethod
-    def _coarse_face_colors(mg, level: int) -> np.ndarray:
-        """Colours 0..19 of the coarse triangles, different for triangles sharing a vertex
-        (greedy colouring of the face graph, Alg. 10; wraps around only past 20 colours)."""
-        Fc = mg.levels[level][1]
-        nv = int(Fc.max()) + 1
-        inc = sp.csr_matrix((np.ones(Fc.size), (np.repeat(np.arange(len(Fc)), 3), Fc.ravel())),
-                            shape=(len(Fc), nv))
-        return greedy_coloring(inc @ inc.T) % 20
 
     def _on_visibility(self, visible: bool) -> None:
         if not visible:  # another panel takes over the viewport: the document's mesh comes back
@@ -520,18 +480,18 @@ class MultigridPanel(MethodPanel):
 
     def _on_doc(self, what: str) -> None:
         if what in ("mesh", "topology"):
-            self._hierarchies, self._smoothers = {}, {}
-            self._last_solution = None
+            self._recipe_cache.clear()
             self.solve_times = {}
             self._show_times()
             self._show_hierarchy_info()
         if self.is_shown() and what in ("mesh", "topology", "fields"):
             self.show_view()
 
-    def analysis_finished(self) -> None:
-        """After an analysis job of this panel (hierarchy build, solver comparison)."""
+    def analysis_finished(self, step=None) -> None:
+        """After an analysis job of this panel (hierarchy build, solver comparison); ``step``:
+        its last step."""
         self._show_hierarchy_info()
-        times = self._holder.get("times")
+        times = getattr(step, "info", None) if self._job == COMPARE else None
         if times:
             for k, info in times.items():
                 cyc = f", {plural(info['cycles'], 'cycle')}" if info.get("cycles") else ""
@@ -544,6 +504,6 @@ class MultigridPanel(MethodPanel):
                                       f"Multigrid {mgt * 1000:.0f} ms vs direct "
                                       f"{dt * 1000:.0f} ms at this α (small meshes favour the "
                                       "direct solver).")
-        elif self._holder.get("mg") is not None:
+        elif self._job == HIERARCHY and getattr(step, "mg", None) is not None:
             self.status_label.setText("Hierarchy built.")
             self.show_view()

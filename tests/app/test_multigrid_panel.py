@@ -109,7 +109,9 @@ def test_hierarchy_views_solver_comparison_and_flow(window, dialogs, qtbot):
     assert len(labels) == len(window.document.F) and len(np.unique(labels)) > 5
     from algorithms.mesh.topology import edge_flaps
 
-    colors = panel._coarse_face_colors(mg, 1)  # neighbouring coarse triangles differ
+    from app.recipes.multigrid import coarse_face_colors
+
+    colors = coarse_face_colors(mg, 1)  # neighbouring coarse triangles differ
     EF = edge_flaps(mg.levels[1][1])[2]
     EF = EF[(EF >= 0).all(axis=1)]
     assert (colors[EF[:, 0]] != colors[EF[:, 1]]).all()
@@ -157,10 +159,10 @@ def test_bad_field_file_is_refused_and_nothing_changes(window, dialogs, qtbot, t
 def test_unconverged_multigrid_leaves_the_shape_and_says_so(window, dialogs, qtbot, monkeypatch):
     """Issue 10: a solve that stops before its tolerance never replaces the document. Here the
     iterations are capped at 1 and the direct fallback is said not to fit in memory."""
-    import app.panels.multigrid as panel_module
+    import app.recipes.multigrid as recipe_module
     from algorithms.multigrid import applications
 
-    monkeypatch.setattr(panel_module, "MAX_ITERATIONS", 1)
+    monkeypatch.setattr(recipe_module, "MAX_ITERATIONS", 1)
     monkeypatch.setattr(applications, "direct_fits_in_memory", lambda n, e: (False, 1 << 40))
     panel = open_panel(window)
     panel.live_box.setChecked(False)
@@ -177,9 +179,9 @@ def test_unconverged_multigrid_leaves_the_shape_and_says_so(window, dialogs, qtb
 
 def test_unconverged_multigrid_falls_back_to_direct_saying_so(window, dialogs, qtbot,
                                                               monkeypatch):
-    import app.panels.multigrid as panel_module
+    import app.recipes.multigrid as recipe_module
 
-    monkeypatch.setattr(panel_module, "MAX_ITERATIONS", 1)
+    monkeypatch.setattr(recipe_module, "MAX_ITERATIONS", 1)
     panel = open_panel(window)
     panel.live_box.setChecked(False)
     panel.signal_combo.setCurrentIndex(1)
@@ -205,3 +207,157 @@ def test_auto_solver_says_which(window, dialogs, qtbot):
     with qtbot.waitSignal(window.job_committed, timeout=120000):
         panel.run_button.click()
     qtbot.waitUntil(lambda: "Auto: direct solver" in panel.status_label.text(), timeout=10000)
+
+
+# -- the panel's jobs are the recipes of app.recipes.multigrid ------------------------------------
+def _bits(a) -> bytes:
+    a = np.asarray(a)
+    return a.dtype.str.encode() + str(a.shape).encode() + a.tobytes()
+
+
+def _headless(panel):
+    """The panel's last request run headless with a fresh cache (as the study replay does)."""
+    import json
+
+    from app.recipes import run
+
+    req = panel.last_request
+    json.dumps(req["options"])  # JSON-able, as the study log and the project write them
+    return run(req["recipe"], req["input"], req["params"], req["options"], cache={})
+
+
+def test_smoothing_runs_match_the_headless_recipe_bit_for_bit(window, dialogs, qtbot):
+    panel = open_panel(window)
+    doc = window.document
+    panel.live_box.setChecked(False)
+    panel.new_noise()
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    req = panel.last_request
+    assert req["recipe"] == "Multigrid smoothing" and req["input"] is not doc.state
+    assert req["options"]["signal"] == "noise" and "warm_start" not in req["options"]
+    first = _headless(panel)
+    assert _bits(first.state.fields["smoothed"]) == _bits(doc.state.fields["smoothed"])
+    assert first.state.fields.keys() == doc.state.fields.keys()
+
+    # a live slider move warm-starts from the first solve: the options say from which α
+    alpha1 = panel.form.params().alpha
+    panel.live_box.setChecked(True)
+    slider = panel.form.editors["alpha"].slider
+    with qtbot.waitSignal(window.job_committed, timeout=60000):
+        slider.setValue(slider.value() + 150)
+    assert "from the last α" in panel.times_label.text()
+    opts = panel.last_request["options"]
+    assert opts["warm_start"] == [alpha1]
+    second = _headless(panel)  # re-solves alpha1 first, then continues from it
+    assert second.outcome["warm_start"] is True
+    assert _bits(second.state.fields["smoothed"]) == _bits(doc.state.fields["smoothed"])
+
+
+def test_positions_flow_compare_and_build_match_the_headless_recipes(window, dialogs, qtbot):
+    from app.recipes import get_recipe, outcome_hash
+
+    panel = open_panel(window)
+    doc = window.document
+    panel.live_box.setChecked(False)
+    panel.signal_combo.setCurrentIndex(1)  # vertex positions
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    assert _bits(_headless(panel).state.V) == _bits(doc.V)
+    mg = panel.hierarchy(doc.F)
+    # Run again on the smoothed shape: the hierarchy of the first shape is kept, so the
+    # positions it was built on are an input of the run
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    assert panel.hierarchy(doc.F) is mg
+    assert panel.last_request["options"]["hierarchy_positions"].startswith("blob:")
+    assert _bits(_headless(panel).state.V) == _bits(doc.V)
+
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.mcf_step_button.click()
+    req = panel.last_request
+    assert req["recipe"] == "Multigrid smoothing: mean curvature flow"
+    assert req["params"].iterations == 1 and req["params"].step_size == panel.dt_spin.value()
+    assert window.undo_stack.undoText() == "Mean curvature flow"
+    assert _bits(_headless(panel).state.V) == _bits(doc.V)
+
+    for button, name in ((panel.compare_button, "Multigrid smoothing: compare solvers"),
+                         (panel.build_button, "Multigrid smoothing: hierarchy")):
+        count = window.undo_stack.count()
+        with qtbot.waitSignal(window.runner.finished, timeout=120000) as blocker:
+            button.click()
+        assert panel.last_request["recipe"] == name
+        recipe = get_recipe(name)
+        mine = recipe.outcome(blocker.args[0])
+        assert mine and outcome_hash(mine) == outcome_hash(_headless(panel).outcome)
+        assert window.undo_stack.count() == count  # analyses change nothing
+    assert panel.status_label.text() == "Hierarchy built."
+
+
+def test_options_are_json_and_restore_the_widgets(window, dialogs, qtbot):
+    import json
+
+    panel = open_panel(window)
+    panel.live_box.setChecked(False)
+    panel.signal_combo.setCurrentIndex(2)
+    panel.noise_spin.setValue(1.25)
+    panel.dt_spin.setValue(2.5e-4)
+    panel.steps_spin.setValue(17)
+    panel._noise_seed = 12345
+    opts = panel.job_options()
+    assert json.loads(json.dumps(opts)) == opts
+    assert opts == {"signal": "loaded", "noise": 1.25, "noise_seed": 12345,
+                    "flow_step_size": 2.5e-4, "flow_steps": 17}
+    panel.signal_combo.setCurrentIndex(0)
+    panel.noise_spin.setValue(0.4)
+    panel.dt_spin.setValue(1e-3)
+    panel.steps_spin.setValue(10)
+    panel._noise_seed = 0
+    panel.restore_options(json.loads(json.dumps(opts)))
+    assert panel.job_options() == opts
+    assert panel.signal_combo.currentIndex() == 2 and panel.steps_spin.value() == 17
+
+
+def test_new_noise_is_seeded_and_logged(window, dialogs, qtbot):
+    from app.recipes.multigrid import noisy_field
+
+    panel = open_panel(window)
+    panel.live_box.setChecked(False)
+    panel.noise_spin.setValue(0.7)
+    doc = window.document
+    panel.new_noise()
+    seed = panel.job_options()["noise_seed"]
+    np.testing.assert_array_equal(doc.state.fields["noisy input"],
+                                  noisy_field(doc.V, doc.F, 0.7, seed))
+    cmd = window.undo_stack.command(window.undo_stack.count() - 1)
+    assert cmd.log_details == {"tool": "new_noise", "field": "noisy input", "noise": 0.7,
+                               "seed": seed}
+    # a run of the recipe on a mesh without the field makes the same one from the options
+    from app.document import MeshState
+    from app.recipes import run
+
+    bare = MeshState.make(doc.V, doc.F)
+    res = run("smooth-data", bare, {"solver": "direct"}, panel.job_options())
+    np.testing.assert_array_equal(res.state.fields["noisy input"],
+                                  doc.state.fields["noisy input"])
+
+
+def test_panel_imports_no_numerical_code():
+    """app/panels/multigrid.py takes from algorithms only errors, Params classes, UPPER_CASE
+    constants and field file reading/writing; the computing is in app/recipes/multigrid.py."""
+    import ast
+    from pathlib import Path
+
+    import app.panels.multigrid as mod
+
+    allowed = {"field_file_filter", "read_field", "write_field"}
+    tree = ast.parse(Path(mod.__file__).read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            assert not any(a.name.startswith("algorithms") for a in node.names)
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("algorithms"):
+            for a in node.names:
+                ok = (node.module == "algorithms.errors" or a.name.endswith("Params")
+                      or a.name.isupper() or a.name in allowed
+                      or (node.module == "algorithms.steps" and a.name == "Step"))
+                assert ok, f"{node.module}.{a.name}"
