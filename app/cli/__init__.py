@@ -1,0 +1,157 @@
+"""Batch sub-commands of ``stylize3d``. Imports no Qt and no VTK.
+
+Every sub-command prints a plain message and exits non-zero on bad input (the exit status is the
+error's ``exit_code``: 2 unreadable file, 3 unwritable file, 4 invalid mesh, 5 bad parameter,
+6 an iterative solve that did not converge; 70 an unexpected failure, whose traceback goes to a
+crash-log file, never to the screen).
+Method flags are generated from the methods' Params dataclasses (one definition per parameter);
+every method sub-command takes a mesh file or a project (``.s3d``) and ``--params FILE.json``
+(precedence: see :mod:`app.cli.common`).
+
+One module per method family registers its sub-parsers (``COMMANDS``, ``add_parsers(sub)``):
+:mod:`~app.cli.mesh_tools` (info, clean), :mod:`~app.cli.smooth` (smooth, multigrid-info),
+:mod:`~app.cli.deform` (cubic, analogy), :mod:`~app.cli.study`, :mod:`~app.cli.spectral`
+(coarsen), :mod:`~app.cli.paparazzi`, :mod:`~app.cli.adversary`, :mod:`~app.cli.subdivision`
+(subdivide, subdivide-train, subdivide-eval).
+"""
+
+from __future__ import annotations
+
+import argparse
+import difflib
+import os
+import sys
+from pathlib import Path
+
+from algorithms.errors import Stylize3DError
+from app.cli import adversary, deform, mesh_tools, paparazzi, smooth, spectral, study, subdivision
+from app.cli.adversary import cmd_adversary
+from app.cli.common import (INTERNAL_ERROR_EXIT, add_params_arguments, method_params,
+                            params_from_args, read_valid, say, settings, silence_stdout,
+                            write_crash_log)
+from app.cli.deform import cmd_analogy, cmd_cubic
+from app.cli.mesh_tools import cmd_clean, cmd_info
+from app.cli.paparazzi import cmd_paparazzi
+from app.cli.smooth import cmd_multigrid_info, cmd_smooth
+from app.cli.spectral import cmd_coarsen
+from app.cli.study import cmd_study
+from app.cli.subdivision import cmd_subdivide, cmd_subdivide_eval, cmd_subdivide_train
+
+#: the modules that add sub-commands, in the order of ``stylize3d --help``
+MODULES = (mesh_tools, smooth, deform, study, spectral, paparazzi, adversary, subdivision)
+SUBCOMMANDS: tuple[str, ...] = tuple(c for m in MODULES for c in m.COMMANDS)
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="stylize3d",
+        description="Stylize3D: stylize and process 3D surface meshes. With no sub-command, "
+                    "opens the app (optionally on MESH).")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    for module in MODULES:
+        module.add_parsers(sub)
+    return p
+
+
+def unknown_command(word: str) -> str | None:
+    """The message for a first argument that is neither a sub-command nor something the app
+    can open, or None. An option, an existing file or folder, a name with a mesh or project
+    extension, or a path opens the app as before; a bare word is a mistyped command."""
+    if not word or word.startswith("-") or word in SUBCOMMANDS:
+        return None
+    p = Path(word)
+    if p.exists() or p.suffix or os.sep in word or "/" in word:
+        return None
+    close = difflib.get_close_matches(word, SUBCOMMANDS, n=1, cutoff=0.6)
+    if close:
+        return f"stylize3d: unknown command '{word}'. Did you mean '{close[0]}'?"
+    return (f"stylize3d: unknown command '{word}' (and there is no file of that name). The "
+            f"commands are: {', '.join(SUBCOMMANDS)}; 'stylize3d MESH' opens a mesh in the app.")
+
+
+def main(argv: list[str]) -> int:
+    argv = list(argv)
+    if argv and not argv[0].startswith("-") and argv[0] not in SUBCOMMANDS:
+        say(unknown_command(argv[0]) or f"stylize3d: unknown command '{argv[0]}'.")
+        return 2
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse already printed a usage message
+        return int(e.code or 0)
+    if not getattr(args, "command", None):
+        parser.print_help()
+        return 0
+    # through this package's namespace, so that a command replaced here (tests, scripts) runs
+    func = globals().get(args.func.__name__, args.func)
+    try:
+        code = int(func(args))
+        sys.stdout.flush()  # a closed pipe (`stylize3d info MESH | head`) shows up here
+        return code
+    except Stylize3DError as e:
+        say(f"stylize3d {args.command}: {e}")
+        return e.exit_code
+    except KeyboardInterrupt:
+        say("stylize3d: interrupted; nothing was written.")
+        return 130
+    except BrokenPipeError:
+        # the reader of our output went away (e.g. `| head`): not an error of ours, and Python
+        # must not print a second traceback when it flushes stdout at exit
+        silence_stdout()
+        return 0
+    except MemoryError:
+        say(f"stylize3d {args.command}: this machine ran out of memory; nothing was written. "
+            "Try a smaller mesh (decimate it first) or the options for big meshes "
+            "(e.g. --progressive-faces for cubic, --solver multigrid for smooth).")
+        return INTERNAL_ERROR_EXIT
+    except Exception as e:  # a defect of ours: say so plainly, never a bare traceback
+        import traceback
+
+        log = write_crash_log(traceback.format_exc())
+        say(f"stylize3d {args.command}: an unexpected error stopped the command "
+            f"({type(e).__name__}: {e}); nothing was written. This is a bug in Stylize3D"
+            + (f"; the details are in {log}." if log else "."))
+        return INTERNAL_ERROR_EXIT
+
+
+# ----------------------------------------------------------------------------- GUI
+def gui_main(argv: list[str]) -> int:
+    p = argparse.ArgumentParser(prog="stylize3d", description="Open the Stylize3D app.",
+                                epilog="Batch sub-commands: " + ", ".join(SUBCOMMANDS)
+                                + " (stylize3d COMMAND --help).")
+    p.add_argument("mesh", nargs="?", help="mesh file or project (.s3d) to open")
+    p.add_argument("--screenshot", metavar="PNG",
+                   help="save a screenshot of the window once the mesh is shown, then quit")
+    g = p.add_argument_group("user-study mode")
+    g.add_argument("--study", metavar="PROTOCOL",
+                   help="run a study session from a protocol file (.json or .toml)")
+    g.add_argument("--participant", metavar="CODE",
+                   help="participant code (otherwise the start dialog asks)")
+    g.add_argument("--condition", metavar="NAME",
+                   help="study condition (otherwise the start dialog asks)")
+    g.add_argument("--log-dir", metavar="DIR",
+                   help="where session logs and results go (default: logs/ next to the protocol)")
+    args = p.parse_args(argv)
+    study = None
+    if args.study:
+        from app.study.protocol import load_protocol
+
+        try:  # a malformed protocol is a plain message before any window opens
+            load_protocol(args.study)
+        except Stylize3DError as e:
+            say(f"stylize3d: {e}")
+            return e.exit_code
+        study = {"protocol": args.study, "participant": args.participant,
+                 "condition": args.condition, "log_dir": args.log_dir}
+    from app.gui import run_app  # Qt is imported only here
+
+    if study is None:
+        return run_app(args.mesh, screenshot=args.screenshot)
+    return run_app(args.mesh, screenshot=args.screenshot, study=study)
+
+
+__all__ = ["INTERNAL_ERROR_EXIT", "MODULES", "SUBCOMMANDS", "add_params_arguments",
+           "build_parser", "cmd_adversary", "cmd_analogy", "cmd_clean", "cmd_coarsen",
+           "cmd_cubic", "cmd_info", "cmd_multigrid_info", "cmd_paparazzi", "cmd_smooth",
+           "cmd_study", "cmd_subdivide", "cmd_subdivide_eval", "cmd_subdivide_train",
+           "gui_main", "main", "method_params", "params_from_args", "read_valid", "settings",
+           "unknown_command"]

@@ -1,0 +1,192 @@
+"""``stylize3d paparazzi``: image filters applied to a shape through many rendered views
+(thesis ch. 2). Filters registered by ``--plugin`` files add their own flags."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from algorithms.errors import Stylize3DError
+from algorithms.params import describe, params_from_dict
+from app.cli.common import (MESH_HELP, add_params_arguments, add_params_file_argument,
+                            check_output, method_params, params_to_dict, print_json, read_input)
+
+COMMANDS = ("paparazzi",)
+
+
+def _paparazzi_filter_flags() -> list[tuple[str, str, object]]:
+    """(filter name, flag, ParamSpec) for every registered filter's parameters; a field name
+    used by two filters (or by PaparazziParams) gets the filter's name as a prefix."""
+    from algorithms.paparazzi import filter_names, get_filter
+    from algorithms.paparazzi.optimize import PaparazziParams
+
+    taken = {spec.flag for spec in describe(PaparazziParams)}
+    counts: dict[str, int] = {}
+    for name in filter_names():
+        for spec in describe(get_filter(name).params):
+            counts[spec.flag] = counts.get(spec.flag, 0) + 1
+    out = []
+    for name in filter_names():
+        for spec in describe(get_filter(name).params):
+            flag = spec.flag
+            if flag in taken or counts[flag] > 1:
+                flag = f"--{name}-{spec.name.replace('_', '-')}"
+            out.append((name, flag, spec))
+    return out
+
+
+_PAPARAZZI_PLUGIN_HELP = (
+    "a Python file that registers image filters with "
+    "algorithms.paparazzi.register_filter (see the algorithms.paparazzi.filters documentation); "
+    "it is imported before the other flags are read, so its filters become --filter choices and "
+    "their Params fields become flags (shown by --help after --plugin). Repeatable. A file that "
+    "is missing, fails to import or registers nothing stops the command with a message; nothing "
+    "is written.")
+
+
+class _PaparazziParser(argparse.ArgumentParser):
+    """The ``paparazzi`` sub-parser: before parsing, it imports the ``--plugin`` files found among
+    its arguments and adds their filters' flags (argparse classifies every flag before it runs
+    any action, so a plugin's flags must exist before parsing starts)."""
+
+    def parse_known_args(self, args=None, namespace=None):
+        args = list(sys.argv[1:] if args is None else args)
+        files = []
+        for i, a in enumerate(args):
+            if a == "--":
+                break
+            if a == "--plugin" and i + 1 < len(args):
+                files.append(args[i + 1])
+            elif a.startswith("--plugin="):
+                files.append(a.split("=", 1)[1])
+        if files:
+            from algorithms.paparazzi.filters import load_filter_plugin
+
+            try:
+                for f in files:
+                    load_filter_plugin(f)
+            except Stylize3DError as e:
+                self.exit(e.exit_code, f"stylize3d paparazzi: {e}\n")
+            _add_paparazzi_filter_flags(self)
+        return super().parse_known_args(args, namespace)
+
+
+def _add_paparazzi_filter_flags(s: argparse.ArgumentParser) -> None:
+    """Add the flags of every registered filter that ``s`` does not have yet (all of them when
+    the parser is built, a plugin's when ``--plugin`` loaded one) and refresh ``--filter``."""
+    from algorithms.paparazzi import filter_names, get_filter
+
+    group = getattr(s, "_pz_group", None)
+    if group is None:
+        group = s._pz_group = s.add_argument_group(
+            "filter parameters (only those of the chosen --filter are used)")
+    have = {a.dest for a in s._actions}
+    flags = set(s._option_string_actions)
+    for name, flag, spec in _paparazzi_filter_flags():
+        dest = f"pz_{name}_{spec.name}".replace("-", "_")
+        if dest in have:
+            continue
+        if flag in flags:                  # a plugin's field clashing with a flag already there
+            flag = f"--{name}-{spec.name.replace('_', '-')}"
+        help_text = f"[{name}] {spec.tooltip} Default: {spec.default}.".replace("%", "%%")
+        if spec.type is bool:
+            group.add_argument(flag, dest=dest, action=argparse.BooleanOptionalAction,
+                               default=spec.default, help=help_text)
+        else:
+            group.add_argument(flag, dest=dest, type=spec.type, default=spec.default,
+                               choices=spec.choices, metavar=spec.name.upper(), help=help_text)
+    for action in s._actions:
+        if action.dest == "filter":
+            action.choices = filter_names()
+            action.help = "the image filter: " + "; ".join(
+                f"{n}: {get_filter(n).description or 'a user filter'}"
+                for n in filter_names()).replace("%", "%%")
+
+
+def add_parsers(sub) -> None:
+    from algorithms.paparazzi.optimize import PaparazziParams
+
+    s = sub.add_parser("paparazzi", help="Paparazzi: image filters applied to a shape through "
+                                         "many rendered views (thesis ch. 2)")
+    s.__class__ = _PaparazziParser     # same state, plus the --plugin pre-pass above
+    s.add_argument("mesh", help=MESH_HELP)
+    s.add_argument("-o", "--output", required=True, help="where to write the filtered mesh")
+    s.add_argument("--filter", required=True, help="the image filter")
+    s.add_argument("--plugin", action="append", default=[], metavar="FILE.py",
+                   help=_PAPARAZZI_PLUGIN_HELP)
+    s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
+    s.add_argument("--json", action="store_true",
+                   help="print iterations, seconds (render / filter / derivative / remesh), the "
+                        "monitor-view energy before and after, and the manifold / "
+                        "self-intersection checks of the output, as JSON")
+    s.add_argument("--quiet", action="store_true", help="no progress")
+    s.add_argument("--clean", action="store_true",
+                   help="clean the mesh first when it has fixable problems (says what it fixed)")
+    add_params_file_argument(s)
+    add_params_arguments(s, PaparazziParams)
+    _add_paparazzi_filter_flags(s)
+    s.set_defaults(func=cmd_paparazzi)
+
+
+def cmd_paparazzi(args: argparse.Namespace) -> int:
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.topology import euler_characteristic, is_manifold
+    from algorithms.paparazzi import Paparazzi, count_self_intersections, get_filter
+    from algorithms.paparazzi.optimize import PaparazziParams
+
+    params = method_params(args, PaparazziParams, panel="Paparazzi")
+    spec = get_filter(args.filter)
+    values = {ps.name: getattr(args, f"pz_{spec.name}_{ps.name}".replace("-", "_"))
+              for ps in describe(spec.params)}
+    fparams = params_from_dict(spec.params, values)
+    check_output(args.output, args.overwrite, args.mesh)
+    quiet = args.json or args.quiet
+    data, _ = read_input(args, quiet=quiet)
+    t0 = time.perf_counter()
+    run = Paparazzi(data.V, data.F, spec, fparams, params)
+    setup = time.perf_counter() - t0
+    last = None
+    report_every = max(1, params.iterations // 10)
+    for last in run.steps():
+        if not quiet and (last.iteration % report_every == 0 or last.message):
+            print(f"  iteration {last.iteration}/{params.iterations}: monitor energy "
+                  f"{last.metrics['monitor_energy']:.6g} {last.message}", file=sys.stderr)
+    seconds = time.perf_counter() - t0
+    V, F = last.V, last.F
+    manifold = bool(is_manifold(F))
+    same_topology = euler_characteristic(F) == euler_characteristic(data.F)
+    crossings = count_self_intersections(V, F)
+    new_crossings = run.new_self_intersections(V, F) if crossings else 0
+    if not manifold or not same_topology or new_crossings:
+        raise Stylize3DError("Paparazzi failed: the result is not a clean 2-manifold with the "
+                             "input's topology; nothing was written. Try a smaller learning rate.")
+    write_mesh(args.output, V, F)
+    sec = last.seconds
+    it = last.iteration
+    if args.json:
+        print_json({
+            "input": args.mesh, "output": args.output, "filter": spec.name,
+            "filter_params": params_to_dict(fparams), "params": params_to_dict(params),
+            "iterations": it, "seconds": seconds, "setup_seconds": setup,
+            "seconds_split": {k: sec.get(k, 0.0) for k in
+                              ("render", "filter", "derivative", "remesh", "monitor")},
+            "seconds_per_iteration": {k: sec.get(k, 0.0) / it for k in
+                                      ("render", "filter", "derivative", "remesh")},
+            "initial_monitor_energy": last.metrics["initial_monitor_energy"],
+            "final_monitor_energy": last.metrics["monitor_energy"],
+            "vertices": int(len(V)), "faces": int(len(F)),
+            "manifold": manifold, "same_topology": bool(same_topology),
+            "self_intersecting_pairs": crossings,
+            "input_self_intersecting_pairs": run.input_intersections,
+            "new_self_intersecting_pairs": new_crossings,
+            "self_intersections": crossings > 0,
+            "remeshes": int(last.metrics["remeshes"]),
+            "rollbacks": int(last.metrics["rollbacks"]),
+            **{k: int(last.metrics.get(k, 0))
+               for k in ("remesh_rejected", "remesh_retries", "held_vertices")}})
+    else:
+        print(f"Paparazzi '{spec.name}' on {args.mesh}: {it} iterations in {seconds:.1f} s; "
+              f"monitor energy {last.metrics['initial_monitor_energy']:.4g} -> "
+              f"{last.metrics['monitor_energy']:.4g}; {len(V)} vertices; wrote {args.output}.")
+    return 0
