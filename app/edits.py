@@ -15,11 +15,17 @@ the Gauss map the distance is the angle between the vertex normal and the picked
 
 * ``{"tool": "brush", "space": "surface" | "gauss", "field", "low", "high", "default",
   "radius", "strength", "erase", "dabs": [[x, y, z], ...]}``
-* ``{"tool": "stamp", "fields": [...], "values": [...], "radius", "erase", "dabs": [...]}``
+* ``{"tool": "stamp", "names": [field, ...], "values": [...], "radius", "erase", "dabs": [...]}``
 * ``{"tool": "handles", "handles": [[vertex, [x, y, z]], ...]}`` (the handles after the edit)
-* ``{"tool": "clear", "fields": [...], "handles": bool}`` (fields removed, handles cleared)
+* ``{"tool": "clear", "names": [field, ...], "clear_handles": bool}`` (fields removed, handles
+  cleared)
+
+(The study log adds its own ``fields``, ``moved_vertices`` and ``handles`` keys — what changed —
+to every edit; only the handles tool's ``handles`` means the same as the log's.)
 * ``{"tool": "clean"}`` (Edit > Clean Mesh)
-* ``{"tool": "set_fields", "fields": {name: [values] | null}}`` (whole fields set or removed)
+* ``{"tool": "set_fields", "values": {name: [values] | null}}`` (whole fields set or removed)
+* ``{"tool": "new_noise", "field", "noise", "seed"}`` (the Multigrid panel's noisy test field)
+* ``{"tool": "load_field", "field", "file": "blob:..."}`` (a per-vertex field read from a file)
 """
 
 from __future__ import annotations
@@ -94,7 +100,7 @@ def stamp_stroke(state, details: dict):
     values (NaN when erasing); a field left all-NaN is removed."""
     V = state.V
     n = len(V)
-    fields = list(details["fields"])
+    fields = list(details["names"])
     arrays = [np.array(state.fields[f]) if f in state.fields else np.full(n, np.nan)
               for f in fields]
     vals = ((np.nan,) * len(fields) if details.get("erase")
@@ -117,9 +123,9 @@ def set_handles(state, details: dict):
 
 def clear_fields(state, details: dict):
     after = state
-    for f in details.get("fields", []):
+    for f in details.get("names", []):
         after = after.with_field(f, None)
-    if details.get("handles"):
+    if details.get("clear_handles"):
         after = after.with_handles({})
     return after
 
@@ -135,15 +141,34 @@ def clean(state, details: dict):
 
 def set_fields(state, details: dict):
     after = state
-    for name, values in (details.get("fields") or {}).items():
+    for name, values in (details.get("values") or {}).items():
         after = after.with_field(name, None if values is None
                                  else np.asarray(values, dtype=np.float64))
     return after
 
 
+def new_noise(state, details: dict):
+    """The Multigrid panel's "New noise": a seeded noisy test field; the old result goes."""
+    from app.recipes.multigrid import RESULT_FIELD, noisy_field
+
+    noisy = noisy_field(state.V, state.F, float(details["noise"]), int(details["seed"]))
+    return state.with_field(details["field"], noisy).with_field(RESULT_FIELD, None)
+
+
+def load_field(state, details: dict):
+    """The Multigrid panel's "Load field…": the file's values (kept as a blob)."""
+    from algorithms.mesh.fields import read_field
+    from app.recipes import blob_path
+    from app.recipes.multigrid import RESULT_FIELD
+
+    values = read_field(str(blob_path(details["file"])), len(state.V))
+    return state.with_field(details["field"], values).with_field(RESULT_FIELD, None)
+
+
 EDITS: dict[str, Callable] = {"brush": brush_stroke, "stamp": stamp_stroke,
                               "handles": set_handles, "clear": clear_fields, "clean": clean,
-                              "set_fields": set_fields}
+                              "set_fields": set_fields, "new_noise": new_noise,
+                              "load_field": load_field}
 
 
 def replay_edit(state, details: dict):

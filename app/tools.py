@@ -260,7 +260,7 @@ class StampBrush(QObject):
             after = after.with_field(f, None if np.isnan(arr).all() else arr)
         cmd = StateCommand(self.window_.document, before, after, f"Paint {self.label}")
         # everything app.edits.stamp_stroke needs to re-compute the stroke (study replay)
-        cmd.log_details = {"tool": "stamp", "fields": list(self.fields),
+        cmd.log_details = {"tool": "stamp", "names": list(self.fields),
                            "values": list(self._stamp_values), "radius": self.settings.radius,
                            "erase": self.settings.erase, "dabs": self._dabs}
         self.window_.undo_stack.push(cmd)

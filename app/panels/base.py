@@ -184,6 +184,21 @@ class MethodPanel(QDockWidget):
 
     #: the recipe a plain Run computes (default: the one registered under the panel's title)
     recipe_name: str = ""
+    #: counts requests over all panels: the study log takes the newest one as the request of
+    #: the job that starts next, whatever the job's name
+    _request_counter = 0
+
+    @property
+    def last_request(self) -> dict | None:
+        """What the job being started asks for: ``params``, ``options``, ``input`` (the state)
+        and ``recipe`` (its name); set by every panel just before it starts a job."""
+        return getattr(self, "_last_request", None)
+
+    @last_request.setter
+    def last_request(self, request: dict | None) -> None:
+        MethodPanel._request_counter += 1
+        self._last_request = request
+        self.last_request_seq = MethodPanel._request_counter
 
     def recipe(self, name: str | None = None):
         """A Qt-free recipe of this panel (:mod:`app.recipes`): ``name``, else the one of the

@@ -235,8 +235,8 @@ class CubicPanel(MethodPanel):
         after = after.with_handles({})
         if after.fields != st.fields or after.handles != st.handles:
             cmd = StateCommand(doc, st, after, "Clear painting")
-            cmd.log_details = {"tool": "clear", "handles": True,
-                               "fields": [LAMBDA_FIELD, FIXED_FIELD, PLANE_FIELD, *FRAME_FIELDS]}
+            cmd.log_details = {"tool": "clear", "clear_handles": True,
+                               "names": [LAMBDA_FIELD, FIXED_FIELD, PLANE_FIELD, *FRAME_FIELDS]}
             self.window_.undo_stack.push(cmd)
 
     def _on_multigrid_toggled(self, on: bool) -> None:

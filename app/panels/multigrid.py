@@ -214,8 +214,11 @@ class MultigridPanel(MethodPanel):
         except Stylize3DError as e:
             dialogs.error(self, "Cannot load the field", str(e))
             return False
+        from app.recipes import put_blob_file
+
+        details = {"tool": "load_field", "field": LOADED_FIELD, "file": put_blob_file(path)}
         self._push(doc.state.with_field(LOADED_FIELD, values).with_field(RESULT_FIELD, None),
-                   "Load field")
+                   "Load field", details)
         self.signal_combo.setCurrentIndex(2)
         self.view_combo.setCurrentIndex(1)
         self.show_view()

@@ -231,6 +231,7 @@ class _Replayer:
                 f"event {rr.index} ({rr.method}): the document changed before this edit in a "
                 "way the log does not show")
         try:
+            _load_blobs(self.base, ev)
             after = replay_edit(before, ev)
         except KeyError as e:
             rr.reason = f"the edit's logged inputs are incomplete (no {e})"

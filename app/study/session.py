@@ -254,6 +254,7 @@ class StudySession(QObject):
         self._locked: dict[str, dict] = {}
         self._saved_states: set[str] = set()
         self._pending_runs: dict[str, dict] = {}
+        self._job_names: set[str] = set()  # names of the jobs run (their commits are runs)
         self.finished = False
         check_against_panels(protocol, {t: getattr(p, "params_cls", object)
                                         for t, p in window.panels.items()})
@@ -503,8 +504,15 @@ class StudySession(QObject):
     def _on_run_started(self, name: str) -> None:
         if self.log.task is None:
             return
-        panel = self.window.panels.get(name)
-        req = getattr(panel, "last_request", None) if panel is not None else None
+        # the newest request of any panel (a panel may start jobs under other names, such as
+        # Multigrid's "Mean curvature flow"); a request is used for one job only
+        self._job_names.add(name)
+        req, seq = None, getattr(self, "_request_seq", 0)
+        for panel in self.window.panels.values():
+            s = getattr(panel, "last_request_seq", 0)
+            if s > seq and getattr(panel, "last_request", None) is not None:
+                req, seq = panel.last_request, s
+        self._request_seq = seq
         rec: dict = {"method": name}
         if req is not None:
             rec["recipe"] = req.get("recipe") or name
@@ -588,11 +596,16 @@ class StudySession(QObject):
                         and cmds[i][0] is now[i])
                 if redo:
                     self._log("redo", text=cmds[i][1], result_hash=h, result_file=rel)
-                elif not now[i].text().startswith(tuple(self.window.panels)):
+                elif not (now[i].text().startswith(tuple(self.window.panels))
+                          or now[i].text() in self._job_names):
                     # runs are logged as run/result; every other undoable change is an edit,
                     # with what it changed and the tool's inputs (app.edits re-computes it
                     # from the saved input state)
                     extra = {}
+                    try:  # files the edit read (a loaded field), kept for replay
+                        self._save_blobs(getattr(now[i], "log_details", None) or {})
+                    except (OSError, Stylize3DError) as e:
+                        self._log("note", message=f"an input of this edit was not saved: {e}")
                     before = getattr(now[i], "before", None)
                     if before is not None and hasattr(before, "V"):
                         extra["before_hash"], extra["before_file"] = self._save_state(before)
