@@ -17,14 +17,16 @@ of the shape (thesis ch. 3, parametric adversaries; algorithms/adversarial).
   before / after images are shown side by side at the end. A lighting attack changes the panel's
   lighting (Revert takes it back); a geometry attack is one undoable command (Ctrl+Z restores
   the vertices exactly).
+
+Every job is a recipe of app/recipes/adversarial.py ("Adversarial lighting", "Adversarial
+lighting: geometry", "Adversarial lighting: classify"), run with :meth:`job_options` read on the
+GUI thread when it starts; the command line, the study replay and scripts run the same ones.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import threading
-from dataclasses import dataclass, field
 
 import numpy as np
 from PySide6.QtCore import QStringListModel, Qt, QTimer, Signal
@@ -33,12 +35,13 @@ from PySide6.QtWidgets import (QCheckBox, QColorDialog, QComboBox, QCompleter, Q
                                QGridLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit,
                                QProgressBar, QPushButton, QSlider, QVBoxLayout, QWidget)
 
-from algorithms.adversarial.attack import DEFAULT_RADIUS, AdversaryParams, AttackStep
+from algorithms.adversarial.attack import DEFAULT_RADIUS, AdversaryParams
 from algorithms.errors import Stylize3DError
 from algorithms.render.sh import ENVIRONMENTS
-from algorithms.steps import Step
 from app.jobs import JobRunner
 from app.panels.base import MethodPanel
+from app.recipes import adversarial as rcp
+from app.recipes.adversarial import AttackStep, PreviewStep, top_k  # noqa: F401 (re-exported)
 
 #: the coefficients with a slider: degrees 0-2 (index l*l + l + m), what each pattern looks like
 SH_ROWS = (("l=0", "ambient", "the same light from every direction"),
@@ -54,6 +57,7 @@ SLIDER_SCALE = 100          # slider units per coefficient unit (0.01 resolution
 SLIDER_LIMIT = 2.0          # coefficients from -2 to 2
 IMAGE_SIZE = 224            # pixels of the shown image (the classifier's input)
 CUSTOM = "Custom"
+DEFAULT_CLASSIFIER_NAME = "EfficientNet-lite0 (ImageNet, default)"
 
 SH_TIP = ("A spherical-harmonics coefficient: the lighting around the shape is a sum of smooth "
           "brightness patterns over all directions, and each coefficient says how strong one "
@@ -68,45 +72,6 @@ TOP5_TIP = ("Top-5: the five classes the classifier finds most likely for this i
             "confidence in each (a probability: the confidences of all its classes add up to "
             "100 %).")
 
-_CLF_LOCK = threading.Lock()
-
-
-def _classifier(ref):
-    """The classifier ``ref`` (a loaded one) or the default (loaded once, on a worker thread)."""
-    if ref is not None:
-        return ref
-    from algorithms.adversarial.classifiers import default_classifier
-
-    with _CLF_LOCK:
-        return default_classifier()
-
-
-def _read_face_colors(key, F):
-    """Face colours ``(m, 3)`` stored in the mesh file ``key[0]`` (vertex colours averaged over
-    each face's corners), or None (no colours, another size, unreadable)."""
-    from algorithms.render.sh import read_mesh_colors
-
-    path, n, m = key
-    try:
-        got = read_mesh_colors(path, n, m)
-    except Stylize3DError:
-        return None
-    if got is None:
-        return None
-    kind, C = got
-    return C[np.asarray(F)].mean(axis=1) if kind == "vertex" else C
-
-
-def _exact_moves(steps, V, scene):
-    """The geometry attack's steps with ``V + (moved - unmoved)`` as positions: a vertex the
-    attack did not move keeps its coordinates bit for bit (the unit-box round trip
-    ``(V - c) / s * s + c`` alone changes the last bits of about 40 % of them)."""
-    base = scene.to_original(scene.V)
-    for step in steps:
-        step.V = V + (step.V - base)
-        yield step
-
-
 def image_to_pixmap(img: np.ndarray, size: int | None = None) -> QPixmap:
     """A QPixmap of an ``(H, W, 3)`` image with values in [0, 1] (scaled to ``size`` pixels)."""
     a = np.ascontiguousarray((np.clip(np.asarray(img, np.float64), 0, 1) * 255 + 0.5)
@@ -118,40 +83,6 @@ def image_to_pixmap(img: np.ndarray, size: int | None = None) -> QPixmap:
         pm = pm.scaled(size, size, Qt.AspectRatioMode.KeepAspectRatio,
                        Qt.TransformationMode.SmoothTransformation)
     return pm
-
-
-def top_k(probs: np.ndarray, names, k: int = 5) -> list[tuple[str, float, int]]:
-    """``[(short name, probability, class index), ...]`` of the ``k`` most likely classes."""
-    from algorithms.adversarial.labels import short_name
-
-    idx = np.argsort(-np.asarray(probs))[:k]
-    return [(short_name(names[i]), float(probs[i]), int(i)) for i in idx]
-
-
-@dataclass
-class PreviewStep(Step):
-    """One classification of the current view: the image as classified and all probabilities."""
-
-    image: np.ndarray | None = None
-    probs: np.ndarray | None = None
-    names: tuple = ()
-    covered: float = 0.0
-    colors: tuple | None = None   # (key, face colours or None) when the job read the file's
-
-
-@dataclass
-class _Scene:
-    """What a render needs, read on the GUI thread (the worker only reads this)."""
-
-    V: np.ndarray
-    F: np.ndarray
-    albedo: object
-    lighting: np.ndarray
-    azimuths: list = field(default_factory=list)
-    elevation: float = 30.0
-    width: float = 1.5
-    resolution: int = 224
-    supersample: int = 2
 
 
 class Top5View(QWidget):
@@ -213,21 +144,22 @@ class AdversarialPanel(MethodPanel):
 
     def __init__(self, window):
         super().__init__(window)
-        from algorithms.render.sh import environment
-
-        self.lighting = environment("Grace Cathedral")        # (49, 3)
+        self.lighting = rcp.environment_lighting(rcp.DEFAULT_ENVIRONMENT)   # (49, 3)
         self.classifier = None            # None: the default EfficientNet-lite0 (ImageNet)
-        self.classifier_name = "EfficientNet-lite0 (ImageNet, default)"
-        self.color = (0.7, 0.7, 0.7)
+        self._classifier_ref: str | None = None   # the loaded one's blob (options["classifier"])
+        self.classifier_name = DEFAULT_CLASSIFIER_NAME
+        self.color = rcp.DEFAULT_COLOR
         self._file_colors = None          # (m, 3) face colours of the opened file, if any
+        self._file_colors_ref = None      # ... as a blob (options["face_colors"])
         self._file_colors_key = None      # (path, n, m) they were read for
+        self._preview_cache: dict = {}    # the classify recipe's (the attacks use _recipe_cache)
+        self.preview_request: dict | None = None   # the newest classification's request
         self.probs: np.ndarray | None = None
         self.shown_image: np.ndarray | None = None
         self.preview_error: str | None = None
         self.streamed_images = 0
         self.preview_count = 0
         self.last_result = None
-        self._attack_out: dict = {}
         self._attack_mode = "lighting"
         self._attack_lighting_before: np.ndarray | None = None
         self._revert_to: tuple | None = None   # (lighting, environment) before the last attack
@@ -337,10 +269,8 @@ class AdversarialPanel(MethodPanel):
         at += 1
 
         # labels
-        from algorithms.adversarial.classifiers import imagenet_class_names
-
         form = QFormLayout()
-        self.names_model = QStringListModel(list(imagenet_class_names()))
+        self.names_model = QStringListModel(list(rcp.class_names_of(None)))
         self.true_edit = QLineEdit()
         self.true_edit.setPlaceholderText("the classifier's top-1")
         self.true_edit.setToolTip("What the object really is: the class the attack makes less "
@@ -532,11 +462,9 @@ class AdversarialPanel(MethodPanel):
         self.schedule_preview()
 
     def set_environment(self, name: str) -> None:
-        from algorithms.render.sh import environment
-
         if name == CUSTOM:
             return
-        self.set_lighting(environment(name), name)
+        self.set_lighting(rcp.environment_lighting(name), name)
 
     def save_lighting(self, path: str) -> bool:
         from algorithms.adversarial.lighting_io import write_lighting
@@ -600,22 +528,25 @@ class AdversarialPanel(MethodPanel):
         if c.isValid():
             self.set_surface_color((c.redF(), c.greenF(), c.blueF()))
 
-    def _albedo(self, state):
-        if self.file_colors_box.isChecked() and self._file_colors is not None \
-                and len(self._file_colors) == len(state.F):
-            return self._file_colors
-        return np.array(self.color)
+    def _face_colors_ref(self, state):
+        """The blob of the file's face colours when they colour the shape (else None)."""
+        if state is not None and self.file_colors_box.isChecked() \
+                and self._file_colors is not None and len(self._file_colors) == len(state.F):
+            return self._file_colors_ref
+        return None
 
     def _colors_key(self, state):
         doc = self.window_.document
         return None if doc.path is None else (str(doc.path), len(state.V), len(state.F))
 
-    def _take_file_colors(self, key, colors) -> None:
-        """The opened file's face colours (or None), read by a preview job on the worker."""
+    def _take_file_colors(self, key, colors, ref=None) -> None:
+        """The opened file's face colours (or None) and their blob, read by a preview job on
+        the worker."""
         if key != self._colors_key_of_doc():
             return
         self._file_colors_key = key
         self._file_colors = colors
+        self._file_colors_ref = None if colors is None else (ref or rcp.face_colors_ref(colors))
         has = colors is not None
         self.file_colors_box.blockSignals(True)
         self.file_colors_box.setVisible(has)
@@ -629,36 +560,35 @@ class AdversarialPanel(MethodPanel):
 
     # -- classifier -----------------------------------------------------------------------------
     def class_names(self):
-        if self.classifier is not None:
-            return self.classifier.class_names
-        from algorithms.adversarial.classifiers import imagenet_class_names
-
-        return imagenet_class_names()
+        return rcp.class_names_of(self.classifier)
 
     def load_classifier(self, path: str) -> bool:
         """Use the classifier in ``path``; a file that is not a model leaves the current one."""
         from PySide6.QtWidgets import QApplication
 
-        from algorithms.adversarial.classifiers import load_classifier
-
         QApplication.setOverrideCursor(Qt.CursorShape.WaitCursor)
         try:
-            clf = load_classifier(path)
+            clf, ref = rcp.load_classifier_file(path)
         except Stylize3DError as exc:
             self.status_label.setText(f"{exc} The classifier was not changed.")
             return False
         finally:
             QApplication.restoreOverrideCursor()
+        self._use_classifier(clf, ref)
+        return True
+
+    def _use_classifier(self, clf, ref: str) -> None:
         self.classifier = clf
+        self._classifier_ref = ref
         self.classifier_name = f"{clf.name} ({len(clf.class_names)} classes)"
         self._classifier_changed()
-        return True
 
     def use_default_classifier(self) -> None:
         if self.classifier is None:
             return
         self.classifier = None
-        self.classifier_name = "EfficientNet-lite0 (ImageNet, default)"
+        self._classifier_ref = None
+        self.classifier_name = DEFAULT_CLASSIFIER_NAME
         self._classifier_changed()
 
     def _classifier_changed(self) -> None:
@@ -681,14 +611,12 @@ class AdversarialPanel(MethodPanel):
     def check_label(self, edit: QLineEdit) -> int | None:
         """The class index typed in ``edit`` (None when empty); an unknown name is shown with
         close names in the status line and the field is marked."""
-        from algorithms.adversarial.labels import resolve_label
-
         text = edit.text().strip()
         if not text:
             edit.setStyleSheet("")
             return None
         try:
-            k = resolve_label(text, self.class_names())
+            k = rcp.resolve_label(text, self.class_names())
         except Stylize3DError as exc:
             edit.setStyleSheet("border: 1px solid #dc2626;")
             self.status_label.setText(str(exc))
@@ -715,13 +643,6 @@ class AdversarialPanel(MethodPanel):
         self.form.set_value("elevation", float(np.clip(round(el), -89, 89)))
         self.azimuth_slider.setValue(int(round(az)) % 360)
 
-    def _scene(self, state, params, views: int = 1) -> _Scene:
-        az0 = float(self.azimuth_slider.value())
-        return _Scene(np.asarray(state.V), np.asarray(state.F), self._albedo(state),
-                      self.lighting.copy(),
-                      [az0 + k * 360.0 / views for k in range(views)], params.elevation,
-                      params.view_width, params.resolution, params.supersample)
-
     # -- the live classification ----------------------------------------------------------------
     def schedule_preview(self) -> None:
         """Re-classify soon: at most one start per ``preview_debounce_ms`` while a slider moves
@@ -736,38 +657,52 @@ class AdversarialPanel(MethodPanel):
         return self.window_.runner.busy and self._mine()
 
     def update_preview(self) -> None:
-        """Render and classify the current view on the panel's runner (latest request wins)."""
+        """Render and classify the current view on the panel's runner (latest request wins):
+        the recipe "Adversarial lighting: classify" (app/recipes/adversarial.py)."""
         state = self.window_.document.state
         if state is None or not self.is_shown() or self._attacking():
             return  # done when the panel comes to the front / the attack ends
         if self.preview_runner.busy:
             return  # the running one restarts this when it ends (still stale)
         self._preview_stale = False
-        sc = self._scene(state, self.form.params())
-        ref = self.classifier
+        params = self.form.params()
+        options = self.job_options()
         key = self._colors_key(state)
         read_colors = key is not None and key != self._file_colors_key
+        # the request of this classification (same keys as last_request). It is not
+        # last_request: the study log takes the newest last_request of any panel for the next
+        # job of the window's runner, and this job runs on the panel's own runner, unlogged
+        request = self.preview_request = {"params": params, "options": options, "input": state,
+                                          "recipe": rcp.CLASSIFY}
+        recipe = rcp.RECIPES_BY_NAME[rcp.CLASSIFY]
+        cache = self._preview_cache
 
         def steps():
-            from algorithms.adversarial.attack import (classify, orbit_cameras, prepare_scene,
-                                                       render_views)
-
-            colors = _read_face_colors(key, sc.F) if read_colors else None
-            clf = _classifier(ref)
-            scene = prepare_scene(sc.V, sc.F, albedo=sc.albedo if colors is None else colors,
-                                  lighting=sc.lighting)
-            cams = orbit_cameras(sc.azimuths, elevation=sc.elevation, width=sc.width,
-                                 resolution=sc.resolution * sc.supersample)
-            images, renders, _ = render_views(scene, cams, supersample=sc.supersample)
-            p = classify(clf, images)[0]
-            yield PreviewStep(0, None, sc.V, {}, "", image=images[0].astype(np.float32),
-                              probs=p, names=tuple(clf.class_names),
-                              covered=float(renders[0].mask.mean()),
-                              colors=(key, colors) if read_colors else None)
+            opts, colors, ref = options, None, None
+            if read_colors:     # the opened file's colours, read here on the worker once
+                colors = rcp.read_face_colors(key, state.F)
+                if colors is not None:
+                    ref = rcp.face_colors_ref(colors)
+                    opts = {**options, "face_colors": ref}
+            for step in recipe.steps(state, params, opts, cache):
+                step.colors = (key, colors, ref) if read_colors else None
+                step.options = opts
+                step.request = request
+                yield step
 
         if self.probs is None:
-            self.image_note.setText("Loading the classifier…" if ref is None else "Classifying…")
+            self.image_note.setText("Loading the classifier…" if self.classifier is None
+                                    else "Classifying…")
         self.preview_runner.start("classify", steps)
+
+    def _start_request(self, recipe: str, params, options: dict, state) -> dict:
+        """What the attack about to start computes (as MethodPanel.run): its options and recipe
+        for the worker and the commit, and ``last_request`` for the study log."""
+        self._run_options = options
+        self._run_recipe = recipe
+        self.last_request = {"params": params, "options": options, "input": state,
+                             "recipe": recipe}
+        return self.last_request
 
     def _on_preview_done(self, step) -> None:
         if not isinstance(step, PreviewStep) or self._attacking():
@@ -775,6 +710,9 @@ class AdversarialPanel(MethodPanel):
         self.preview_error = None
         if step.colors is not None:
             self._take_file_colors(*step.colors)
+        req = getattr(step, "request", None)
+        if req is not None and req is self.preview_request:   # the colours it read count too
+            req["options"] = step.options
         self.show_classification(step.image, top_k(step.probs, step.names))
         self.probs = np.asarray(step.probs)
         if not self.true_edit.text().strip():  # the object's class: set once, not after attacks
@@ -834,11 +772,73 @@ class AdversarialPanel(MethodPanel):
 
     # -- the attacks ----------------------------------------------------------------------------
     def job_options(self) -> dict:
-        return {"mode": self._attack_mode, "true_label": self.true_edit.text().strip(),
+        """Everything an attack or a classification reads besides the mesh and the Params (the
+        keys are documented in app/recipes/adversarial.py): the whole lighting, the labels, the
+        view, the classifier (a blob of its file, None = the installed one) and the colours."""
+        return {"lighting": self.lighting.tolist(),
+                "environment": self.env_combo.currentText(),
+                "true_label": self.true_edit.text().strip(),
                 "target": self.target_edit.text().strip(),
                 "azimuth": self.azimuth_slider.value(),
-                "classifier": self.classifier_name,
-                "lighting": self.lighting[:9].tolist()}
+                "classifier": self._classifier_ref,
+                "classifier_name": self.classifier_name,
+                "color": [float(x) for x in self.color],
+                "face_colors": self._face_colors_ref(self.window_.document.state)}
+
+    def restore_options(self, options: dict) -> None:
+        """Set the classifier, labels, view, lighting (sliders and environment) and colours
+        back from saved :meth:`job_options` (keys that are absent leave their widgets as they
+        are); re-classifies. A classifier whose file is missing leaves the current one and says
+        so in the status line."""
+        note = ""
+        if "classifier" in options:
+            ref = options.get("classifier")
+            if not ref:
+                self.use_default_classifier()
+            elif ref != self._classifier_ref:
+                try:
+                    self._use_classifier(rcp.classifier_of(ref), ref)
+                except Stylize3DError as exc:
+                    note = f"{exc} The classifier was not changed."
+        for key, edit in (("true_label", self.true_edit), ("target", self.target_edit)):
+            if key in options:
+                edit.setText(str(options.get(key) or ""))
+                edit.setStyleSheet("")
+        if "azimuth" in options:
+            self.azimuth_slider.setValue(int(round(float(options["azimuth"]))) % 360)
+        env = options.get("environment") or CUSTOM
+        try:
+            if options.get("lighting") is not None:
+                self.set_lighting(rcp.full_lighting(options["lighting"]), env)
+            elif env in ENVIRONMENTS:
+                self.set_environment(env)
+        except Stylize3DError as exc:
+            note = note or str(exc)
+        if "color" in options:
+            self.color = tuple(float(np.clip(x, 0, 1)) for x in options["color"])
+            self._show_color()
+        if "face_colors" in options:
+            face = options.get("face_colors")
+            state = self.window_.document.state
+            use_file = False
+            if face:
+                try:
+                    C = rcp.face_colors_of(face)
+                except Stylize3DError as exc:
+                    note = note or str(exc)
+                else:
+                    if state is not None and len(C) == len(state.F):
+                        self._file_colors, self._file_colors_ref = C, face
+                        self._file_colors_key = self._colors_key(state)
+                        use_file = True
+            self.file_colors_box.blockSignals(True)
+            self.file_colors_box.setVisible(self._file_colors is not None)
+            self.file_colors_box.setChecked(use_file)
+            self.file_colors_box.blockSignals(False)
+            self.color_button.setEnabled(not use_file)
+        if note:
+            self.status_label.setText(note)
+        self.schedule_preview()
 
     def run(self, live: bool = False) -> None:
         """The Run button is "Attack lighting"."""
@@ -864,35 +864,29 @@ class AdversarialPanel(MethodPanel):
                                       "leave it empty.")
             return False
         params = dataclasses.replace(self.form.params(), mode=mode)
-        sc = self._scene(state, params, params.views)
-        ref = self.classifier
-        out: dict = {}
-        self._attack_out = out
+        name = rcp.LIGHTING if mode == "lighting" else rcp.GEOMETRY
+        recipe = rcp.RECIPES_BY_NAME[name]
+        options = self.job_options()
         self._attack_mode = mode
         self._attack_lighting_before = self.lighting.copy()
         self._attack_env_before = self.env_combo.currentText()
         self.streamed_images = 0
         self._pending_input = state
-        self.last_request = {"params": params, "options": self.job_options(), "input": state}
+        self._start_request(name, params, options, state)
         self.preview_runner.cancel()
         self._preview_timer.stop()
+        cache = self._recipe_cache
 
         def factory():
-            from algorithms.adversarial.attack import attack_iter, orbit_cameras, prepare_scene
-
-            clf = _classifier(ref)
-            scene = prepare_scene(sc.V, sc.F, albedo=sc.albedo, lighting=sc.lighting)
-            cams = orbit_cameras(sc.azimuths, elevation=sc.elevation, width=sc.width,
-                                 resolution=sc.resolution * sc.supersample)
-            steps = attack_iter(scene, clf, cams, params, decrease=true, increase=target,
-                                _out=out)
-            return steps if mode == "lighting" else _exact_moves(steps, sc.V, scene)
+            return recipe.steps(state, params, options, cache)
 
         self.plot.clear()
         what = "lighting" if mode == "lighting" else "shape"
         self.status_label.setText(f"Attacking the {what}…")
         if mode == "geometry":
-            self.window_.start_positions_job(self.title, factory)
+            self.window_.start_positions_job(
+                self.title, factory, commit=lambda before, step: recipe.result(before, step,
+                                                                               options))
         else:
             self.window_.start_analysis_job(self.title, factory)
         return True
@@ -929,7 +923,7 @@ class AdversarialPanel(MethodPanel):
         if self.window_.last_job_name != self.title:
             return
         self.stop_button.setEnabled(False)
-        res = self._attack_out.get("result")
+        res = getattr(step, "result", None)
         if res is None:
             return
         self.last_result = res

@@ -218,3 +218,162 @@ def test_bad_inputs_give_plain_messages(window, qtbot, mug_path, tmp_path):
     assert not panel.attack("geometry")
     assert "not visible" in panel.status_label.text()
     assert window.undo_stack.count() == n0 and not window.runner.busy
+
+
+# -- the recipes (app/recipes/adversarial.py): the panel's jobs run headless give its bits ------
+def _json(obj):
+    return json.loads(json.dumps(obj))
+
+
+def test_classify_and_lighting_attack_equal_headless_recipes(window, qtbot, mug_path):
+    from app.recipes import adversarial as rcp
+    from app.recipes import outcome_hash, run
+
+    panel = open_panel(window, qtbot, mug_path)
+    state = window.document.state
+    req = panel.preview_request
+    assert req["recipe"] == rcp.CLASSIFY and req["input"] is state
+    # (a classification runs on the panel's own runner: the study log's request stays unset)
+    assert getattr(panel, "last_request", None) is None
+    c = run(rcp.CLASSIFY, state, req["params"], _json(req["options"]))
+    np.testing.assert_array_equal(c.last.probs, panel.probs)
+    np.testing.assert_array_equal(c.last.image, panel.shown_image)
+    assert [panel.class_names()[i].split(",")[0] for i in c.outcome["top5"]] == \
+        [n for n, _p in panel.top5_view.entries]
+    # a targeted lighting attack of 3 iterations from another lighting and view
+    reclassified(panel, qtbot, lambda: panel.set_sh_coefficient(3, 2, -0.4))
+    reclassified(panel, qtbot, lambda: panel.azimuth_slider.setValue(20))
+    U0 = panel.lighting.copy()
+    panel.form.set_value("iterations", 3)
+    panel.target_edit.setText("tench")
+    with qtbot.waitSignal(window.runner.finished, timeout=60000):
+        assert panel.attack("lighting")
+    req = panel.last_request
+    assert req["recipe"] == rcp.LIGHTING and req["params"].mode == "lighting"
+    assert req["input"] is state and panel._run_recipe == rcp.LIGHTING
+    assert req["options"] is panel._run_options
+    opts = _json(req["options"])
+    np.testing.assert_array_equal(np.array(opts["lighting"]), U0)     # all 49 x 3, exactly
+    assert opts["target"] == "tench" and opts["azimuth"] == 20 and opts["classifier"] is None
+    a = run("adversary", state, req["params"], opts)
+    np.testing.assert_array_equal(a.outcome["lighting"], panel.lighting)
+    res = panel.last_result
+    assert a.outcome["iterations"] == res.iterations == 3 and a.outcome["norm"] == res.norm
+    np.testing.assert_array_equal(a.last.result.images_after, res.images_after)
+    np.testing.assert_array_equal(a.last.result.images_before, res.images_before)
+    assert [v.to_dict() for v in a.last.result.views] == [v.to_dict() for v in res.views]
+    b = run("adversary", state, req["params"], opts)           # twice: the same bits
+    assert outcome_hash(a.outcome) == outcome_hash(b.outcome)
+
+
+def test_geometry_attack_equals_headless_recipe(window, qtbot, mug_path):
+    from app.recipes import adversarial as rcp
+    from app.recipes import run
+
+    panel = open_panel(window, qtbot, mug_path)
+    state = window.document.state
+    panel.form.set_value("iterations", 2)
+    panel.form.set_value("views", 2)
+    with qtbot.waitSignal(window.job_committed, timeout=60000):
+        assert panel.attack("geometry")
+    req = panel.last_request
+    assert req["recipe"] == rcp.GEOMETRY and req["params"].mode == "geometry"
+    assert req["input"] is state and req["params"].views == 2
+    g = run(rcp.GEOMETRY, state, req["params"], _json(req["options"]))
+    assert not np.array_equal(window.document.V, state.V)
+    np.testing.assert_array_equal(g.state.V, window.document.V)
+    assert g.outcome["iterations"] == panel.last_result.iterations
+
+
+def test_job_options_round_trip_with_classifier_and_file_colours(window, qtbot, tmp_path):
+    import torch
+
+    from algorithms.render.sh import environment
+    from app.recipes import adversarial as rcp
+    from app.recipes import run
+
+    # a mug whose file has vertex colours (red at the bottom to blue at the top)
+    V, F, _ = SUBJECTS["coffee mug"]()
+    t = (V[:, 1] - V[:, 1].min()) / np.ptp(V[:, 1])
+    path = tmp_path / "coloured_mug.obj"
+    write_mesh(path, V, F, vertex_colors=np.stack([1 - t, 0.2 + 0 * t, t], 1))
+    panel = open_panel(window, qtbot, path)
+    state = window.document.state
+    assert panel.file_colors_box.isVisibleTo(panel) and panel.file_colors_box.isChecked()
+    ref = panel.job_options()["face_colors"]
+    assert ref and ref == panel._file_colors_ref
+    # the first classification read the file's colours on the worker: its request says so
+    req = panel.preview_request
+    assert req["recipe"] == rcp.CLASSIFY and req["options"]["face_colors"] == ref
+    c = run(rcp.CLASSIFY, state, req["params"], _json(req["options"]))
+    np.testing.assert_array_equal(c.last.probs, panel.probs)
+    np.testing.assert_array_equal(c.last.image, panel.shown_image)
+
+    # a classifier of the user's (tiny, TorchScript) and every widget away from its default
+    class Tiny(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.conv = torch.nn.Conv2d(3, 4, 9, stride=16)
+            self.fc = torch.nn.Linear(4, 6)
+
+        def forward(self, x):
+            return self.fc(torch.tanh(self.conv(x)).mean((2, 3)))
+
+    torch.manual_seed(5)
+    model = tmp_path / "tiny.pt"
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        torch.jit.script(Tiny()).save(str(model))
+        reclassified(panel, qtbot, lambda: panel.load_classifier(str(model)))
+    assert len(panel.class_names()) == 6 and panel.true_edit.text().startswith("class ")
+    panel.link_box.setChecked(True)
+    reclassified(panel, qtbot, lambda: panel.set_sh_coefficient(2, 1, 0.8))
+    reclassified(panel, qtbot, lambda: panel.azimuth_slider.setValue(45))
+    panel.true_edit.setText("class 3")
+    panel.target_edit.setText("5")
+    opts = panel.job_options()
+    assert json.loads(json.dumps(opts)) == opts
+    assert opts["classifier"].startswith("blob:") and opts["classifier"].endswith("/tiny.pt")
+    assert opts["face_colors"] == ref and opts["environment"] == "Custom"
+    sliders = [[s.value() for s in row] for row in panel.sh_sliders]
+    tips = [[s.toolTip() for s in row] for row in panel.sh_sliders]
+    U = panel.lighting.copy()
+    # everything changed back by the user ...
+    panel.use_default_classifier()
+    reclassified(panel, qtbot, lambda: panel.set_environment("Eucalyptus Grove"))
+    panel.azimuth_slider.setValue(0)
+    panel.set_surface_color((0.2, 0.4, 0.6))              # (unticks the file's colours)
+    panel.target_edit.setText("tench")
+    assert panel.job_options() != opts and panel.job_options()["face_colors"] is None
+    # ... and restored from the saved options: the same options, the same lighting shown
+    reclassified(panel, qtbot, lambda: panel.restore_options(json.loads(json.dumps(opts))))
+    assert panel.job_options() == opts
+    np.testing.assert_array_equal(panel.lighting, U)
+    assert [[s.value() for s in row] for row in panel.sh_sliders] == sliders
+    assert [[s.toolTip() for s in row] for row in panel.sh_sliders] == tips
+    assert panel.env_combo.currentText() == "Custom" and panel.azimuth_value.text() == "45°"
+    assert panel.file_colors_box.isChecked() and not panel.color_button.isEnabled()
+    assert panel.classifier is rcp.classifier_of(opts["classifier"])
+    assert "tiny.pt" in panel.classifier_label.text()
+    # the classification shown after the restore is the recipe's on the saved options
+    c = run(rcp.CLASSIFY, state, panel.form.params(), opts)
+    np.testing.assert_array_equal(c.last.probs, panel.probs)
+    # a published environment is shown by its name; the installed classifier comes back
+    back = {**opts, "classifier": None, "classifier_name": "EfficientNet-lite0 (ImageNet, default)",
+            "environment": "Grace Cathedral", "true_label": "",
+            "target": "", "lighting": environment("Grace Cathedral").tolist(),
+            "face_colors": None, "color": [0.25, 0.5, 0.75]}
+    reclassified(panel, qtbot, lambda: panel.restore_options(back))
+    assert panel.env_combo.currentText() == "Grace Cathedral" and panel.classifier is None
+    assert not panel.file_colors_box.isChecked() and panel.color_button.text() == "64, 128, 191"
+    got = panel.job_options()
+    assert {k: got[k] for k in back if k != "true_label"} == \
+        {k: v for k, v in back.items() if k != "true_label"}
+    # absent keys leave their widgets; a classifier whose file is gone is said so, not used
+    panel.restore_options({})
+    assert panel.job_options() == got
+    panel.restore_options({"classifier": "blob:" + "0" * 64 + "/gone.pt"})
+    assert "gone.pt" in panel.status_label.text() and "not changed" in panel.status_label.text()
+    assert panel.classifier is None and panel.job_options() == got
