@@ -353,6 +353,32 @@ def run(method: str, state, params=None, options: dict | None = None, *,
     return RunResult(after, last, out or {}, recipe, params, options)
 
 
+def load(path, *, clean: bool = False):
+    """A :class:`app.project.Project` of a ``.s3d`` project or of a mesh file (checked as the
+    app checks it; ``clean=True`` first fixes what Clean can fix). Raises a plain
+    Stylize3DError for a file that cannot be used."""
+    from app.project import Project, is_project_path, read_project
+
+    if is_project_path(path):
+        return read_project(path)
+    from pathlib import Path as _P
+
+    from algorithms.errors import InvalidMeshError
+    from algorithms.mesh import clean_mesh, read_mesh, validate_mesh
+    from app.document import MeshState
+
+    data = read_mesh(path)
+    V, F = data.V, data.F
+    if clean:
+        res = clean_mesh(V, F)
+        V, F = res.V, res.F
+    report = validate_mesh(V, F)
+    if report.errors:
+        raise InvalidMeshError(f"{_P(path).name} cannot be used as it is:\n{report.summary()}"
+                               "\nTry load(path, clean=True) or `stylize3d clean`.")
+    return Project(MeshState.make(V, F), source=_P(path).name)
+
+
 def run_recipe(title: str, state, params_dict: dict, options: dict | None = None,
                cache: dict | None = None) -> Step | None:
     """Run a recipe to its end; returns the last Step (None if it yielded nothing)."""
