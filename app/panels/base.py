@@ -382,8 +382,15 @@ class MethodPanel(QDockWidget):
             QTimer.singleShot(0, self._refresh_if_shown)
 
     def _refresh_if_shown(self) -> None:
-        if self.is_shown() and not self.window_.document.is_empty:
-            self.refresh_view()
+        doc = self.window_.document
+        if not self.is_shown() or doc.is_empty:
+            return
+        poly = getattr(self.window_.viewport, "poly", None)
+        if poly is None or poly.n_points != len(doc.V):
+            # the 3D view does not show the document's mesh yet (a mesh being opened, a job's
+            # remeshed preview): the window redraws it, and the panel's view follows then
+            return
+        self.refresh_view()
 
     # -- behaviour ----------------------------------------------------------------------------
     def _mine(self) -> bool:

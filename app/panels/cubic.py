@@ -18,6 +18,7 @@
 
 from __future__ import annotations
 
+from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import (QButtonGroup, QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout,
                                QGroupBox, QHBoxLayout, QLabel, QPushButton, QRadioButton,
                                QVBoxLayout)
@@ -205,8 +206,11 @@ class CubicPanel(MethodPanel):
                 self.status_label.setText(
                     f"This mesh has {len(st.F):,} triangles: progressive meshes are on, so λ "
                     "changes take about a second after a one-time preparation.")
-        if what in ("fields", "mesh", "topology") and self.is_shown():
+        if what == "fields" and self.is_shown():
             self._show_field(self.show_combo.currentIndex())
+        elif what in ("mesh", "topology"):
+            # the window puts the new mesh on the 3D view after this listener: colour it then
+            QTimer.singleShot(0, self._refresh_if_shown)
         if what in ("handles", "mesh", "topology"):
             st = self.window_.document.state
             self.window_.viewport.show_handles(st.handle_dict if st is not None else None)

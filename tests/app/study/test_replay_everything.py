@@ -23,6 +23,13 @@ DATA = ROOT / "tests" / "data"
 TASKS = [("paint", "sample:blob"), ("analogy", "sample:blob"), ("multigrid", "sample:blob"),
          ("spectral", "sample:blob"), ("subdivision", "sample:blob"),
          ("paparazzi", str(DATA / "hand_lowres.obj")), ("adversarial", "sample:blob")]
+#: benchmarks/study_replay.py runs the same session on the real meshes of tests/data
+BIG = os.environ.get("STYLIZE3D_REPLAY_BIG") == "1"
+if BIG:
+    TASKS = [("paint", str(DATA / "armadillo.obj")), ("analogy", str(DATA / "bob.obj")),
+             ("multigrid", str(DATA / "armadillo.obj")), ("spectral", str(DATA / "fandisk.off")),
+             ("subdivision", str(DATA / "spot_lowres.obj")),
+             ("paparazzi", str(DATA / "camelhead.off")), ("adversarial", str(DATA / "bob.obj"))]
 
 
 def _protocol(tmp_path):
@@ -97,6 +104,9 @@ def test_a_killed_session_through_every_panel_and_tool_replays_entirely(
         window, dialogs, qtbot, tmp_path, monkeypatch):
     if not os.environ.get("DISPLAY"):
         pytest.skip("needs an X display for the app in a subprocess")
+    import time
+
+    t0 = time.perf_counter()
     monkeypatch.setenv("STYLIZE3D_CACHE", str(tmp_path / "cache"))
     proto = _protocol(tmp_path)
     logs = tmp_path / "logs"
@@ -201,8 +211,17 @@ def test_a_killed_session_through_every_panel_and_tool_replays_entirely(
     session.end_task("done")
     assert session.finished
 
+    import time
+
+    t_session = time.perf_counter() - t0
+    t0 = time.perf_counter()
     rep = replay(log_path)
+    t_replay = time.perf_counter() - t0
     d = rep.to_dict()
+    if BIG:  # the benchmark's figures
+        print("BENCH " + json.dumps({"tasks": [m for _t, m in TASKS], "session_s": t_session,
+                                     "replay_s": t_replay, "counts": d["counts_by_kind"],
+                                     "checks": len(rep.runs)}))
     by_kind = rep.counts_by_kind()
     assert rep.counts.get("not replayable", 0) == 0, d
     assert set(rep.counts) == {"match"}, d
