@@ -1,5 +1,11 @@
 """``stylize3d smooth`` (the Smooth recipe: Laplacian / mean-curvature flow; or data smoothing,
-thesis Eq. 8.6, with surface multigrid) and ``stylize3d multigrid-info`` (thesis ch. 8)."""
+thesis Eq. 8.6, with surface multigrid: the "Multigrid smoothing" recipe of
+:mod:`app.recipes.multigrid`) and ``stylize3d multigrid-info`` (thesis ch. 8).
+
+Data smoothing on a project (``scene.s3d``) uses the Multigrid smoothing panel's saved settings
+and options (its noisy or loaded field, noise level and seed) unless flags say otherwise, so
+``smooth scene.s3d -o out.npy --signal noise`` writes the values of
+``app.recipes.run("Multigrid smoothing", project, params, options)``."""
 
 from __future__ import annotations
 
@@ -12,7 +18,7 @@ from algorithms.errors import ParameterError
 from app.cli.common import (MESH_HELP, add_params_arguments, add_params_file_argument,
                             check_output, field_names, input_state, method_params,
                             method_recipe, params_file, params_to_dict, print_json, read_input,
-                            settings)
+                            saved_panel, settings)
 
 COMMANDS = ("smooth", "multigrid-info")
 
@@ -65,69 +71,98 @@ def cmd_smooth(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_data_smooth(args: argparse.Namespace, names: set[str]) -> int:
-    """Data smoothing (thesis Eq. 8.6) of positions, a noisy test field or a field file."""
-    import numpy as np
+def data_signal(args: argparse.Namespace) -> tuple[str, str]:
+    """(the recipe's ``signal`` option, its name for messages) of ``smooth --signal ...``:
+    ``--signal``; without it, the input project's saved signal (noise, or its loaded field)
+    when ``-o`` is a field file, else positions. Refuses an output of the wrong kind."""
+    from algorithms.mesh.fields import FIELD_EXTENSIONS
+    from app.recipes.multigrid import SMOOTH
 
-    from algorithms.mesh import write_mesh
-    from algorithms.mesh.fields import FIELD_EXTENSIONS, read_field, write_field
-    from algorithms.multigrid import surface_multigrid
-    from algorithms.multigrid.applications import DataSmoother
-    from algorithms.multigrid.params import DataSmoothingParams
-    from algorithms.smoothing import noisy_test_field, unit_area
-
-    params = method_params(args, DataSmoothingParams, panel="Multigrid smoothing",
-                           allowed=names)
-    signal = args.signal or "positions"
     out_ext = Path(args.output).suffix.lower()
+    given = args.signal
+    if given is None:
+        saved = saved_panel(args, SMOOTH)
+        kept = saved["options"].get("signal") if saved is not None else None
+        signal = kept if kept in ("noise", "loaded") and out_ext in FIELD_EXTENSIONS \
+            else "positions"
+    else:
+        signal = given if given in ("positions", "noise") else "loaded"
+    name = given or signal
     if signal == "positions":
         if out_ext in FIELD_EXTENSIONS:
             raise ParameterError(f"--signal positions writes a mesh; {args.output} is a field "
                                  "file name. Use .obj, .ply, .off or .stl.")
     elif out_ext not in FIELD_EXTENSIONS:
-        raise ParameterError(f"--signal {signal} writes one value per vertex: give -o a "
+        raise ParameterError(f"--signal {name} writes one value per vertex: give -o a "
                              f"{', '.join(FIELD_EXTENSIONS)} file name.")
+    return signal, name
+
+
+def data_smoothing_options(args: argparse.Namespace, state, signal: str):
+    """(options of the "Multigrid smoothing" recipe, the state to run it on) for
+    ``smooth --signal ...`` (``signal``: :func:`data_signal`'s).
+
+    Options: the input project's saved "Multigrid smoothing" options (if any) < the flags. A
+    field file given with ``--signal`` is checked here (its own name in messages) and becomes
+    a blob; ``--noise`` / ``--seed`` make a new noisy field even when the project holds one."""
+    from algorithms.mesh.fields import read_field
+    from app.recipes import multigrid as rm
+    from app.recipes import put_blob_file
+
+    saved = saved_panel(args, rm.SMOOTH)
+    options = dict(saved["options"]) if saved is not None else {}
+    options["signal"] = signal
+    options.setdefault("noise", rm.DEFAULT_NOISE)
+    options.setdefault("noise_seed", 0)
+    if args.noise is not None or args.seed is not None:
+        if args.noise is not None:
+            options["noise"] = args.noise
+        if args.seed is not None:
+            options["noise_seed"] = args.seed
+        state = state.with_field(rm.NOISY_FIELD, None)
+    if signal == "loaded" and args.signal is not None:
+        read_field(args.signal, len(state.V))  # a plain error naming the user's file
+        options["field"] = put_blob_file(args.signal)
+        state = state.with_field(rm.LOADED_FIELD, None)
+    options.update(rtol=args.rtol, max_iterations=args.max_cycles, fallback=args.fallback)
+    return options, state
+
+
+def _cmd_data_smooth(args: argparse.Namespace, names: set[str]) -> int:
+    """Data smoothing (thesis Eq. 8.6) of positions, a noisy test field or a field file: the
+    recipe "Multigrid smoothing" (:mod:`app.recipes.multigrid`)."""
+    import numpy as np
+
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.fields import write_field
+    from algorithms.multigrid.params import DataSmoothingParams
+    from app.recipes import multigrid as rm
+
+    params = method_params(args, DataSmoothingParams, panel=rm.SMOOTH, allowed=names)
+    kind, signal = data_signal(args)
     check_output(args.output, args.overwrite, args.mesh)
     data, _ = read_input(args, quiet=args.json or args.quiet)
-    V, F = data.V, data.F
-    clean = None
-    if signal == "positions":
-        f = V
-    elif signal == "noise":
-        clean, f = noisy_test_field(V, F, args.noise, args.seed)
-    else:
-        f = read_field(signal, len(V))
-    from algorithms.multigrid.applications import choose_solver
-
-    t0 = time.perf_counter()
-    solver, why = params.solver, None
-    if solver == "auto":
-        solver, why = choose_solver(len(V), params.energy)
-        if not (args.json or args.quiet):
-            print(f"stylize3d smooth: {why}.", file=sys.stderr)
-    mg = None
-    if solver == "multigrid":
-        mg = surface_multigrid(V, F)
-    t1 = time.perf_counter()
-    # operators of the unit-area copy: one α does the same whatever the mesh's units
-    smoother = DataSmoother(unit_area(V, F), F, energy=params.energy, solver=solver, mg=mg)
-    t2 = time.perf_counter()
-    # never a silent wrong answer: an unconverged multigrid solve falls back to the direct
-    # solver when it fits in memory (saying so) or raises NotConvergedError (exit status 6,
-    # nothing written); --no-fallback always refuses
-    u, info = smoother.smooth_checked(f, params.alpha, rtol=args.rtol, maxiter=args.max_cycles,
-                                      fallback=args.fallback)
+    options, state = data_smoothing_options(args, input_state(args, data), kind)
+    solver, why = rm.resolve_solver(len(state.V), params)
+    if why is not None and not (args.json or args.quiet):
+        print(f"stylize3d smooth: {why}.", file=sys.stderr)
+    recipe = method_recipe("multigrid", rm.SMOOTH)
+    last = None
+    for last in recipe.steps(state, params, options, {}):
+        pass
+    info, mg, u = last.info, last.mg, last.values
     if info.get("fallback") and not args.json:
         print(f"stylize3d smooth: {info['fallback']}", file=sys.stderr)
-    if signal == "positions":
-        write_mesh(args.output, u, F)
+    if options["signal"] == "positions":
+        write_mesh(args.output, u, state.F)
     else:
         write_field(args.output, u)
     out = {"input": args.mesh, "output": args.output, "signal": signal,
-           "params": params_to_dict(params), "vertices": len(V),
+           "params": params_to_dict(params), "vertices": len(state.V),
            "solver": info.get("solver", solver), "solver_choice": why,
            "fallback": info.get("fallback"),
-           "hierarchy_seconds": t1 - t0, "precompute_seconds": t2 - t1,
+           "hierarchy_seconds": float(mg.build_seconds) if mg is not None else 0.0,
+           "precompute_seconds": info["precompute_seconds"],
            "setup_seconds": info["setup_seconds"], "solve_seconds": info["solve_seconds"],
            "cycles": info.get("multigrid_cycles", info.get("cycles", 0)),
            "converged": bool(info.get("converged", True)),
@@ -136,14 +171,18 @@ def _cmd_data_smooth(args: argparse.Namespace, names: set[str]) -> int:
     res = list(info.get("multigrid_residuals") or info.get("residuals") or [])
     if res:
         out["relative_residual"] = float(res[-1] / res[0]) if res[0] > 0 else 0.0
-    if clean is not None:
+    if options["signal"] == "noise":  # how close the result gets to the clean pattern
+        from algorithms.smoothing import noisy_test_field
+
+        clean = noisy_test_field(state.V, state.F, 0.0)[0]
+        f = last.made_fields.get(rm.NOISY_FIELD, state.fields.get(rm.NOISY_FIELD))
         rms = lambda x: float(np.sqrt(np.mean((x - clean) ** 2)))  # noqa: E731
         out["rms_error_before"], out["rms_error_after"] = rms(f), rms(u)
     if args.json:
         print_json(out)
     else:
         extra = (f"; RMS error to the clean signal {out['rms_error_before']:.4g} -> "
-                 f"{out['rms_error_after']:.4g}" if clean is not None else "")
+                 f"{out['rms_error_after']:.4g}" if "rms_error_after" in out else "")
         how = (f"multigrid ({out['cycles']} CG steps, {len(out['levels'])} levels)"
                if out["solver"] == "multigrid" else "the direct solver")
         print(f"Smoothed {signal} of {args.mesh} ({params.energy}, α {params.alpha:g}) with "
@@ -232,11 +271,13 @@ def add_parsers(sub) -> None:
         "Any of these switches from the flow above to data smoothing (so does a --params file "
         "holding energy, alpha or solver): minimize α E(u) + (1-α) ∫|u - f|² for a signal f; "
         "the flow options are then not used. A project's saved 'Multigrid smoothing' settings "
-        "are the defaults.")
+        "and options (signal, noise, seed, loaded field) are the defaults.")
     d.add_argument("--signal", metavar="positions|noise|FIELD",
                    help="positions (writes the smoothed mesh), noise (a noisy test field made "
                         "here; writes the smoothed values) or a per-vertex field file "
-                        "(.npy/.txt/.csv; writes the smoothed values). Default: positions.")
+                        "(.npy/.txt/.csv; writes the smoothed values). Default: positions; "
+                        "on a project whose Multigrid smoothing panel smooths noise or a loaded "
+                        "field, that signal when -o is a field file.")
     d.add_argument("--energy", choices=("dirichlet", "bilaplacian", "hessian"),
                    help="smoothness energy E. Default: dirichlet.")
     d.add_argument("--alpha", type=float, metavar="A",
@@ -257,9 +298,13 @@ def add_parsers(sub) -> None:
                    help="when multigrid does not converge, solve with the direct solver if it "
                         "fits in memory (and say so). With --no-fallback the command fails "
                         "(exit status 6) and writes nothing. Default: on.")
-    d.add_argument("--noise", type=float, default=0.4,
-                   help="noise of --signal noise, relative to the pattern's spread. Default: 0.4.")
-    d.add_argument("--seed", type=int, default=0, help="random seed of --signal noise.")
+    d.add_argument("--noise", type=float,
+                   help="noise of --signal noise, relative to the pattern's spread. Default: "
+                        "0.4 (or the project's saved noise).")
+    d.add_argument("--seed", type=int,
+                   help="random seed of --signal noise. Default: 0 (or the project's saved "
+                        "seed; a project's noisy field is used unless --noise or --seed is "
+                        "given).")
     s.set_defaults(func=cmd_smooth)
 
     s = sub.add_parser("multigrid-info",

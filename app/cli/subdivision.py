@@ -1,5 +1,18 @@
 """``stylize3d subdivide``, ``subdivide-train`` and ``subdivide-eval``: neural subdivision
-(thesis ch. 4) and the Loop / modified butterfly / mid-point baselines."""
+(thesis ch. 4) and the Loop / modified butterfly / mid-point baselines.
+
+``subdivide`` and ``subdivide-train`` are thin wrappers around the recipes "Subdivision" and
+"Subdivision training" (:mod:`app.recipes.subdivision`). On a project (``scene.s3d``),
+``subdivide`` uses the Subdivision panel's saved settings and options (the weights chosen
+there: shipped, trained in the app, or a weights file, all kept in the project), so it gives
+the same mesh as ``app.recipes.run("subdivide", project)``; ``--weights FILE`` (or
+``shipped``) wins over the saved choice. ``subdivide-train`` makes the coarse meshes of every
+mesh given (spread evenly over them; locally or on a Dask scheduler) and trains, with the
+training settings saved in a project given as the first mesh (the panel's coarse meshes and
+epochs) as its defaults; its weights file holds the recipe's best weights (on one mesh, those
+of ``app.recipes.run("subdivide-train", mesh, params, {"workers": W, "cache": C})``) and
+``trained_on`` (the meshes' file names).
+"""
 
 from __future__ import annotations
 
@@ -10,14 +23,14 @@ from pathlib import Path
 
 from algorithms.errors import ParameterError
 from app.cli.common import (MESH_HELP, add_params_arguments, add_params_file_argument,
-                            check_output, field_names, method_params, params_to_dict,
-                            print_json, read_input, read_valid, say, settings)
+                            check_output, input_state, method_recipe, params_to_dict,
+                            print_json, read_input, read_valid, saved_panel, say, settings)
 
 COMMANDS = ("subdivide", "subdivide-train", "subdivide-eval")
 
 
 def _neural_or_baseline(method: str, weights: str | None):
-    """``fn(V, F, levels) -> (V, F)`` for a subdivision method name."""
+    """``fn(V, F, levels) -> (V, F)`` for a subdivision method name (subdivide-eval)."""
     from algorithms.subdivision.baselines import subdivide_baseline
 
     if method == "neural":
@@ -26,6 +39,22 @@ def _neural_or_baseline(method: str, weights: str | None):
         net, _ = load_weights(None if weights in (None, "shipped") else weights)
         return lambda V, F, levels: neural_subdivide(V, F, levels, net)
     return lambda V, F, levels: subdivide_baseline(V, F, levels, method)
+
+
+def subdivide_options(args: argparse.Namespace, method: str) -> dict:
+    """The Subdivision recipe's options: the project's saved ones (if any) < ``--weights``
+    (``shipped``, or a weights file, checked and stored as a blob; read only for neural
+    subdivision, as before)."""
+    saved = saved_panel(args, "Subdivision")
+    options = dict(saved["options"]) if saved is not None else {}
+    if args.weights is not None and method == "neural":
+        if args.weights == "shipped":
+            options["weights"] = "shipped"
+        else:
+            from app.recipes.subdivision import weights_blob_from_file
+
+            options.update(weights="file", weights_file=weights_blob_from_file(args.weights))
+    return options
 
 
 def cmd_subdivide(args: argparse.Namespace) -> int:
@@ -41,15 +70,16 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
     params = params_from_dict(SubdivideParams, values)
     check_output(args.output, args.overwrite, args.mesh)
     data, _ = read_input(args, quiet=args.json)
-    fn = _neural_or_baseline(params.method, args.weights)
+    options = subdivide_options(args, params.method)
+    state = input_state(args, data)
+    recipe = method_recipe("subdivision", "Subdivision")
     t0 = time.perf_counter()
-    V, F = data.V, data.F
-    if params.coarsen_first and params.coarsen_first < len(V):   # as the Subdivision panel
-        from algorithms.subdivision.metrics import coarsen_to_vertices
-
-        V, F = coarsen_to_vertices(V, F, params.coarsen_first)
-    V, F = fn(V, F, params.levels)
+    last = None
+    for last in recipe.steps(state, params, options, {}):
+        pass
+    after = recipe.result(state, last, options)
     dt = time.perf_counter() - t0
+    V, F = after.V, after.F
     write_mesh(args.output, V, F)
     out = {"input": args.mesh, "output": args.output, "method": params.method,
            "levels": params.levels, "coarsen_first": params.coarsen_first,
@@ -63,62 +93,93 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
     return 0
 
 
+def training_params(args: argparse.Namespace, project=None):
+    """The "Subdivision training" Params: defaults < the training settings saved in a project
+    given as the first mesh (the Subdivision panel's coarse meshes and epochs) < ``--params``
+    < the flags."""
+    from algorithms.params import describe, params_from_dict
+    from app.recipes import subdivision as rs
+
+    cls = rs.training_params_cls()
+    specs = {spec.name: spec for spec in describe(cls)}
+    defaults = {name: spec.default for name, spec in specs.items()}
+    if project is not None:
+        saved = {**(project.options_of(rs.SUBDIVIDE_RECIPE).get("training") or {}),
+                 **project.params_of(rs.TRAIN_RECIPE)}
+        defaults.update({k: v for k, v in saved.items() if k in defaults})
+    values = settings(args, defaults)
+    for k, v in values.items():  # JSON's 3.0 for a whole-number field
+        if specs[k].type is int and isinstance(v, float) and v.is_integer():
+            values[k] = int(v)
+    return params_from_dict(cls, values)
+
+
 def cmd_subdivide_train(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from algorithms.subdivision.data import DataParams, generate_dataset
-    from algorithms.subdivision.model import save_weights
-    from algorithms.subdivision.train import Trainer, TrainParams
+    from algorithms.mesh.io import atomic_write
+    from app.document import MeshState
+    from app.project import is_project_path, read_project
+    from app.recipes import subdivision as rs
 
-    names = field_names(DataParams, TrainParams)
-    dparams = method_params(args, DataParams, allowed=names)
-    tparams = method_params(args, TrainParams, allowed=names)
+    first = args.meshes[0]
+    project = read_project(first) if is_project_path(first) else None
+    params = training_params(args, project)
+    dparams, tparams = rs.split_training_params(params)
     check_output(args.output, args.overwrite)
-    shapes = [read_valid(p, clean=args.clean, quiet=args.json)[0] for p in args.meshes]
+    shapes = [read_valid(p, clean=args.clean, quiet=args.json,
+                         project=project if k == 0 else None)[0]
+              for k, p in enumerate(args.meshes)]
     quiet = args.json or args.quiet
-    t0 = time.perf_counter()
-    last = {"pct": -1}
-
-    def progress(frac, msg):
-        pct = int(frac * 100)
-        if not quiet and pct >= last["pct"] + 10:
-            last["pct"] = pct
-            print(f"  data: {msg}", file=sys.stderr)
-
-    samples = generate_dataset([(d.V, d.F) for d in shapes], dparams, workers=args.workers,
-                               scheduler=args.scheduler, cache_dir=args.cache_dir,
-                               use_cache=not args.no_cache, progress=progress)
-    t_data = time.perf_counter() - t0
-    trainer = Trainer(samples, tparams)
-    t1 = time.perf_counter()
+    options = {"workers": args.workers, "cache": not args.no_cache}
+    recipe = method_recipe("subdivision", rs.TRAIN_RECIPE)
+    state = MeshState.make(shapes[0].V, shapes[0].F)
+    shown = -1
+    last = None
+    epoch_seconds = []
+    steps = rs.training_steps(state, params, options, {},
+                              meshes=[(d.V, d.F) for d in shapes], scheduler=args.scheduler,
+                              cache_dir=args.cache_dir)
     try:
-        for step in trainer.steps():
-            if not quiet and (step.iteration % 10 == 0 or step.iteration == 1):
-                print(f"  {step.message}", file=sys.stderr)
+        for step in steps:
+            if isinstance(step, rs.TrainingStep):
+                last = step
+                epoch_seconds.append(float(step.metrics["seconds"]))
+                if not quiet and (step.iteration % 10 == 0 or step.iteration == 1):
+                    print(f"  {step.message}", file=sys.stderr)
+            elif not quiet and step.total:  # making the coarse meshes: every 10 %
+                pct = int(100 * step.iteration / step.total)
+                if pct >= shown + 10:
+                    shown = pct
+                    print(f"  data: {step.message}", file=sys.stderr)
     except KeyboardInterrupt:
+        if last is None:  # no epoch finished: no weights worth keeping
+            raise
         say("stylize3d subdivide-train: interrupted; saving the best weights so far.")
-    t_train = time.perf_counter() - t1
-    info = {"trained_on": ", ".join(Path(p).name for p in args.meshes),
-            "coarse_meshes": dparams.coarse_meshes, "levels": dparams.levels,
-            "epochs_run": len(trainer.history), "best_epoch": trainer.best_epoch,
-            "best_validation_loss": float(trainer.best_loss), "targets": dparams.targets}
-    save_weights(args.output, trainer.net, info)
-    spe = trainer.seconds_per_epoch
+    finally:
+        steps.close()
+    trained_on = ", ".join(Path(p).name for p in args.meshes)
+    data = rs.trained_weights_bytes(last, {"trained_on": trained_on})
+    atomic_write(args.output, lambda fh: fh.write(data))
+    outcome = recipe.outcome(last)
+    t_data = float(last.data_seconds)
     out = {"weights": args.output, "meshes": list(args.meshes),
-           "coarse_meshes": len(samples), "epochs": len(trainer.history),
-           "best_epoch": trainer.best_epoch, "best_validation_loss": float(trainer.best_loss),
-           "final_loss": trainer.history[-1]["loss"] if trainer.history else None,
-           "stopped_early": bool(trainer.stopped_early),
-           "seconds_data": t_data, "seconds_training": t_train,
-           "seconds_per_epoch": float(np.median(spe)) if spe else None}
+           "coarse_meshes": int(dparams.coarse_meshes), "epochs": int(outcome["epochs"]),
+           "best_epoch": int(outcome["best_epoch"]),
+           "best_validation_loss": float(outcome["best_validation_loss"]),
+           "final_loss": float(outcome["losses"][-1]),
+           "stopped_early": bool(outcome["stopped_early"]),
+           "seconds_data": t_data, "seconds_training": float(sum(epoch_seconds)),
+           "seconds_per_epoch": float(np.median(epoch_seconds))}
     if args.json:
         print_json(out)
     else:
         stopped = (f" (stopped early: no progress in {tparams.patience} epochs)"
-                   if trainer.stopped_early else "")
-        print(f"Wrote {args.output}: {len(samples)} coarse meshes ({t_data:.0f} s), "
-              f"{len(trainer.history)} epochs{stopped} ({t_train:.0f} s); best validation loss "
-              f"{trainer.best_loss:.4g} at epoch {trainer.best_epoch}.")
+                   if out["stopped_early"] else "")
+        print(f"Wrote {args.output}: {out['coarse_meshes']} coarse meshes ({t_data:.0f} s), "
+              f"{out['epochs']} epochs{stopped} ({out['seconds_training']:.0f} s); best "
+              f"validation loss {out['best_validation_loss']:.4g} at epoch "
+              f"{out['best_epoch']}.")
     return 0
 
 

@@ -56,6 +56,14 @@ Options (JSON-able; every key optional):
     built on are then an input of the run (:func:`hierarchy_option`). Not used by the
     hierarchy recipe (it always builds on the input's positions).
 
+``rtol`` : float, ``max_iterations`` : int, ``fallback`` : bool
+    the multigrid solve's stopping tolerance (relative residual, default :data:`RTOL`), its
+    most iterations (default :data:`MAX_ITERATIONS`; it also stops early when the residual
+    grows or stalls) and whether an unconverged solve falls back to the direct solver when it
+    fits in memory (default True; False raises NotConvergedError). Smoothing only (the
+    command line's ``--rtol``, ``--max-cycles`` and ``--no-fallback``); the panel uses the
+    defaults.
+
 The panel's options also hold ``flow_step_size`` and ``flow_steps`` (its flow's settings, kept
 with a project), which these recipes do not read: a flow run takes them as its Params.
 
@@ -189,6 +197,26 @@ def _warm_list(options: dict) -> list[float]:
     if not all(0.0 < a < 1.0 for a in alphas):
         raise ParameterError("Every α in options['warm_start'] must lie between 0 and 1.")
     return alphas
+
+
+def solve_options(options: dict) -> tuple[float, int, bool]:
+    """(rtol, max_iterations, fallback) of a smoothing run's options (module docstring)."""
+    from algorithms.errors import ParameterError
+
+    try:
+        rtol = float(options.get("rtol", RTOL))
+        maxiter = options.get("max_iterations", MAX_ITERATIONS)
+        if isinstance(maxiter, float) and maxiter.is_integer():
+            maxiter = int(maxiter)
+        if isinstance(maxiter, bool) or not isinstance(maxiter, int):
+            raise ValueError
+    except (TypeError, ValueError):
+        raise ParameterError("options['rtol'] must be a number and options['max_iterations'] "
+                             "a whole number.") from None
+    if not (rtol > 0 and maxiter >= 1):
+        raise ParameterError(f"The multigrid tolerance must be positive and the iterations at "
+                             f"least 1 (got {rtol:g} and {maxiter}).")
+    return rtol, maxiter, bool(options.get("fallback", True))
 
 
 # ------------------------------------------------------------------------------ hierarchy
@@ -347,10 +375,11 @@ def smoothing_steps(state, params, options=None, cache=None) -> Iterator[Step]:
     matrices" (when not cached), the re-solves of ``warm_start`` (when not cached), then one
     step per iteration with its relative residual, then the last step whose ``values`` is the
     smoothed signal, ``V`` the smoothed positions (``signal="positions"``) or the input's,
-    ``info`` the solver's report plus ``auto`` (the sentence of ``solver="auto"``) and
-    ``warm_start`` (whether it started from an earlier solution). An unconverged multigrid
+    ``info`` the solver's report plus ``auto`` (the sentence of ``solver="auto"``),
+    ``warm_start`` (whether it started from an earlier solution) and ``precompute_seconds``
+    (building the Galerkin matrices in this run; 0 when cached). An unconverged multigrid
     solve falls back to the direct solver when it fits in memory (``info["fallback"]``) or
-    raises NotConvergedError."""
+    raises NotConvergedError (``options["fallback"]`` False: always raises)."""
     from algorithms.multigrid.applications import DataSmoother
     from algorithms.smoothing import unit_area
 
@@ -362,13 +391,16 @@ def smoothing_steps(state, params, options=None, cache=None) -> Iterator[Step]:
     f_src, made = signal_values(state, options)
     f = np.array(f_src, dtype=np.float64)
     chain = _warm_list(options) if solver == "multigrid" else []
+    rtol, maxiter, fallback = solve_options(options)
     mg = None
     if solver == "multigrid":
         mg = yield from hierarchy_steps(state, options, cache)
     sm, skey = _smoother(state, params.energy, solver, mg, cache)
+    precompute_seconds = 0.0
     if sm is None:
         yield Step(0, None, V, {}, "preparing the Galerkin matrices")
         sm = DataSmoother(unit_area(V, F), F, energy=params.energy, solver=solver, mg=mg)
+        precompute_seconds = float(sm.precompute_seconds)
         _keep(cache["smoothers"], skey, (V, F, mg, sm), _KEEP_SMOOTHERS)
     sols = cache.setdefault("solutions", {})
     fkey = skey + (id(f_src),)
@@ -384,9 +416,11 @@ def smoothing_steps(state, params, options=None, cache=None) -> Iterator[Step]:
         if start < len(chain):
             yield Step(0, None, V, {}, f"warm start: solving {len(chain) - start} earlier α")
         for k in range(start, len(chain)):
-            x0, _info = sm.smooth_checked(f, chain[k], rtol=RTOL, maxiter=MAX_ITERATIONS, x0=x0)
+            x0, _info = sm.smooth_checked(f, chain[k], rtol=rtol, maxiter=maxiter, x0=x0,
+                                          fallback=fallback)
             _keep(sols, fkey + (tuple(chain[:k + 1]),), (f_src, x0), _KEEP_SOLUTIONS)
-    u, info = sm.smooth_checked(f, params.alpha, rtol=RTOL, maxiter=MAX_ITERATIONS, x0=x0)
+    u, info = sm.smooth_checked(f, params.alpha, rtol=rtol, maxiter=maxiter, x0=x0,
+                                fallback=fallback)
     done = chain + [float(params.alpha)]
     _keep(sols, fkey + (tuple(done),), (f_src, u), _KEEP_SOLUTIONS)
     cache["last"] = {"V": V, "F": F, "f": f_src, "energy": params.energy, "solver": solver,
@@ -394,6 +428,7 @@ def smoothing_steps(state, params, options=None, cache=None) -> Iterator[Step]:
     info["warm_start"] = x0 is not None
     info["auto"] = why
     info["requested_solver"] = solver
+    info["precompute_seconds"] = precompute_seconds
     res = np.asarray(info.get("residuals") or [], dtype=np.float64)
     if res.size:
         res = res / (res[0] if res[0] > 0 else 1.0)

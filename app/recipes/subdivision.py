@@ -77,6 +77,7 @@ class TrainingStep(Step):
     losses, validation_losses : the training and validation loss of every epoch so far.
     stopped_early : training ends here by its patience rule.
     info : the data and training settings (for the weights file's ``info``).
+    data_seconds : how long making the coarse meshes took (for display; varies run to run).
     """
 
     best_state: dict | None = None
@@ -86,6 +87,7 @@ class TrainingStep(Step):
     validation_losses: tuple = ()
     stopped_early: bool = False
     info: dict = dataclasses.field(default_factory=dict)
+    data_seconds: float = 0.0
 
 
 # ------------------------------------------------------------------------------ weights
@@ -236,11 +238,20 @@ def split_training_params(params):
     return tuple(out)
 
 
-def training_steps(state, params, options: dict | None = None, cache: dict | None = None
+def training_steps(state, params, options: dict | None = None, cache: dict | None = None,
+                   *, meshes=None, scheduler: str | None = None, cache_dir=None
                    ) -> Iterator[Step]:
     """"Train on this mesh": the coarse meshes of the mesh (progress steps, cancellable), then
     one :class:`TrainingStep` per epoch (stopping keeps the best weights: every step carries
-    them)."""
+    them).
+
+    For the command line (``subdivide-train``), beyond the recipe's input: ``meshes``, a list
+    of (V, F) to make the coarse meshes from instead of the state's mesh (spread evenly over
+    them; ``[(state.V, state.F)]`` is the recipe's run), ``scheduler``, the address of a Dask
+    scheduler to make them on, and ``cache_dir``, the data cache's folder (default
+    ``$STYLIZE3D_CACHE``); where the data is made or cached does not change it."""
+    import time
+
     from algorithms.params import params_to_dict
     from algorithms.steps import with_progress
     from algorithms.subdivision.data import generate_dataset
@@ -250,14 +261,19 @@ def training_steps(state, params, options: dict | None = None, cache: dict | Non
     dparams, tparams = split_training_params(params)
     workers = int(options.get("workers", 2))
     use_cache = bool(options.get("cache", True))
-    V, F = np.asarray(state.V), np.asarray(state.F)
+    if meshes is None:
+        meshes = [(state.V, state.F)]
+    shapes = [(np.asarray(V), np.asarray(F)) for V, F in meshes]
     box: dict = {}
+    t0 = time.perf_counter()
     yield from with_progress(
-        lambda progress: generate_dataset([(V, F)], dparams, workers=workers,
+        lambda progress: generate_dataset(shapes, dparams, workers=workers,
+                                          scheduler=scheduler, cache_dir=cache_dir,
                                           use_cache=use_cache, progress=progress),
         state.V, box)
     if "value" not in box:
         return
+    data_seconds = time.perf_counter() - t0
     trainer = Trainer(box["value"], tparams)
     info = {**params_to_dict(dparams), **params_to_dict(tparams)}
     losses: list[float] = []
@@ -271,21 +287,23 @@ def training_steps(state, params, options: dict | None = None, cache: dict | Non
                                best_state=trainer.best_state, best_epoch=int(trainer.best_epoch),
                                best_loss=float(trainer.best_loss), losses=tuple(losses),
                                validation_losses=tuple(vlosses),
-                               stopped_early=bool(trainer.stopped_early), info=info)
+                               stopped_early=bool(trainer.stopped_early), info=info,
+                               data_seconds=data_seconds)
     finally:
         steps.close()
 
 
-def trained_weights_bytes(step: TrainingStep) -> bytes:
+def trained_weights_bytes(step: TrainingStep, extra_info: dict | None = None) -> bytes:
     """The weights file (the project's format, :func:`~algorithms.subdivision.model.save_weights`)
-    of a training step's best weights, as bytes (the same bytes for the same weights)."""
+    of a training step's best weights, as bytes (the same bytes for the same weights);
+    ``extra_info`` is added to the file's ``info`` (e.g. the command line's ``trained_on``)."""
     from algorithms.subdivision.model import SubdivisionNet, save_weights
 
     net = SubdivisionNet(seed=0)  # seeded: leaves the global torch generator alone
     net.load_state(step.best_state)
     info = {"trained_by": TRAIN_RECIPE, "epochs_run": int(step.iteration),
             "best_epoch": int(step.best_epoch),
-            "best_validation_loss": float(step.best_loss), **step.info}
+            "best_validation_loss": float(step.best_loss), **step.info, **(extra_info or {})}
     with tempfile.TemporaryDirectory(prefix="stylize3d-weights-") as d:
         p = Path(d) / TRAINED_WEIGHTS_NAME
         save_weights(p, net, info)
