@@ -1,5 +1,5 @@
-"""``stylize3d cubic`` (the Cubic recipe, thesis ch. 5) and ``stylize3d analogy`` (normal-driven
-shape analogies, thesis ch. 6).
+"""``stylize3d cubic`` (the Cubic recipe, thesis ch. 5) and ``stylize3d analogy`` (the Analogies
+recipe: normal-driven shape analogies, thesis ch. 6).
 
 ``cubic`` is a thin wrapper around the recipe :mod:`app.recipes.cubic`: on a project
 (``scene.s3d``) it uses the painted λ scale, fixed region, plane, cube frames and point handles,
@@ -8,6 +8,14 @@ it gives the same vertices as ``app.recipes.run("cubic", project)``. Flags given
 line win (``--progressive-faces`` / ``--no-progressive`` / ``--global-solver`` over the saved
 options). On a plain mesh (or a project without saved Cubic settings) meshes above
 ``AUTO_PROGRESSIVE_FACES`` triangles go through affine progressive meshes, as in the app.
+
+``analogy`` is a thin wrapper around the recipe :mod:`app.recipes.analogies`: its options are
+the style (a primitive, a style file given here, stored as a blob, or on a project the saved
+style: a primitive, a style file or the painted capture sphere), the style map and progressive
+meshes; defaults < the Analogies panel's saved options < ``--style`` / ``--style-map`` /
+``--progressive-faces`` / ``--no-progressive``. The panel has no progressive switch: unless the
+saved options hold one, big meshes go through progressive meshes as on a plain mesh. Without
+that (or below the size), the output is ``app.recipes.run("analogy", project)`` bit for bit.
 """
 
 from __future__ import annotations
@@ -15,8 +23,10 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from contextlib import contextmanager
+from pathlib import Path
 
-from algorithms.errors import ParameterError
+from algorithms.errors import ParameterError, Stylize3DError
 from algorithms.params import params_from_dict
 from app.cli.common import (MESH_HELP, add_params_arguments, add_params_file_argument,
                             check_output, input_state, method_params, method_recipe,
@@ -126,44 +136,112 @@ def cmd_cubic(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_analogy(args: argparse.Namespace) -> int:
-    from algorithms.deform.analogies import AnalogyParams, ShapeAnalogy, angles_to_targets
-    from algorithms.deform.targets import load_style
-    from algorithms.mesh import write_mesh
+@contextmanager
+def user_paths(named: dict[str, str]):
+    """Errors raised inside name the user's files, not the copies of their blobs that the
+    recipe reads (``named``: blob reference -> the path given on the command line)."""
+    try:
+        yield
+    except Stylize3DError as e:
+        from app.recipes import blob_path
+
+        text = str(e)
+        for ref, path in named.items():
+            text = text.replace(str(blob_path(ref)), path)
+        if text != str(e):
+            e.args = (text,)
+        raise
+
+
+def analogy_style_options(args: argparse.Namespace) -> tuple[dict, dict]:
+    """The Analogies recipe's style options (``style``, ``style_map``, ``capture``): defaults <
+    the project's saved options < ``--style`` / ``--style-map``; a style file given here becomes
+    a blob. Returns ``(options, {blob reference: path given})``."""
+    from algorithms.deform.targets import PRIMITIVES, load_style
+    from app.recipes import put_blob_file
+    from app.recipes.analogies import CAPTURE
+
+    saved = saved_panel(args, "Analogies")
+    saved = dict(saved["options"]) if saved is not None else {}
+    options = {"style": "cube", "style_map": "auto", **saved}
+    named: dict[str, str] = {}
+    style = args.style
+    if style is None or style in PRIMITIVES:
+        pass
+    elif style == CAPTURE and saved.get("capture") is not None:
+        pass  # the project's painted capture sphere
+    elif Path(style).is_file():
+        named[put_blob_file(style)] = style
+        style = next(iter(named))
+    else:
+        load_style(style, args.style_map or "auto")  # its plain message (no such file, ...)
+        raise ParameterError(f"Unknown style '{style}': use one of {', '.join(PRIMITIVES)}, a "
+                             "capture .json file or a mesh file.")
+    if style is not None:
+        options["style"] = style
+    if args.style_map is not None:
+        options["style_map"] = args.style_map
+    return options, named
+
+
+def analogy_progressive(args: argparse.Namespace, options: dict, n_faces: int) -> bool:
+    """Set ``options["progressive"]``: ``--progressive-faces`` / ``--no-progressive``, else the
+    project's saved choice, else the automatic one for big meshes (the panel has no such
+    switch, so a project without it keeps the command's automatic choice). Returns whether
+    progressive meshes were chosen automatically."""
+    if args.progressive_faces is None and not args.no_progressive and "progressive" in options:
+        if options["progressive"] is not None:  # no previews on the command line
+            options["progressive"] = {**options["progressive"], "preview_every": 0}
+        return False
+    prog = _progressive_choice(args, n_faces, "analogy")
+    options["progressive"] = None if prog is None else params_to_dict(prog)
+    return prog is not None and args.progressive_faces is None
+
+
+def _angles_to_targets(V, F, target_map) -> tuple[float, float]:
+    """(mean, max) degrees between the vertex normals and their targets (area-weighted mean)."""
+    from algorithms.deform.analogies import angles_to_targets
     from algorithms.mesh.operators import mass_matrix, vertex_normals
+
+    N = vertex_normals(V, F)
+    return angles_to_targets(N, target_map(N), mass_matrix(V, F, "voronoi").diagonal())
+
+
+def cmd_analogy(args: argparse.Namespace) -> int:
+    from algorithms.deform.analogies import AnalogyParams
+    from algorithms.mesh import write_mesh
+    from app.recipes.analogies import style_target_map
 
     params = method_params(args, AnalogyParams, panel="Analogies")
     check_output(args.output, args.overwrite, args.mesh)
-    target_map, what = load_style(args.style, args.style_map)
+    options, named = analogy_style_options(args)
+    cache: dict = {}  # the style's target map is built once, for the run and the figures
+    with user_paths(named):
+        target_map, what = style_target_map(options, cache)
     data, _ = read_input(args, quiet=args.json or args.quiet)
-
-    def angles(V):
-        N = vertex_normals(V, data.F)
-        return angles_to_targets(N, target_map(N), mass_matrix(V, data.F, "voronoi").diagonal())
-
-    before = angles(data.V)
+    state = input_state(args, data)
+    auto = analogy_progressive(args, options, len(data.F))
+    prog = options["progressive"]
+    before = _angles_to_targets(data.V, data.F, target_map)
+    recipe = method_recipe("analogies", "Analogies")
     t0 = time.perf_counter()
     last = None
-    prog = _progressive_choice(args, len(data.F), "analogy")
-    if prog is not None:
-        from algorithms.deform.progressive import progressive_analogy_iter
-
-        steps = progressive_analogy_iter(data.V, data.F, target_map, params, prog)
-    else:
-        steps = ShapeAnalogy(data.V, data.F, target_map).steps(params)
-    for last in steps:
-        if not args.json and not args.quiet and "mean_angle_to_targets" in last.metrics:
-            print(f"  iteration {last.iteration}: mean angle to targets "
-                  f"{last.metrics['mean_angle_to_targets']:.2f}°", file=sys.stderr)
+    with user_paths(named):
+        for last in recipe.steps(state, params, options, cache):
+            if not args.json and not args.quiet and "mean_angle_to_targets" in last.metrics:
+                print(f"  iteration {last.iteration}: mean angle to targets "
+                      f"{last.metrics['mean_angle_to_targets']:.2f}°", file=sys.stderr)
     seconds = time.perf_counter() - t0
-    write_mesh(args.output, last.V, data.F)
-    after = angles(last.V)
+    V = recipe.result(state, last, options).V
+    write_mesh(args.output, V, data.F)
+    after = _angles_to_targets(V, data.F, target_map)
     if args.json:
-        print_json({"input": args.mesh, "output": args.output, "style": args.style,
+        print_json({"input": args.mesh, "output": args.output,
+                    "style": args.style if args.style is not None else options["style"],
                     "style_map": what, "params": params_to_dict(params),
                     "iterations": last.iteration, "seconds": seconds,
-                    "progressive_faces": None if prog is None else prog.target_faces,
-                    "progressive_auto": prog is not None and args.progressive_faces is None,
+                    "progressive_faces": None if prog is None else int(prog["target_faces"]),
+                    "progressive_auto": auto,
                     "mean_angle_before": before[0], "max_angle_before": before[1],
                     "mean_angle_after": after[0], "max_angle_after": after[1]})
     else:
@@ -214,15 +292,21 @@ def add_parsers(sub) -> None:
     add_params_arguments(s, CubicParams)
     s.set_defaults(func=cmd_cubic)
 
-    s = sub.add_parser("analogy", help="normal-driven shape analogy (thesis ch. 6)")
+    s = sub.add_parser("analogy", help="normal-driven shape analogy (thesis ch. 6)",
+                       description="Normal-driven shape analogy (thesis ch. 6). On a project "
+                                   "(.s3d) it uses the Analogies panel's saved settings and "
+                                   "style (a style file or the painted capture sphere saved "
+                                   "with it); flags given here win.")
     s.add_argument("mesh", help=MESH_HELP)
     s.add_argument("-o", "--output", required=True, help="where to write the stylized mesh")
-    s.add_argument("--style", default="cube",
+    s.add_argument("--style",
                    help=f"a primitive ({', '.join(PRIMITIVES)}), a normal-capture .json file, or "
-                        "a style mesh file. Default: cube.")
-    s.add_argument("--style-map", choices=STYLE_MAP_MODES, default="auto",
+                        "a style mesh file; on a project, 'capture sphere' is its painted "
+                        "capture sphere. Default: cube (or the project's saved style).")
+    s.add_argument("--style-map", choices=STYLE_MAP_MODES,
                    help="for a style mesh: closest face normals (convex meshes) or a spherical "
-                        "parameterization (any closed genus-0 mesh); auto picks. Default: auto.")
+                        "parameterization (any closed genus-0 mesh); auto picks. Default: auto "
+                        "(or the project's saved choice).")
     s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
     s.add_argument("--json", action="store_true",
                    help="print iterations, time, and the mean/max angle to the targets before "

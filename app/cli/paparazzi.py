@@ -1,16 +1,29 @@
 """``stylize3d paparazzi``: image filters applied to a shape through many rendered views
-(thesis ch. 2). Filters registered by ``--plugin`` files add their own flags."""
+(thesis ch. 2). Filters registered by ``--plugin`` files add their own flags.
+
+A thin wrapper around the recipe "Paparazzi" (:mod:`app.recipes.paparazzi`): Params from the
+flags (defaults < a project's saved Paparazzi settings < ``--params`` < flags); the options are
+the filter and its parameters (``--filter`` and the filter's flags over, for the same filter,
+the project's saved ones; the filter's files, e.g. ``--image``, become blobs) and the plug-in
+file the filter comes from. The output is the recipe's result: ``app.recipes.run("paparazzi",
+...)`` with the same inputs gives the same mesh bit for bit. The command also checks the result
+(a 2-manifold of the input's topology, no new self-intersections) before writing it.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
 import time
+from contextlib import contextmanager
+from typing import Any
 
-from algorithms.errors import Stylize3DError
+from algorithms.errors import ParameterError, Stylize3DError
 from algorithms.params import describe, params_from_dict
 from app.cli.common import (MESH_HELP, add_params_arguments, add_params_file_argument,
-                            check_output, method_params, params_to_dict, print_json, read_input)
+                            check_output, input_state, method_params, method_recipe,
+                            params_to_dict, print_json, read_input, saved_panel)
+from app.cli.deform import user_paths
 
 COMMANDS = ("paparazzi",)
 
@@ -90,16 +103,19 @@ def _add_paparazzi_filter_flags(s: argparse.ArgumentParser) -> None:
         if flag in flags:                  # a plugin's field clashing with a flag already there
             flag = f"--{name}-{spec.name.replace('_', '-')}"
         help_text = f"[{name}] {spec.tooltip} Default: {spec.default}.".replace("%", "%%")
+        # None = not given: the project's saved value (same filter) or the default is used
         if spec.type is bool:
             group.add_argument(flag, dest=dest, action=argparse.BooleanOptionalAction,
-                               default=spec.default, help=help_text)
+                               default=None, help=help_text)
         else:
-            group.add_argument(flag, dest=dest, type=spec.type, default=spec.default,
+            group.add_argument(flag, dest=dest, type=spec.type, default=None,
                                choices=spec.choices, metavar=spec.name.upper(), help=help_text)
     for action in s._actions:
         if action.dest == "filter":
             action.choices = filter_names()
-            action.help = "the image filter: " + "; ".join(
+            action.help = "the image filter (required unless the input is a project with " \
+                "saved Paparazzi settings, whose filter and filter parameters are then " \
+                "used): " + "; ".join(
                 f"{n}: {get_filter(n).description or 'a user filter'}"
                 for n in filter_names()).replace("%", "%%")
 
@@ -112,7 +128,7 @@ def add_parsers(sub) -> None:
     s.__class__ = _PaparazziParser     # same state, plus the --plugin pre-pass above
     s.add_argument("mesh", help=MESH_HELP)
     s.add_argument("-o", "--output", required=True, help="where to write the filtered mesh")
-    s.add_argument("--filter", required=True, help="the image filter")
+    s.add_argument("--filter", help="the image filter")
     s.add_argument("--plugin", action="append", default=[], metavar="FILE.py",
                    help=_PAPARAZZI_PLUGIN_HELP)
     s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
@@ -129,30 +145,93 @@ def add_parsers(sub) -> None:
     s.set_defaults(func=cmd_paparazzi)
 
 
+class _MissingFilter(ParameterError):
+    """No ``--filter`` and no saved one: a usage error, argparse's exit status."""
+
+    exit_code = 2
+
+
+@contextmanager
+def _recorded_run():
+    """Keep the :class:`~algorithms.paparazzi.Paparazzi` object the recipe builds and the
+    seconds its set-up took (``{"run": ..., "setup": ...}``), for the checks and figures the
+    command reports besides the recipe's outcome (the input's self-intersections, the new ones
+    of the result). The recipe builds it with ``algorithms.paparazzi.Paparazzi`` when its first
+    step is asked for; within this block that name is a subclass that only records."""
+    import algorithms.paparazzi as pz
+
+    original = pz.Paparazzi
+    held: dict = {}
+
+    class Recorded(original):
+        def __init__(self, *a, **kw):
+            t0 = time.perf_counter()
+            super().__init__(*a, **kw)
+            held["run"], held["setup"] = self, time.perf_counter() - t0
+
+    pz.Paparazzi = Recorded
+    try:
+        yield held
+    finally:
+        pz.Paparazzi = original
+
+
+def paparazzi_options(args: argparse.Namespace) -> tuple[dict, Any, dict]:
+    """The Paparazzi recipe's options for this run: the filter (``--filter``, else the project's
+    saved one, loading its plug-in from the project when needed) and its parameters (defaults <
+    the project's saved ones, for the same filter < the flags given here); files become blobs.
+    Returns ``(options, the filter's Params as given, {blob reference: path given})``."""
+    from app.recipes import is_blob_ref
+    from app.recipes.paparazzi import ensure_filter, filter_options
+
+    saved = saved_panel(args, "Paparazzi")
+    saved = (saved["options"] or {}) if saved is not None else {}
+    name = args.filter or saved.get("filter")
+    if not name:
+        raise _MissingFilter("the following arguments are required: --filter (unless the "
+                             "input is a project (.s3d) with saved Paparazzi settings)")
+    same = saved.get("filter") == name
+    # the saved plug-in, unless --filter and --plugin name the user's own
+    plugin = saved.get("plugin") if same and not (args.filter and args.plugin) else None
+    spec = ensure_filter(name, plugin)
+    values = {ps.name: ps.default for ps in describe(spec.params)}
+    if same:
+        values.update({k: v for k, v in (saved.get("filter_params") or {}).items()
+                       if k in values})
+    for ps in describe(spec.params):
+        given = getattr(args, f"pz_{spec.name}_{ps.name}".replace("-", "_"), None)
+        if given is not None:
+            values[ps.name] = given
+    fparams = params_from_dict(spec.params, values)
+    options = filter_options(spec.name, fparams)
+    named = {v: values[k] for k, v in options["filter_params"].items()
+             if is_blob_ref(v) and v != values[k]}
+    return options, fparams, named
+
+
 def cmd_paparazzi(args: argparse.Namespace) -> int:
     from algorithms.mesh import write_mesh
     from algorithms.mesh.topology import euler_characteristic, is_manifold
-    from algorithms.paparazzi import Paparazzi, count_self_intersections, get_filter
+    from algorithms.paparazzi import count_self_intersections
     from algorithms.paparazzi.optimize import PaparazziParams
 
     params = method_params(args, PaparazziParams, panel="Paparazzi")
-    spec = get_filter(args.filter)
-    values = {ps.name: getattr(args, f"pz_{spec.name}_{ps.name}".replace("-", "_"))
-              for ps in describe(spec.params)}
-    fparams = params_from_dict(spec.params, values)
+    options, fparams, named = paparazzi_options(args)
     check_output(args.output, args.overwrite, args.mesh)
     quiet = args.json or args.quiet
     data, _ = read_input(args, quiet=quiet)
+    state = input_state(args, data)
+    recipe = method_recipe("paparazzi", "Paparazzi")
     t0 = time.perf_counter()
-    run = Paparazzi(data.V, data.F, spec, fparams, params)
-    setup = time.perf_counter() - t0
     last = None
     report_every = max(1, params.iterations // 10)
-    for last in run.steps():
-        if not quiet and (last.iteration % report_every == 0 or last.message):
-            print(f"  iteration {last.iteration}/{params.iterations}: monitor energy "
-                  f"{last.metrics['monitor_energy']:.6g} {last.message}", file=sys.stderr)
+    with _recorded_run() as held, user_paths(named):
+        for last in recipe.steps(state, params, options, {}):
+            if not quiet and (last.iteration % report_every == 0 or last.message):
+                print(f"  iteration {last.iteration}/{params.iterations}: monitor energy "
+                      f"{last.metrics['monitor_energy']:.6g} {last.message}", file=sys.stderr)
     seconds = time.perf_counter() - t0
+    run = held["run"]
     V, F = last.V, last.F
     manifold = bool(is_manifold(F))
     same_topology = euler_characteristic(F) == euler_characteristic(data.F)
@@ -161,32 +240,34 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
     if not manifold or not same_topology or new_crossings:
         raise Stylize3DError("Paparazzi failed: the result is not a clean 2-manifold with the "
                              "input's topology; nothing was written. Try a smaller learning rate.")
-    write_mesh(args.output, V, F)
+    after = recipe.result(state, last, options)
+    write_mesh(args.output, after.V, after.F)
+    outcome = recipe.outcome(last)
     sec = last.seconds
-    it = last.iteration
+    it = outcome["iterations"]
     if args.json:
         print_json({
-            "input": args.mesh, "output": args.output, "filter": spec.name,
+            "input": args.mesh, "output": args.output, "filter": options["filter"],
             "filter_params": params_to_dict(fparams), "params": params_to_dict(params),
-            "iterations": it, "seconds": seconds, "setup_seconds": setup,
+            "iterations": it, "seconds": seconds, "setup_seconds": held["setup"],
             "seconds_split": {k: sec.get(k, 0.0) for k in
                               ("render", "filter", "derivative", "remesh", "monitor")},
             "seconds_per_iteration": {k: sec.get(k, 0.0) / it for k in
                                       ("render", "filter", "derivative", "remesh")},
-            "initial_monitor_energy": last.metrics["initial_monitor_energy"],
-            "final_monitor_energy": last.metrics["monitor_energy"],
-            "vertices": int(len(V)), "faces": int(len(F)),
+            "initial_monitor_energy": outcome["initial_monitor_energy"],
+            "final_monitor_energy": outcome["monitor_energy"],
+            "vertices": int(len(after.V)), "faces": int(len(after.F)),
             "manifold": manifold, "same_topology": bool(same_topology),
             "self_intersecting_pairs": crossings,
             "input_self_intersecting_pairs": run.input_intersections,
             "new_self_intersecting_pairs": new_crossings,
             "self_intersections": crossings > 0,
-            "remeshes": int(last.metrics["remeshes"]),
-            "rollbacks": int(last.metrics["rollbacks"]),
-            **{k: int(last.metrics.get(k, 0))
+            "remeshes": int(outcome["remeshes"]),
+            "rollbacks": int(outcome["rollbacks"]),
+            **{k: int(outcome.get(k, 0))
                for k in ("remesh_rejected", "remesh_retries", "held_vertices")}})
     else:
-        print(f"Paparazzi '{spec.name}' on {args.mesh}: {it} iterations in {seconds:.1f} s; "
-              f"monitor energy {last.metrics['initial_monitor_energy']:.4g} -> "
-              f"{last.metrics['monitor_energy']:.4g}; {len(V)} vertices; wrote {args.output}.")
+        print(f"Paparazzi '{options['filter']}' on {args.mesh}: {it} iterations in "
+              f"{seconds:.1f} s; monitor energy {outcome['initial_monitor_energy']:.4g} -> "
+              f"{outcome['monitor_energy']:.4g}; {len(after.V)} vertices; wrote {args.output}.")
     return 0

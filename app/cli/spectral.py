@@ -1,14 +1,25 @@
 """``stylize3d coarsen``: spectral coarsening of a mesh operator (thesis ch. 7), with the QSlim
-and algebraic-multigrid baselines measured the same way."""
+and algebraic-multigrid baselines measured the same way.
+
+A thin wrapper around the recipe "Spectral coarsening" (:mod:`app.recipes.spectral`), run in
+this process (option ``isolated`` false): Params from the flags (defaults < a project's saved
+settings < ``--params`` < flags); options ``operator`` / ``alpha`` (``--operator``) and
+``compare`` (``--compare``) over a project's saved ones (the command's own default compares
+with nothing). The JSON, the table and ``-o OUT.npz`` (ours' L, M, P, G and K) come from the
+recipe's outcome, so they equal ``app.recipes.run("coarsen", ...)``'s bit for bit; the seconds
+each method took, which the outcome leaves out, are measured during the run.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
+from contextlib import contextmanager
 
 from algorithms.errors import MeshWriteError, ParameterError
 from app.cli.common import (MESH_HELP, add_params_arguments, add_params_file_argument,
-                            check_output, method_params, print_json, read_input)
+                            check_output, input_state, method_params, method_recipe, print_json,
+                            read_input, saved_panel)
 
 COMMANDS = ("coarsen",)
 
@@ -59,16 +70,85 @@ def _save_npz(path: str, arrays: dict) -> None:
         raise MeshWriteError(f"Could not write {path}: {e.strerror or e}") from None
 
 
+#: the command's options before a project's saved ones and the flags: no baselines unless
+#: asked for, in this process (the panel runs it in a child process)
+CLI_OPTIONS = {"operator": "cotangent", "alpha": 10.0, "compare": [], "isolated": False}
+
+
+def coarsen_options(args: argparse.Namespace) -> dict:
+    """The recipe's options: :data:`CLI_OPTIONS` < the project's saved Spectral coarsening
+    options < ``--operator`` / ``--compare``; always in this process."""
+    saved = saved_panel(args, "Spectral coarsening")
+    options = {**CLI_OPTIONS, **(saved["options"] if saved is not None else {})}
+    if args.operator is not None:
+        options["operator"], options["alpha"] = _parse_operator(args.operator)
+    if args.compare is not None:
+        given = [c for c in args.compare.split(",") if c]
+        bad = [c for c in given if c not in ("ours", "qslim", "amg")]
+        if bad:
+            raise ParameterError(f"--compare takes qslim and/or amg (got {', '.join(bad)}).")
+        options["compare"] = [c for c in dict.fromkeys(given) if c != "ours"]
+    options["isolated"] = False
+    return options
+
+
+@contextmanager
+def _method_seconds():
+    """``{method: seconds}`` of the run inside the block (ours' optimization, each baseline's
+    coarsening), which the recipe's outcome leaves out (it holds no timings, so that a replay
+    can check it): the recipe calls ``algorithms.spectral.compare.compare_coarsenings_iter``
+    when its first step is asked for; within this block that name is a wrapper that only
+    records the seconds of the comparison it returns."""
+    from algorithms.spectral import compare
+
+    original = compare.compare_coarsenings_iter
+    seconds: dict[str, float] = {}
+
+    def recorded(*a, **kw):
+        cmp_ = yield from original(*a, **kw)
+        seconds.update({name: r.seconds for name, r in cmp_.methods.items()})
+        return cmp_
+
+    compare.compare_coarsenings_iter = recorded
+    try:
+        yield seconds
+    finally:
+        compare.compare_coarsenings_iter = original
+
+
+def _table(outcome: dict, seconds: dict) -> str:
+    """The comparison as a text table (one row per method that ran)."""
+    lines = [f"{'method':8s} {'m':>6s} {'C diag':>8s} {'eig mean':>9s} {'eig max':>9s} "
+             f"{'s':>7s}"]
+    for name in outcome["methods"]:
+        lines.append(f"{name:8s} {int(outcome[f'{name}.L.shape'][0]):6d} "
+                     f"{outcome[f'{name}.c_diag_score']:8.3f} "
+                     f"{outcome[f'{name}.eig_rel_error_mean']:9.3g} "
+                     f"{outcome[f'{name}.eig_rel_error_max']:9.3g} "
+                     f"{seconds.get(name, float('nan')):7.2f}")
+    return "\n".join(lines)
+
+
+def _ours_matrices(outcome: dict) -> dict:
+    """Ours' L, M, P, G (n × m prolongation) and K (m × n cluster indicator) from the outcome."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    from app.recipes.spectral import outcome_matrix
+
+    arrays = {k: outcome_matrix(outcome, f"ours.{k}") for k in ("L", "M", "P", "G")}
+    clusters = outcome["ours.clusters"]
+    n = len(clusters)
+    arrays["K"] = sp.csr_matrix((np.ones(n), (clusters, np.arange(n))),
+                                shape=(arrays["P"].shape[0], n))
+    return arrays
+
+
 def cmd_coarsen(args: argparse.Namespace) -> int:
     from algorithms.spectral.coarsen import CoarsenParams
-    from algorithms.spectral.compare import compare_coarsenings
 
     params = method_params(args, CoarsenParams, panel="Spectral coarsening")
-    operator, alpha = _parse_operator(args.operator)
-    methods = ["ours"] + [c for c in (args.compare.split(",") if args.compare else []) if c]
-    bad = [c for c in methods if c not in ("ours", "qslim", "amg")]
-    if bad:
-        raise ParameterError(f"--compare takes qslim and/or amg (got {', '.join(bad)}).")
+    options = coarsen_options(args)
     if args.output:
         check_output(args.output, args.overwrite)
     data, _ = read_input(args, quiet=True)
@@ -76,37 +156,36 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
     if not 2 * (params.k or round(params.m / 3)) < params.m < n:
         raise ParameterError(f"Need 2k < m < n (here n = {n}, m = {params.m}, k = "
                              f"{params.k or round(params.m / 3)}).")
-    iterations = {"n": 0}
-
-    def progress(step):
-        iterations["n"] = step.iteration
-        if not args.json and not args.quiet and step.iteration % 50 == 0:
-            print(f"  iteration {step.iteration}: energy {step.energy:.6g}", file=sys.stderr)
-
-    cmp_ = compare_coarsenings(data.V, data.F, operator, m=params.m, k=params.k or None,
-                               params=params, methods=tuple(dict.fromkeys(methods)),
-                               alpha=alpha, callback=progress)
-    out = {"n": cmp_.n, "m": cmp_.m, "k": cmp_.k, "methods": {}}   # a fixed interface
-    for name, r in cmp_.methods.items():
-        d = {"c_diag_score": r.metrics["c_diag_score"],
-             "eig_rel_err_mean": r.metrics["eig_rel_error_mean"],
-             "eig_rel_err_max": r.metrics["eig_rel_error_max"], "seconds": r.seconds}
+    recipe = method_recipe("spectral", "Spectral coarsening")
+    last = None
+    with _method_seconds() as seconds:
+        for last in recipe.steps(input_state(args, data), params, options, {}):
+            if ("energy" in last.metrics and not args.json and not args.quiet
+                    and last.iteration % 50 == 0):
+                print(f"  iteration {last.iteration}: energy {last.metrics['energy']:.6g}",
+                      file=sys.stderr)
+    outcome = recipe.outcome(last)
+    out = {"n": outcome["n"], "m": outcome["m"], "k": outcome["k"],
+           "methods": {}}   # a fixed interface
+    for name in outcome["methods"]:
+        d = {"c_diag_score": outcome[f"{name}.c_diag_score"],
+             "eig_rel_err_mean": outcome[f"{name}.eig_rel_error_mean"],
+             "eig_rel_err_max": outcome[f"{name}.eig_rel_error_max"],
+             "seconds": seconds.get(name, float("nan"))}
         if name == "ours":
             # the thesis optimizer's (NADAM) iterations, capped by --max-iterations; the
             # balancing stage's come on top (--balance-iterations)
-            d["iterations"] = int(cmp_.timings.get("ours_iterations", iterations["n"]))
+            d["iterations"] = outcome["ours.iterations"]
         out["methods"][name] = d
     if args.output:
-        ours = cmp_.methods["ours"]
-        _save_npz(args.output, {"L": ours.L, "M": ours.M, "P": ours.P,
-                                "G": ours.extra["G"], "K": ours.extra["K"]})
+        _save_npz(args.output, _ours_matrices(outcome))
     if args.json:
         print_json(out)
-        for note in cmp_.notes:   # a baseline left out: said on stderr, absent from "methods"
+        for note in outcome["notes"]:  # a baseline left out: said on stderr, not in "methods"
             print(f"Note: {note}", file=sys.stderr)
     else:
-        print(cmp_.table())
-        for note in cmp_.notes:
+        print(_table(outcome, seconds))
+        for note in outcome["notes"]:
             print(f"Note: {note}")
         if args.output:
             print(f"Wrote {args.output}.")
@@ -118,11 +197,12 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser("coarsen", help="spectral coarsening of a mesh operator (thesis ch. 7)")
     s.add_argument("mesh", help=MESH_HELP)
-    s.add_argument("--operator", default="cotan",
+    s.add_argument("--operator",
                    help="cotan, idt (intrinsic Delaunay), aniso:ALPHA (anisotropic), graph or "
-                        "pointcloud. Default: cotan.")
-    s.add_argument("--compare", default="",
-                   help="baselines to measure the same way: qslim,amg")
+                        "pointcloud. Default: cotan (or the project's saved operator).")
+    s.add_argument("--compare",
+                   help="baselines to measure the same way: qslim,amg (\"\" for none). "
+                        "Default: none (or the project's saved choice).")
     s.add_argument("-o", "--output", help="write ours (L, M, P, G, K) as .npz")
     s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
     s.add_argument("--json", action="store_true",
