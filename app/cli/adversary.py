@@ -87,7 +87,7 @@ def recognized_views(args, state, params, options: dict, say) -> list[float]:
 
     clf = rcp.classifier_of(options.get("classifier"))
     k = rcp.resolve_label(args.label, clf.class_names)
-    scene, _ = rcp._scene_and_cameras(state, params, options, 1)  # the scene the run attacks
+    scene, _ = rcp.scene_and_cameras(state, params, options, 1)  # the scene the run attacks
     found = find_recognized_views(scene, clf, k, candidates=24, elevation=params.elevation,
                                   width=params.view_width, resolution=params.resolution,
                                   supersample=params.supersample)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from contextlib import contextmanager
 
 from algorithms.errors import MeshWriteError, ParameterError
 from app.cli.common import (MESH_HELP, add_params_arguments, add_params_file_argument,
@@ -92,30 +91,6 @@ def coarsen_options(args: argparse.Namespace) -> dict:
     return options
 
 
-@contextmanager
-def _method_seconds():
-    """``{method: seconds}`` of the run inside the block (ours' optimization, each baseline's
-    coarsening), which the recipe's outcome leaves out (it holds no timings, so that a replay
-    can check it): the recipe calls ``algorithms.spectral.compare.compare_coarsenings_iter``
-    when its first step is asked for; within this block that name is a wrapper that only
-    records the seconds of the comparison it returns."""
-    from algorithms.spectral import compare
-
-    original = compare.compare_coarsenings_iter
-    seconds: dict[str, float] = {}
-
-    def recorded(*a, **kw):
-        cmp_ = yield from original(*a, **kw)
-        seconds.update({name: r.seconds for name, r in cmp_.methods.items()})
-        return cmp_
-
-    compare.compare_coarsenings_iter = recorded
-    try:
-        yield seconds
-    finally:
-        compare.compare_coarsenings_iter = original
-
-
 def _table(outcome: dict, seconds: dict) -> str:
     """The comparison as a text table (one row per method that ran)."""
     lines = [f"{'method':8s} {'m':>6s} {'C diag':>8s} {'eig mean':>9s} {'eig max':>9s} "
@@ -158,13 +133,13 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
                              f"{params.k or round(params.m / 3)}).")
     recipe = method_recipe("spectral", "Spectral coarsening")
     last = None
-    with _method_seconds() as seconds:
-        for last in recipe.steps(input_state(args, data), params, options, {}):
-            if ("energy" in last.metrics and not args.json and not args.quiet
-                    and last.iteration % 50 == 0):
-                print(f"  iteration {last.iteration}: energy {last.metrics['energy']:.6g}",
-                      file=sys.stderr)
+    for last in recipe.steps(input_state(args, data), params, options, {}):
+        if ("energy" in last.metrics and not args.json and not args.quiet
+                and last.iteration % 50 == 0):
+            print(f"  iteration {last.iteration}: energy {last.metrics['energy']:.6g}",
+                  file=sys.stderr)
     outcome = recipe.outcome(last)
+    seconds = last.seconds  # each method's time (the outcome holds none)
     out = {"n": outcome["n"], "m": outcome["m"], "k": outcome["k"],
            "methods": {}}   # a fixed interface
     for name in outcome["methods"]:

@@ -289,7 +289,7 @@ def azimuths_of(options: dict, views: int) -> list[float]:
     return [az0 + k * 360.0 / views for k in range(views)]
 
 
-def _scene_and_cameras(state, params, options: dict, views: int):
+def scene_and_cameras(state, params, options: dict, views: int):
     from algorithms.adversarial.attack import orbit_cameras, prepare_scene
 
     scene = prepare_scene(np.asarray(state.V), np.asarray(state.F),
@@ -331,7 +331,7 @@ def _attack_steps(state, params, options: dict, mode: str) -> Iterator[AttackSte
         raise ParameterError("The target is the true label: choose another target, or leave "
                              "it empty.")
     azimuths = azimuths_of(options, params.views)
-    scene, cams = _scene_and_cameras(state, params, options, len(azimuths))
+    scene, cams = scene_and_cameras(state, params, options, len(azimuths))
     rec = _Recording(clf)
     out: dict = {}
     steps = attack_iter(scene, rec, cams, params, decrease=true, increase=target, _out=out)
@@ -433,7 +433,7 @@ def classify_steps(state, params, options: dict | None = None, cache: dict | Non
 
     options = options or {}
     clf = classifier_of(options.get("classifier"))
-    scene, cams = _scene_and_cameras(state, params, options, 1)
+    scene, cams = scene_and_cameras(state, params, options, 1)
     images, renders, _ = render_views(scene, cams[:1], supersample=params.supersample)
     p = classify(clf, images)[0]
     yield PreviewStep(0, None, np.asarray(state.V), {}, "", image=images[0].astype(np.float32),

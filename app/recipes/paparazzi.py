@@ -189,13 +189,20 @@ def run_params(params):
 def paparazzi_steps(state, params, options: dict | None = None, cache: dict | None = None
                     ) -> Iterator[Step]:
     """The Paparazzi panel's run (module docstring). A generator: the filter is found, its
-    files read and the optimizer built when the first step is asked for (the worker thread)."""
+    files read and the optimizer built when the first step is asked for (the worker thread).
+    The optimizer object and the seconds its set-up took are left in ``cache`` (``"run"``,
+    ``"setup_seconds"``) for a caller that reports more (the command line's checks)."""
+    import time
+
     from algorithms.paparazzi import Paparazzi
 
     options = options or {}
     spec = ensure_filter(str(options.get("filter") or DEFAULT_FILTER), options.get("plugin"))
     fparams = resolve_filter_params(spec, options.get("filter_params"))
+    t0 = time.perf_counter()
     run = Paparazzi(np.asarray(state.V), np.asarray(state.F), spec, fparams, run_params(params))
+    if cache is not None:
+        cache["run"], cache["setup_seconds"] = run, time.perf_counter() - t0
     yield from run.steps()
 
 

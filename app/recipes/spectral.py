@@ -48,9 +48,11 @@ DEFAULT_OPTIONS = {"operator": "cotangent", "alpha": 10.0, "compare": list(BASEL
 
 @dataclass
 class ComparisonStep(Step):
-    """The recipe's last Step: ``outcome`` is the run's :func:`comparison_outcome`."""
+    """The recipe's last Step: ``outcome`` is the run's :func:`comparison_outcome`;
+    ``seconds`` each method's time (kept out of the outcome, which a replay compares)."""
 
     outcome: dict = field(default_factory=dict)
+    seconds: dict = field(default_factory=dict)
 
 
 def spectral_options(options: dict | None) -> dict:
@@ -108,7 +110,9 @@ def spectral_steps(state, params, options: dict | None = None, cache: dict | Non
                 cs = next(gen)
             except StopIteration as stop:
                 out = comparison_outcome(stop.value)
-                yield ComparisonStep(last_it + 1, None, state.V, {}, "done", outcome=out)
+                secs = {name: float(r.seconds) for name, r in stop.value.methods.items()}
+                yield ComparisonStep(last_it + 1, None, state.V, {}, "done", outcome=out,
+                                     seconds=secs)
                 return
             if np.isnan(cs.energy):      # the eigenvector stage: its own progress
                 yield Step(cs.iteration, cs.total, state.V, {}, cs.message)
