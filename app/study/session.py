@@ -578,6 +578,8 @@ class StudySession(QObject):
         import shiboken6
 
         st = self.window.undo_stack
+        if not shiboken6.isValid(st) or not shiboken6.isValid(self.window):
+            return  # the window is being destroyed (quitting): nothing the participant did
         if getattr(self, "_opening", False):
             self._snapshot_undo()
             return
