@@ -515,6 +515,9 @@ class MainWindow(QMainWindow):
                 panel.restore_options(entry.get("options") or {})
             except Stylize3DError as e:
                 problems.append(f"{title}: {e}")
+        for panel in self.panels.values():  # restoring settings is not a request to re-run
+            panel._debounce.stop()
+            panel.show_live_state(None)
         self._add_recent(str(path))
         self._update_title()
         st = project.state

@@ -135,7 +135,10 @@ def test_project_saved_in_the_app_remakes_the_run_headless(window, dialogs, qtbo
     window.document.modified = False
     panel.form.editors["lam"].setValue(0.2)
     panel.plane_axis.setCurrentIndex(0)
+    panel.live_box.setChecked(True)  # restoring settings must not start a live re-run
     assert window.open_path(path)
+    qtbot.wait(panel.live_debounce_ms + 200)
+    assert not window.runner.busy and window.undo_stack.count() == 0
     back = window.document.state
     assert _h(back) == _h(st)
     assert panel.form.params().lam == 0.35 and panel.plane_axis.currentIndex() == 2
