@@ -173,6 +173,12 @@ class QuestionnaireDialog(QDialog):
         self.resize(640, 520)
         self._update()
 
+    def reject(self) -> None:  # noqa: D401 - Qt override
+        """Esc or the window's close button: the questions must be answered to go on (a
+        questionnaire left open would leave the task neither finished nor running)."""
+        self.progress.setText("Please answer the questions to go on (OK when done).")
+        self.progress.setStyleSheet("color: #b45309;")
+
     def set_answer(self, item_id: str, value) -> None:
         """Answer one item as the participant would (tests, scripted sessions)."""
         if item_id in self.groups:
@@ -255,6 +261,8 @@ class StudySession(QObject):
         self._saved_states: set[str] = set()
         self._pending_runs: dict[str, dict] = {}
         self._job_names: set[str] = set()  # names of the jobs run (their commits are runs)
+        self._ended = False  # the current task has ended (its questions may still be open)
+        self._setting_up = False  # the app itself is showing / hiding panels
         self.finished = False
         check_against_panels(protocol, {t: getattr(p, "params_cls", object)
                                         for t, p in window.panels.items()})
@@ -280,7 +288,7 @@ class StudySession(QObject):
         window.undo_stack.indexChanged.connect(self._on_undo_index)
         for title, panel in window.panels.items():
             panel.visibilityChanged.connect(
-                lambda vis, t=title: vis and self.log.task and self._log("panel", title=t))
+                lambda vis, t=title: self._on_panel_shown(t) if vis else None)
             form = getattr(panel, "form", None)
             if form is not None:
                 form.changed.connect(lambda _p, t=title: self._reapply_locks(t))
@@ -309,6 +317,9 @@ class StudySession(QObject):
     def _begin(self, task_id: str, resumed: bool = False) -> None:
         task = self.protocol.task(task_id)
         self.task = task
+        self._ended = False
+        for b in (self.bar.done, self.bar.skip):
+            b.setEnabled(True)
         self.log.task = task.id
         if not resumed:
             self._log("task_start", title=task.title)
@@ -348,8 +359,11 @@ class StudySession(QObject):
     def end_task(self, status: str = "done") -> None:
         """Done / Skip / time up: save the result, ask the questions, go on."""
         task = self.task
-        if task is None:
-            return
+        if task is None or self._ended:
+            return  # a task ends once (a second Done while its questions are open does nothing)
+        self._ended = True
+        for b in (self.bar.done, self.bar.skip):
+            b.setEnabled(False)
         if self.window.runner.busy:
             self.window.runner.cancel()
             self.window.runner.wait(30000)
@@ -392,6 +406,15 @@ class StudySession(QObject):
         self._log("session_end")
         self.finished = True
         self._cam_timer.stop()
+        self._tick.stop()
+        self.bar.clock.setText("")
+        self._unlock()
+        self._setting_up = True  # the app shows the panels again, not the participant
+        try:
+            for panel in self.window.panels.values():
+                panel.setVisible(True)
+        finally:
+            self._setting_up = False
         self.bar.title.setText("Session complete")
         self.bar.instructions.setText("Thank you! You can close the app now.")
         for b in (self.bar.done, self.bar.skip, self.bar.more):
@@ -422,7 +445,20 @@ class StudySession(QObject):
             self.bar.clock.setText(f"{s // 60}:{s % 60:02d}")
 
     # -- locking -------------------------------------------------------------------------------
+    def _on_panel_shown(self, title: str) -> None:
+        """A panel came forward: logged when the participant did it, not when a task's set-up
+        showed or hid panels."""
+        if self.log.task and not self._setting_up and not self.finished:
+            self._log("panel", title=title)
+
     def _apply_setup(self, task: Task) -> None:
+        self._setting_up = True
+        try:
+            self._apply_setup_now(task)
+        finally:
+            self._setting_up = False
+
+    def _apply_setup_now(self, task: Task) -> None:
         setup = task.setup(self.condition)
         self._locked = {name: dict(values) for name, values in setup.params.items()}
         for title, panel in self.window.panels.items():

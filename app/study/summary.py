@@ -3,8 +3,10 @@
 One row per (log, task) in the order the participant did the tasks. Columns:
 
 ``study, participant, condition, order, task, status`` (done / skipped / timeout / unfinished),
-``seconds`` (task_start to task_end on the monotonic clock), ``actions`` (events logged during
-the task, not counting task_start / task_end / camera moves), ``runs``, ``failed_runs``,
+``seconds`` (task_start to task_end on the monotonic clock), ``actions`` (what the participant
+did during the task: runs, edits, undo / redo, panels brought forward, questionnaires — not the
+app's own events: task_start / task_end, the task's mesh being opened, results, notes, resumes,
+camera moves, which have their own column), ``runs`` (runs started), ``failed_runs``,
 ``undo``, ``redo``, ``camera_moves``, ``final_params`` (JSON: for each method, the params of its
 last finished run), ``result_hash`` (the document at task end), then one ``q_<item>`` column per
 questionnaire item seen in any log, and ``sus_score`` (0-100, Brooke 1996) where the task asked
@@ -24,7 +26,8 @@ from .protocol import SUS_ITEMS
 BASE_COLUMNS = ["study", "participant", "condition", "order", "task", "status", "seconds",
                 "actions", "runs", "failed_runs", "undo", "redo", "camera_moves",
                 "final_params", "result_hash"]
-_NOT_ACTIONS = {"task_start", "task_end", "camera", "resume", "session_end", "result"}
+_NOT_ACTIONS = {"task_start", "task_end", "camera", "resume", "session_end", "result", "open",
+                "note"}
 
 
 def sus_score(answers: dict) -> float | None:
