@@ -565,9 +565,30 @@ class MainWindow(QMainWindow):
                 elif choice != "Open as it is":
                     return False
             else:
-                self._error("Cannot open mesh", text + "\n\nThese problems cannot be "
-                              "fixed automatically; repair the file in a mesh editor.")
-                return False
+                # what Clean cannot repair may still be removed (vertices with NaN / infinite
+                # coordinates or bad indices, and their triangles), as `stylize3d clean
+                # --remove-invalid-faces` does: offer it when the rest is then usable
+                try:
+                    res = clean_mesh(V, F, remove_invalid_faces=True)
+                    after = validate_mesh(res.V, res.F, notes=notes + list(res.actions))
+                except Stylize3DError:
+                    res, after = None, None
+                if res is None or after.errors or not len(res.F):
+                    self._error("Cannot open mesh", text + "\n\nThese problems cannot be "
+                                "fixed automatically, and removing the broken parts would not "
+                                "leave a usable mesh; repair the file in a mesh editor.")
+                    return False
+                removed = len(F) - len(res.F)
+                choice = dialogs.choose(
+                    self, "Mesh problems", text + "\n\n'Remove the broken parts and open' "
+                    f"deletes what cannot be repaired ({removed:,} triangle(s) with their "
+                    "broken vertices) and fixes the rest, then tells you what it changed; your "
+                    "file is not modified.", ["Remove the broken parts and open", "Cancel"],
+                    default="Remove the broken parts and open")
+                if choice != "Remove the broken parts and open":
+                    return False
+                V, F, report = res.V, res.F, after
+                notes += list(res.actions)
         if not self._confirm_discard():
             return False
         self.undo_stack.clear()

@@ -249,3 +249,34 @@ def test_open_as_is_then_clean_is_undoable(window, dialogs, tmp_path):
     assert window.viewport.n_points == len(V)
     assert not window.clean_mesh()  # nothing left to fix
     assert "Nothing to fix" in dialogs.infos[-1][1]
+
+
+def test_a_nan_vertex_is_not_a_dead_end(window, dialogs, tmp_path):
+    """Issue 24 item 3: one NaN coordinate in a real mesh: the app offers to remove what cannot
+    be repaired (as `stylize3d clean --remove-invalid-faces` does), and says what it removed."""
+    from algorithms.mesh.primitives import icosphere
+
+    V, F = icosphere(3)
+    V = V.copy()
+    V[17, 1] = np.nan
+    path = tmp_path / "scan_with_nan.obj"
+    with open(path, "w") as f:
+        f.writelines(f"v {x} {y} {z}\n" for x, y, z in V)
+        f.writelines(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F)
+    # Cancel: the document stays as it was
+    assert window.open_path(SAMPLE)
+    state = window.document.state
+    dialogs.answers.append("Cancel")
+    assert not window.open_path(path)
+    assert window.document.state is state
+    title, text, choices = dialogs.questions[-1]
+    assert choices == ["Remove the broken parts and open", "Cancel"]
+    assert "NaN" in text or "not a number" in text.lower()
+    assert "repair the file in a mesh editor" not in text
+    # the way forward: the vertex and its triangles go, the rest opens
+    n_tris = int((F == 17).any(axis=1).sum())
+    dialogs.answers.append("Remove the broken parts and open")
+    assert window.open_path(path)
+    assert len(window.document.F) == len(F) - n_tris
+    assert np.isfinite(window.document.V).all() and len(window.document.V) == len(V) - 1
+    assert f"{n_tris:,} triangle" in dialogs.questions[-1][1]
