@@ -24,7 +24,7 @@ import sys
 from pathlib import Path
 
 from algorithms.errors import Stylize3DError
-from app.cli import adversary, deform, mesh_tools, paparazzi, smooth, spectral, study, subdivision
+from app.cli import adversary, batch, deform, mesh_tools, paparazzi, smooth, spectral, study, subdivision
 from app.cli.adversary import cmd_adversary
 from app.cli.common import (INTERNAL_ERROR_EXIT, add_params_arguments, method_params,
                             params_from_args, read_valid, say, settings, silence_stdout,
@@ -38,7 +38,7 @@ from app.cli.study import cmd_study
 from app.cli.subdivision import cmd_subdivide, cmd_subdivide_eval, cmd_subdivide_train
 
 #: the modules that add sub-commands, in the order of ``stylize3d --help``
-MODULES = (mesh_tools, smooth, deform, study, spectral, paparazzi, adversary, subdivision)
+MODULES = (mesh_tools, smooth, deform, study, spectral, paparazzi, adversary, subdivision, batch)
 SUBCOMMANDS: tuple[str, ...] = tuple(c for m in MODULES for c in m.COMMANDS)
 
 def build_parser() -> argparse.ArgumentParser:

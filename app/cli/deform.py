@@ -96,9 +96,10 @@ def cubic_options(args: argparse.Namespace, n_faces: int) -> tuple[dict, bool]:
     return options, False
 
 
-def cmd_cubic(args: argparse.Namespace) -> int:
-    from algorithms.deform.cubic import CubicParams, mean_l1_of_normals
-    from algorithms.mesh import write_mesh
+def cubic_params(args: argparse.Namespace):
+    """The CubicParams of ``cubic``'s flags: defaults < a project's saved Cubic settings <
+    ``--params`` < the flags (``--lambda-xyz`` turns per-axis λ on)."""
+    from algorithms.deform.cubic import CubicParams
 
     params = method_params(args, CubicParams, panel="Cubic")
     if args.lambda_xyz is not None:
@@ -106,6 +107,20 @@ def cmd_cubic(args: argparse.Namespace) -> int:
         params = params_from_dict(CubicParams, {**params_to_dict(params), "per_axis": True,
                                                 "axis_factor_x": x, "axis_factor_y": y,
                                                 "axis_factor_z": z})
+    return params
+
+
+def cubic_job(args: argparse.Namespace, n_faces: int) -> tuple:
+    """``(params, options)`` of the Cubic recipe that ``cubic`` would run on a mesh of
+    ``n_faces`` triangles (``stylize3d batch`` builds its job with it)."""
+    return cubic_params(args), cubic_options(args, n_faces)[0]
+
+
+def cmd_cubic(args: argparse.Namespace) -> int:
+    from algorithms.deform.cubic import mean_l1_of_normals
+    from algorithms.mesh import write_mesh
+
+    params = cubic_params(args)
     check_output(args.output, args.overwrite, args.mesh)
     data, _ = read_input(args, quiet=args.json or args.quiet)
     state = input_state(args, data)
@@ -196,6 +211,20 @@ def analogy_progressive(args: argparse.Namespace, options: dict, n_faces: int) -
     prog = _progressive_choice(args, n_faces, "analogy")
     options["progressive"] = None if prog is None else params_to_dict(prog)
     return prog is not None and args.progressive_faces is None
+
+
+def analogy_job(args: argparse.Namespace, n_faces: int) -> tuple:
+    """``(params, options)`` of the Analogies recipe that ``analogy`` would run on a mesh of
+    ``n_faces`` triangles (the style checked; a style file given becomes a blob)."""
+    from algorithms.deform.analogies import AnalogyParams
+    from app.recipes.analogies import style_target_map
+
+    params = method_params(args, AnalogyParams, panel="Analogies")
+    options, named = analogy_style_options(args)
+    with user_paths(named):
+        style_target_map(options, {})
+    analogy_progressive(args, options, n_faces)
+    return params, options
 
 
 def _angles_to_targets(V, F, target_map) -> tuple[float, float]:

@@ -183,6 +183,15 @@ def paparazzi_options(args: argparse.Namespace) -> tuple[dict, Any, dict]:
     return options, fparams, named
 
 
+def paparazzi_job(args: argparse.Namespace) -> tuple:
+    """``(params, options)`` of the Paparazzi recipe that ``paparazzi`` runs (for
+    ``stylize3d batch``; the filter's files and plug-in become blobs)."""
+    from algorithms.paparazzi.optimize import PaparazziParams
+
+    params = method_params(args, PaparazziParams, panel="Paparazzi")
+    return params, paparazzi_options(args)[0]
+
+
 def cmd_paparazzi(args: argparse.Namespace) -> int:
     from algorithms.mesh import write_mesh
     from algorithms.mesh.topology import euler_characteristic, is_manifold

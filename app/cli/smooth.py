@@ -128,6 +128,31 @@ def data_smoothing_options(args: argparse.Namespace, state, signal: str):
     return options, state
 
 
+def smooth_job(args: argparse.Namespace, data_smoothing: bool | None = None) -> tuple:
+    """``(recipe title, params, options)`` that ``smooth`` runs on any mesh, for ``stylize3d
+    batch``: the flow ("Smooth"), or data smoothing of the positions ("Multigrid smoothing")
+    when its flags ask for it (or ``data_smoothing``). A batch writes meshes, so it smooths
+    the positions: ``--signal`` noise or a field file (values per vertex) is refused with a
+    plain message, and a project's saved signal other than the positions is not used."""
+    from algorithms.mesh import tetrahedron
+    from algorithms.multigrid.params import DataSmoothingParams
+    from algorithms.smoothing import SmoothParams
+    from app.document import MeshState
+    from app.recipes import multigrid as rm
+
+    names = _smooth_names()
+    if not (_data_smoothing_requested(args) if data_smoothing is None else data_smoothing):
+        return "Smooth", method_params(args, SmoothParams, panel="Smooth", allowed=names), {}
+    params = method_params(args, DataSmoothingParams, panel=rm.SMOOTH, allowed=names)
+    if args.signal not in (None, "positions"):
+        raise ParameterError("A batch writes meshes: only --signal positions (the default) "
+                             "has a batch form; smoothing noise or a field file writes one "
+                             "value per vertex, one mesh at a time with stylize3d smooth.")
+    # the state only carries a noisy field to drop; none is used for the positions
+    options, _ = data_smoothing_options(args, MeshState.make(*tetrahedron()), "positions")
+    return rm.SMOOTH, params, options
+
+
 def _cmd_data_smooth(args: argparse.Namespace, names: set[str]) -> int:
     """Data smoothing (thesis Eq. 8.6) of positions, a noisy test field or a field file: the
     recipe "Multigrid smoothing" (:mod:`app.recipes.multigrid`)."""

@@ -57,8 +57,9 @@ def subdivide_options(args: argparse.Namespace, method: str) -> dict:
     return options
 
 
-def cmd_subdivide(args: argparse.Namespace) -> int:
-    from algorithms.mesh import write_mesh
+def subdivide_params(args: argparse.Namespace):
+    """The SubdivideParams of ``subdivide``'s flags (defaults < a project's saved Subdivision
+    settings < ``--params`` < flags; 1 to 3 levels)."""
     from algorithms.params import params_from_dict
     from algorithms.subdivision.model import SubdivideParams
 
@@ -67,7 +68,20 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
         values["levels"] = int(values["levels"])
     if not isinstance(values["levels"], int) or not 1 <= values["levels"] <= 3:
         raise ParameterError(f"--levels must be 1, 2 or 3 (got {values['levels']}).")
-    params = params_from_dict(SubdivideParams, values)
+    return params_from_dict(SubdivideParams, values)
+
+
+def subdivide_job(args: argparse.Namespace) -> tuple:
+    """``(params, options)`` of the Subdivision recipe that ``subdivide`` runs (for
+    ``stylize3d batch``)."""
+    params = subdivide_params(args)
+    return params, subdivide_options(args, params.method)
+
+
+def cmd_subdivide(args: argparse.Namespace) -> int:
+    from algorithms.mesh import write_mesh
+
+    params = subdivide_params(args)
     check_output(args.output, args.overwrite, args.mesh)
     data, _ = read_input(args, quiet=args.json)
     options = subdivide_options(args, params.method)

@@ -1,0 +1,309 @@
+"""The work of one mesh, in a worker process (a local pool's or a Dask worker's): read it, run the
+job's recipe to its end, check and write the result atomically, return a small record.
+
+:func:`run_task` is the top-level (picklable) entry point for both executors; a local pool's
+processes get the Job once, from :func:`init_pool_worker`, a Dask task gets it as an argument
+(scattered once to every worker by the driver).
+
+The watchdog: a thread of the worker process reads the process's resident memory (psutil)
+five times a second and the running task's time; over ``memory_limit`` or ``time_limit`` it
+writes the reason into the run folder (``limit-<input id>.json``) and ends the process at once
+(``os._exit``, exit status :data:`EXIT_MEMORY` / :data:`EXIT_TIME`); the driver then records
+the mesh as failed with that reason and does not run it again (a Dask worker that the
+scheduler gives the task again finds the reason and returns it at once). In a local pool it
+also ends the process when the driver has gone (killed): no orphan keeps computing.
+
+Every task writes ``pid-<pid>.json`` in the run folder when it starts (which input this process
+is working on): after a local pool breaks, the driver reads them to know which mesh's worker
+died. A finished mesh's record also goes to ``pending/<task id>.json`` (atomically) before the
+task returns, so a driver killed between the worker's write and its own report line still
+counts the mesh as done when it starts again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import socket
+import threading
+import time
+from pathlib import Path
+
+#: exit status of a worker process the watchdog ended (memory, time)
+EXIT_MEMORY = 86
+EXIT_TIME = 87
+#: seconds between two looks of the watchdog
+WATCH_EVERY = 0.2
+
+_state: dict = {"job": None, "pool": False, "parent": None}
+_current: dict[str, dict] = {}          # task id -> what the watchdog needs
+_lock = threading.Lock()
+_watchdog: threading.Thread | None = None
+_blobs_added: set[str] = set()
+
+
+# ----------------------------------------------------------------------------- files
+def file_sha256(path) -> str:
+    with open(path, "rb") as fh:
+        return hashlib.file_digest(fh, "sha256").hexdigest()
+
+
+def input_id(path) -> str:
+    """A short name of an input (its absolute path's hash) for the run folder's files."""
+    return hashlib.sha256(str(Path(path).resolve()).encode()).hexdigest()[:16]
+
+
+def record_key(input_sha256: str, job_key: str) -> str:
+    """The key of a result: the input's bytes and everything of the job (its key)."""
+    return hashlib.sha256(f"{input_sha256}:{job_key}".encode()).hexdigest()
+
+
+def _write_json(path: Path, obj: dict) -> None:
+    from algorithms.mesh.io import atomic_write
+
+    text = json.dumps(obj, default=str).encode()
+    atomic_write(path, lambda fh: fh.write(text))
+
+
+def limit_file(run_dir, iid: str) -> Path:
+    return Path(run_dir) / f"limit-{iid}.json"
+
+
+# ----------------------------------------------------------------------------- watchdog
+def init_pool_worker(job) -> None:
+    """ProcessPoolExecutor initializer: keep the job, leave Ctrl+C to the driver, watch."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _state.update(job=job, pool=True, parent=os.getppid())
+    _start_watchdog()
+
+
+def _start_watchdog() -> None:
+    global _watchdog
+    with _lock:
+        if _watchdog is None or not _watchdog.is_alive():
+            _watchdog = threading.Thread(target=_watch, name="stylize3d-batch-watchdog",
+                                         daemon=True)
+            _watchdog.start()
+
+
+def _gb(n: float) -> str:
+    return f"{n / 1e9:.1f} GB" if n >= 1e9 else f"{n / 1e6:.0f} MB"
+
+
+def _watch() -> None:
+    import psutil
+
+    me = psutil.Process()
+    while True:
+        time.sleep(WATCH_EVERY)
+        if _state["pool"] and os.getppid() != _state["parent"]:
+            os._exit(0)  # the driver is gone: nobody will read what this computes
+        with _lock:
+            running = list(_current.values())
+        if not running:
+            continue
+        rss = None
+        now = time.monotonic()
+        for c in running:
+            if c["memory_limit"]:
+                rss = me.memory_info().rss if rss is None else rss
+                if rss > c["memory_limit"]:
+                    _stop(c, EXIT_MEMORY, "memory",
+                          f"it needed more than {_gb(c['memory_limit'])} (the memory limit "
+                          "per task); it was stopped and nothing was written. Decimate it "
+                          "first, or raise --memory-limit.")
+            if c["time_limit"] and now - c["t0"] > c["time_limit"]:
+                _stop(c, EXIT_TIME, "time",
+                      f"it took longer than {c['time_limit']:g} s (the time limit per task); "
+                      "it was stopped and nothing was written.")
+
+
+def _stop(c: dict, code: int, kind: str, message: str) -> None:
+    try:
+        _write_json(limit_file(c["run_dir"], c["input_id"]),
+                    {"kind": kind, "message": message, "task_id": c["task_id"],
+                     "pid": os.getpid()})
+    finally:
+        os._exit(code)
+
+
+# ----------------------------------------------------------------------------- the task
+def _ensure_blobs(job) -> None:
+    from app.recipes import add_blob
+
+    for ref, data in job.blobs.items():
+        if ref not in _blobs_added:
+            add_blob(ref, data)
+            _blobs_added.add(ref)
+
+
+def _scalars(d: dict | None) -> dict:
+    import math
+
+    out = {}
+    for k, v in (d or {}).items():
+        if isinstance(v, bool) or (isinstance(v, int) and not isinstance(v, bool)):
+            out[k] = v if isinstance(v, bool) else int(v)
+        elif isinstance(v, float) or type(v).__name__.startswith(("float", "int")):
+            try:
+                f = float(v)
+            except (TypeError, ValueError):
+                continue
+            out[k] = f if math.isfinite(f) else None
+        elif isinstance(v, str) and len(v) < 200:
+            out[k] = v
+    return out
+
+
+def _check_paparazzi(before, last, cache) -> None:
+    """The one-mesh command's check of a Paparazzi result (a clean 2-manifold of the input's
+    topology, no new self-intersections)."""
+    from algorithms.errors import Stylize3DError
+    from algorithms.mesh.topology import euler_characteristic, is_manifold
+    from algorithms.paparazzi import count_self_intersections
+
+    V, F = last.V, last.F
+    run = cache["run"]
+    crossings = count_self_intersections(V, F)
+    new = run.new_self_intersections(V, F) if crossings else 0
+    if not is_manifold(F) or euler_characteristic(F) != euler_characteristic(before.F) or new:
+        raise Stylize3DError("Paparazzi failed: the result is not a clean 2-manifold with the "
+                             "input's topology; nothing was written. Try a smaller learning "
+                             "rate.")
+
+
+def _figures(job, before, after, outcome) -> dict:
+    out = {"vertices_in": int(len(before.V)), "faces_in": int(len(before.F)),
+           "vertices": int(len(after.V)), "faces": int(len(after.F)), **_scalars(outcome)}
+    if job.method == "cubic":
+        from algorithms.deform.cubic import mean_l1_of_normals
+
+        out["l1_normals_before"] = mean_l1_of_normals(before.V, before.F)
+        out["l1_normals_after"] = mean_l1_of_normals(after.V, after.F)
+    return out
+
+
+def _read(job, path: str):
+    """The MeshState a recipe runs on (a project's with its painting) and the file's notes."""
+    from app.cli.common import read_valid
+    from app.document import MeshState
+    from app.project import is_project_path, read_project
+
+    project = read_project(path) if is_project_path(path) else None
+    data, _ = read_valid(path, clean=job.clean, quiet=True, project=project)
+    if project is not None and project.state.V.shape == data.V.shape:
+        return project.state, list(data.notes)
+    return MeshState.make(data.V, data.F), list(data.notes)
+
+
+def _run(job, task: dict, rec: dict) -> dict:
+    import numpy as np
+    import psutil
+
+    from algorithms.errors import InvalidMeshError
+    from algorithms.mesh import write_mesh
+    from app.recipes import get_recipe
+
+    rec["input_sha256"] = file_sha256(task["input"])
+    rec["key"] = record_key(rec["input_sha256"], job.key)
+    state, notes = _read(job, task["input"])
+    if notes:
+        rec["notes"] = notes
+    limit = task.get("memory_limit")
+    if limit and task.get("precheck", True):
+        need = psutil.Process().memory_info().rss + len(state.F) * job.bytes_per_face
+        if need > limit:
+            return {**rec, "status": "failed",
+                    "message": f"it would need about {_gb(need)} for its {len(state.F):,} "
+                               f"triangles, more than the memory limit per task "
+                               f"({_gb(limit)}); it was not run. Decimate it first, or raise "
+                               "--memory-limit."}
+    _ensure_blobs(job)
+    options = job.options_for(len(state.F))
+    recipe = get_recipe(job.recipe)
+    params = recipe.make_params(job.params)
+    cache: dict = {}
+    last = None
+    for last in recipe.steps(state, params, options, cache):
+        pass
+    if last is None:
+        raise InvalidMeshError(f"{job.recipe} produced no result.")
+    if job.method == "paparazzi":
+        _check_paparazzi(state, last, cache)
+    after = recipe.result(state, last, options)
+    V, F = np.asarray(after.V), np.asarray(after.F)
+    if not (len(V) and len(F) and np.isfinite(V).all() and F.min() >= 0 and F.max() < len(V)):
+        raise InvalidMeshError("the result is not a valid mesh (empty, or coordinates that "
+                               "are not numbers); nothing was written.")
+    if _state["pool"] and os.getppid() != _state["parent"]:
+        os._exit(0)  # the driver is gone: do not write behind its back
+    out = Path(task["output"])
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_mesh(out, V, F)
+    outcome = recipe.outcome(last) if recipe.outcome is not None else {}
+    return {**rec, "status": "done", "message": "",
+            "output_sha256": file_sha256(out), "figures": _figures(job, state, after, outcome)}
+
+
+def run_task(job, task: dict) -> dict:
+    """Process one input (module docstring) and return its record: ``input``, ``output``,
+    ``status`` ("done" / "failed"), ``message``, ``seconds``, ``key``, ``input_sha256``,
+    ``output_sha256``, ``figures``, ``attempt``, ``worker``, ``task_id``, ``finished``.
+    Never raises for a problem of the mesh (the record says it)."""
+    from algorithms.errors import Stylize3DError
+
+    job = job if job is not None else _state["job"]
+    t0 = time.perf_counter()
+    _start_watchdog()
+    iid, run_dir = task["input_id"], Path(task["run_dir"])
+    rec = {"input": task["input"], "output": task["output"], "status": "failed",
+           "message": "", "seconds": 0.0, "attempt": task.get("attempt", 1),
+           "task_id": task["task_id"], "method": job.method, "recipe": job.recipe,
+           "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    stopped = limit_file(run_dir, iid)
+    if stopped.exists():  # an earlier try of this task hit a limit (Dask gave it again)
+        try:
+            reason = json.loads(stopped.read_text())
+            return {**rec, "message": reason["message"], "limit": reason.get("kind")}
+        except (OSError, ValueError, KeyError):
+            pass
+    _write_json(run_dir / f"pid-{os.getpid()}.json",
+                {"pid": os.getpid(), "task_id": task["task_id"], "input": task["input"],
+                 "input_id": iid})
+    with _lock:
+        _current[task["task_id"]] = {
+            "task_id": task["task_id"], "input_id": iid, "run_dir": str(run_dir),
+            "t0": time.monotonic(), "memory_limit": task.get("memory_limit"),
+            "time_limit": task.get("time_limit")}
+    try:
+        rec = _run(job, task, rec)
+    except Stylize3DError as e:
+        rec = {**rec, "status": "failed", "message": str(e)}
+    except MemoryError:
+        rec = {**rec, "status": "failed",
+               "message": "it ran out of memory; nothing was written. Decimate it first, or "
+                          "run fewer workers."}
+    except Exception as e:  # noqa: BLE001 - a defect of ours: recorded plainly, batch goes on
+        import traceback
+
+        from app.cli.common import write_crash_log
+
+        log = write_crash_log(traceback.format_exc())
+        rec = {**rec, "status": "failed",
+               "message": f"an unexpected error stopped it ({type(e).__name__}: {e}); nothing "
+                          "was written. This is a bug in Stylize3D"
+                          + (f"; the details are in {log}." if log else ".")}
+    finally:
+        with _lock:
+            _current.pop(task["task_id"], None)
+    rec["seconds"] = time.perf_counter() - t0
+    rec["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    if rec["status"] == "done" and task.get("pending_dir"):
+        _write_json(Path(task["pending_dir"]) / f"{task['task_id']}.json", rec)
+    return rec
+
+
+__all__ = ["EXIT_MEMORY", "EXIT_TIME", "file_sha256", "init_pool_worker", "input_id",
+           "limit_file", "record_key", "run_task"]

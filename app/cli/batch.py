@@ -1,0 +1,165 @@
+"""``stylize3d batch METHOD INPUT... -o OUT_DIR [batch flags] [the method's flags]``: one method
+on a whole library of meshes, with local processes or a Dask cluster (:mod:`app.batch`;
+docs/batch.md).
+
+METHOD is a sub-command with a batch form (cubic, analogy, smooth, subdivide, paparazzi), a
+project (``.s3d``: the settings of its panel, ``--panel NAME``) or a panel-settings ``.json``.
+Exit status: 0 when every input is done or skipped, 1 when some failed (or the batch was
+stopped), 2 for a mistyped METHOD, a missing INPUT or an unreadable settings file, 5 for a bad
+parameter; 130 when interrupted (what is done is recorded: run the same command again).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from algorithms.errors import ParameterError
+from app.cli.common import print_json, say
+
+COMMANDS = ("batch",)
+
+
+def _check(args: argparse.Namespace) -> None:
+    from app.batch import BatchUsageError
+
+    if not args.inputs:
+        raise BatchUsageError("give at least one INPUT (mesh files, folders or globs).")
+    if not args.output:
+        raise BatchUsageError("-o OUT_DIR is required (the folder the results go to).")
+    if args.workers is not None and args.workers < 1:
+        raise ParameterError(f"--workers must be at least 1 (got {args.workers}).")
+    if args.time_limit is not None and not args.time_limit > 0:
+        raise ParameterError(f"--time-limit must be a positive number of seconds (got "
+                             f"{args.time_limit}).")
+    if args.retries < 0:
+        raise ParameterError(f"--retries must be 0 or more (got {args.retries}).")
+    if Path(args.output).exists() and not Path(args.output).is_dir():
+        raise BatchUsageError(f"-o {args.output} is a file; give a folder for the results.")
+
+
+def _dry_run(job, args, inputs, outputs, report) -> int:
+    from app.batch import plan
+
+    items = plan(job, inputs, outputs, report, args.overwrite)
+    runs = sum(it.action == "run" for it in items)
+    if args.json:
+        print_json({"dry_run": True, "job": job.describe(), "report": str(report),
+                    "run": runs, "skip": len(items) - runs,
+                    "items": [{"input": it.input, "output": it.output, "action": it.action,
+                               "reason": it.reason} for it in items]})
+        return 0
+    for it in items:
+        print(f"{it.action:4s}  {it.input} -> {it.output}  ({it.reason})")
+    print(f"{runs} to run, {len(items) - runs} to skip; {job.method} with {job.source}; "
+          f"report {report}. Nothing was run (--dry-run).")
+    return 0
+
+
+class _Progress:
+    """A rich progress bar on a terminal (done / failed / skipped / remaining, rate, ETA), or one
+    plain line per mesh on stderr otherwise; nothing with --quiet."""
+
+    def __init__(self, method: str, quiet: bool, console=None):
+        self.quiet, self.bar, self.task = quiet, None, None
+        self.t0 = time.perf_counter()
+        if not quiet and (console is not None or sys.stderr.isatty()):
+            from rich.console import Console
+            from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                                       TimeElapsedColumn, TimeRemainingColumn)
+
+            self.bar = Progress(
+                TextColumn(f"[bold]{method}"), BarColumn(), MofNCompleteColumn(),
+                TextColumn("done {task.fields[done]} · failed {task.fields[failed]} · "
+                           "skipped {task.fields[skipped]} · remaining "
+                           "{task.fields[remaining]} · {task.fields[rate]}"),
+                TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
+                console=console or Console(stderr=True))
+
+    def __call__(self, rec: dict | None, counts: dict) -> None:
+        ran = counts["done"] + counts["failed"]
+        dt = time.perf_counter() - self.t0
+        rate = f"{60 * ran / dt:.1f}/min" if ran and dt > 0 else "-/min"
+        if self.bar is not None:
+            fields = {k: v for k, v in counts.items() if k != "total"}
+            if self.task is None:
+                self.bar.start()
+                self.task = self.bar.add_task("batch", total=counts["total"] - counts["skipped"],
+                                              rate=rate, **fields)
+            self.bar.update(self.task, completed=ran, rate=rate, **fields)
+            if rec is not None and rec["status"] == "failed":
+                self.bar.console.print(f"[red]failed[/red] {rec['input']}: {rec['message']}",
+                                       markup=True, highlight=False)
+        elif not self.quiet and rec is not None:
+            tail = f": {rec['message']}" if rec["status"] == "failed" else \
+                f" -> {rec['output']} ({rec['seconds']:.1f} s)"
+            say(f"{rec['status']:6s} {rec['input']}{tail}")
+
+    def close(self) -> None:
+        if self.bar is not None and self.task is not None:
+            self.bar.stop()
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    from app import batch
+
+    try:
+        job, bargs = batch.parse_batch_args(args.method, list(args.rest))
+    except SystemExit as e:  # argparse printed its usage message
+        return int(e.code or 0)
+    _check(bargs)
+    out = Path(bargs.output)
+    inputs = batch.collect_inputs(bargs.inputs, out_dir=out)
+    if not inputs:
+        raise batch.BatchUsageError(f"No mesh files ({', '.join(batch.inputs.INPUT_SUFFIXES)}) "
+                                    f"in {', '.join(map(str, bargs.inputs))}.")
+    outputs = batch.output_names(inputs, out)
+    report = Path(bargs.report).resolve() if bargs.report else \
+        out.resolve() / batch.REPORT_NAME
+    if bargs.dry_run:
+        return _dry_run(job, bargs, inputs, outputs, report)
+    memory = batch.parse_size(bargs.memory_limit) if bargs.memory_limit else "auto"
+    progress = _Progress(job.method, bargs.quiet)
+    try:
+        summary = batch.run_batch(job, inputs, out, workers=bargs.workers,
+                                  scheduler=bargs.scheduler, report=report, memory_limit=memory,
+                                  time_limit=bargs.time_limit, retries=bargs.retries,
+                                  redo=bargs.overwrite, outputs=outputs, on_record=progress)
+    except KeyboardInterrupt:
+        progress.close()
+        say(f"stylize3d batch: interrupted. What was done is recorded in {report}; run the "
+            "same command again to finish (done meshes are skipped).")
+        return 130
+    progress.close()
+    if bargs.json:
+        print_json({"method": job.method, "recipe": job.recipe, "source": job.source,
+                    **summary.to_dict()})
+    else:
+        print(f"Batch {job.method}: {summary.done} done, {summary.failed} failed, "
+              f"{summary.skipped} skipped of {summary.total} in {summary.seconds:.1f} s "
+              f"({60 * summary.throughput:.1f} meshes/min); results in {out}, report "
+              f"{report}.")
+    return summary.exit_code
+
+
+def add_parsers(sub) -> None:
+    from app.batch.jobs import METHODS
+
+    s = sub.add_parser(
+        "batch", help="run a method on many meshes (local processes or a Dask cluster)",
+        usage="stylize3d batch METHOD INPUT... -o OUT_DIR [--workers N] [--scheduler ADDRESS] "
+              "[--report FILE] [--memory-limit SIZE] [--time-limit S] [--dry-run] [--json] "
+              "[--quiet] [--clean] [the method's flags]",
+        description="Run one method on every INPUT; results go to OUT_DIR under the inputs' "
+                    "file names, one JSON line per input goes to the report. A batch that is "
+                    "stopped and started again skips what is done. 'stylize3d batch METHOD "
+                    "--help' lists the method's flags and the batch's. Exit status: 0 all "
+                    "done or skipped, 1 some failed, 2 usage, 5 bad parameter.")
+    s.add_argument("method", metavar="METHOD",
+                   help=f"{', '.join(METHODS)}; or a project (.s3d) or panel-settings .json "
+                        "whose settings to apply")
+    s.add_argument("rest", nargs=argparse.REMAINDER, metavar="...",
+                   help="INPUT... -o OUT_DIR and the flags")
+    s.set_defaults(func=cmd_batch)

@@ -1,0 +1,407 @@
+"""``stylize3d batch`` (issue 21): a method on a library of meshes with a local process pool or a
+Dask cluster; outputs equal to the one-mesh command's, plain failures, resuming after the driver
+is killed, a worker killed mid-mesh retried once, memory and time limits, dry run, typos."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from algorithms.mesh import icosphere, torus, write_mesh
+from app import batch
+from app.cli import main
+from tests.conftest import ROOT, TEST_DATA
+
+
+def _rotation(seed: int) -> np.ndarray:
+    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    return q
+
+
+def _library(root: Path) -> tuple[list[Path], list[Path]]:
+    """Good meshes (tests/data and primitives, rotated / scaled; two with the same file name
+    in different folders) and broken ones (empty, NaN, non-manifold, garbage bytes)."""
+    good = []
+    for name in ("hand_lowres.obj", "spot_lowres.obj"):
+        p = root / name
+        p.write_bytes((TEST_DATA / name).read_bytes())
+        good.append(p)
+    for k, (sub, (V, F)) in enumerate([("a", icosphere(2)), ("b", icosphere(2)),
+                                       ("a", torus(n_major=24, n_minor=12)), ("b", icosphere(1))]):
+        (root / sub).mkdir(exist_ok=True)
+        name = "ico.obj" if k < 2 else f"shape{k}.{'off' if k == 2 else 'ply'}"
+        p = root / sub / name
+        write_mesh(p, (V @ _rotation(k).T) * (0.5 + k), F)
+        good.append(p)
+    bad = {"empty.obj": "", "nan.obj": "v 0 0 0\nv 1 0 0\nv 0 nan 0\nv 0 0 1\nf 1 2 3\n"
+           "f 1 3 4\nf 1 4 2\nf 2 4 3\n",
+           "nonmanifold.obj": "v 0 0 0\nv 1 0 0\nv 0.5 1 0\nv 0.5 -1 0\nv 0.5 0 1\n"
+           "f 1 2 3\nf 2 1 4\nf 1 2 5\n"}
+    broken = []
+    for name, text in bad.items():
+        (root / name).write_text(text)
+        broken.append(root / name)
+    g = root / "garbage.obj"
+    g.write_bytes(np.random.default_rng(0).integers(0, 256, 4096, dtype=np.uint8).tobytes())
+    broken.append(g)
+    return good, broken
+
+
+def _records(report: Path) -> list[dict]:
+    return [json.loads(line) for line in report.read_text().splitlines() if line.strip()]
+
+
+def _reference(path: Path, tmp: Path, *flags) -> bytes:
+    """What the one-mesh command writes for ``path``."""
+    suffix = ".obj" if path.suffix == ".s3d" else path.suffix   # a project gives a mesh
+    out = tmp / f"ref-{abs(hash(str(path)))}{suffix}"
+    assert main(["cubic", str(path), "-o", str(out), "--quiet", *flags]) == 0
+    return out.read_bytes()
+
+
+def _no_tmp(folder: Path) -> list[Path]:
+    return [p for p in folder.rglob("*") if p.name.endswith(".tmp")]
+
+
+def _batch_cmd(*args) -> list[str]:
+    return [sys.executable, "-m", "app", "batch", *map(str, args)]
+
+
+@pytest.fixture(scope="module")
+def cubic_batch(tmp_path_factory):
+    """One batch of cubic over the library with 2 workers (the CLI, in this process)."""
+    tmp = tmp_path_factory.mktemp("cubic")
+    lib = tmp / "lib"
+    lib.mkdir()
+    good, broken = _library(lib)
+    out = tmp / "out"
+    code = main(["batch", "cubic", str(lib), "-o", str(out), "--workers", "2", "--quiet",
+                 "--json"])
+    return {"tmp": tmp, "lib": lib, "good": good, "broken": broken, "out": out, "code": code}
+
+
+def test_cubic_batch_equals_one_mesh_command_and_reports_broken_meshes(cubic_batch, tmp_path):
+    good, broken, out = cubic_batch["good"], cubic_batch["broken"], cubic_batch["out"]
+    assert cubic_batch["code"] == 1  # some failed
+    recs = {Path(r["input"]).resolve(): r for r in _records(out / "batch-report.jsonl")}
+    assert len(recs) == len(good) + len(broken)
+    for p in good:
+        r = recs[p.resolve()]
+        assert r["status"] == "done", r
+        # the same file name in two folders: each keeps its folder below the common one
+        assert Path(r["output"]) == out / p.relative_to(cubic_batch["lib"])
+        assert Path(r["output"]).read_bytes() == _reference(p, tmp_path)
+        assert r["output_sha256"] and len(r["key"]) == 64 and r["seconds"] > 0
+        f = r["figures"]
+        assert f["iterations"] > 0 and f["faces"] == f["faces_in"] > 0
+        assert f["l1_normals_after"] < f["l1_normals_before"]
+    for p in broken:
+        r = recs[p.resolve()]
+        assert r["status"] == "failed" and len(r["message"]) > 20, r
+        assert "Traceback" not in r["message"] and "bug" not in r["message"]
+        assert not Path(r["output"]).exists()
+    assert "NaN" in recs[(cubic_batch["lib"] / "nan.obj").resolve()]["message"] or \
+        "not a number" in recs[(cubic_batch["lib"] / "nan.obj").resolve()]["message"].lower()
+    assert not _no_tmp(out)
+
+
+def test_dry_run_lists_what_would_run_or_be_skipped_and_runs_nothing(cubic_batch, capsys,
+                                                                      tmp_path):
+    lib, out = cubic_batch["lib"], cubic_batch["out"]
+    before = (out / "batch-report.jsonl").read_text()
+    assert main(["batch", "cubic", str(lib), "-o", str(out), "--dry-run", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    actions = {Path(i["input"]).name: i["action"] for i in d["items"]}
+    assert actions["hand_lowres.obj"] == "skip" and actions["garbage.obj"] == "run"
+    assert d["skip"] == len(cubic_batch["good"]) and d["run"] == len(cubic_batch["broken"])
+    assert (out / "batch-report.jsonl").read_text() == before  # nothing written
+    fresh = tmp_path / "never"
+    assert main(["batch", "cubic", str(lib), "-o", str(fresh), "--dry-run", "--lam", "0.3"]) \
+        == 0
+    text = capsys.readouterr().out
+    assert text.count("run ") >= len(cubic_batch["good"]) and "not done yet" in text
+    assert not fresh.exists()
+
+
+def test_a_typo_or_a_method_without_batch_form_is_a_plain_usage_error(tmp_path, capsys):
+    mesh = tmp_path / "m.obj"
+    write_mesh(mesh, *icosphere(1))
+    assert main(["batch", "cubc", str(mesh), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "Did you mean 'cubic'?" in err and "Traceback" not in err
+    assert main(["batch", "coarsen", str(mesh), "-o", str(tmp_path / "o")]) == 2
+    assert "no batch form" in capsys.readouterr().err
+    assert main(["batch", "cubic", str(tmp_path / "nothing*.obj"), "-o",
+                 str(tmp_path / "o")]) == 2
+    assert main(["batch", "cubic", str(mesh), "-o", str(tmp_path / "o"), "--lam", "-3"]) == 5
+    assert not (tmp_path / "o").exists()
+
+
+def test_settings_from_a_project_or_a_settings_file_make_the_same_job(tmp_path):
+    from app.document import MeshState
+    from app.project import Project, save_project
+
+    job = batch.build_job("cubic", ["--lambda", "0.4"])
+    # options switch to progressive meshes above the automatic size, as for one mesh
+    assert job.options_for(1000)["progressive"] is None
+    big = job.options_for(400_000)["progressive"]
+    assert big["target_faces"] == 20_000 and big["preview_every"] == 0
+    params = {**job.params}
+    options = {"plane_axis": 0, "progressive": None, "multigrid": False}
+    proj = Project(MeshState.make(*icosphere(1)),
+                   panels={"Cubic": {"params": params, "options": options},
+                           "Smooth": {"params": {}, "options": {}}})
+    path = save_project(tmp_path / "scene.s3d", proj)
+    saved = batch.build_job(str(path))  # the only changed panel: Cubic
+    assert (saved.recipe, saved.params, saved.options) == (job.recipe, job.params, job.options)
+    # as for one mesh, saved settings keep the panel's own progressive choice on big meshes
+    assert saved.large_options is None and saved.key != job.key
+    settings = batch.write_panel_settings(tmp_path / "cubic.json", "Cubic", params, options)
+    assert batch.build_job(str(settings)).key == saved.key
+    assert batch.job_from_settings("Cubic", params, options).key == saved.key
+    flags = batch.build_job(str(settings), ["--lambda", "0.2"])
+    assert flags.params["lam"] == 0.2 and flags.key != saved.key   # flags win
+    proj.panels["Smooth"]["params"] = {"iterations": 3}
+    save_project(tmp_path / "two.s3d", proj)
+    with pytest.raises(batch.BatchUsageError, match="--panel"):
+        batch.build_job(str(tmp_path / "two.s3d"))
+    smooth = batch.build_job(str(tmp_path / "two.s3d"), panel="smooth")
+    assert smooth.recipe == "Smooth" and smooth.params["iterations"] == 3
+
+
+def test_output_names_keep_folders_and_never_collide(tmp_path):
+    ins = [tmp_path / "lib" / "a" / "x.obj", tmp_path / "lib" / "b" / "x.obj",
+           tmp_path / "lib" / "a" / "x.s3d"]
+    outs = batch.output_names(ins, tmp_path / "out")
+    assert outs[0] == (tmp_path / "out" / "a" / "x.obj").resolve()
+    assert outs[1] == (tmp_path / "out" / "b" / "x.obj").resolve()
+    assert outs[2].suffix == ".obj" and outs[2] != outs[0] and len(set(outs)) == 3
+    with pytest.raises(batch.BatchUsageError):
+        batch.output_names([tmp_path / "x.obj"], tmp_path)
+
+
+def test_resume_after_the_driver_is_killed_does_nothing_twice(tmp_path):
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    good = []
+    for k in range(6):
+        V, F = torus(n_major=30 + 2 * k, n_minor=14) if k % 2 else icosphere(3)
+        p = lib / f"m{k}.obj"
+        write_mesh(p, (V @ _rotation(10 + k).T) * (1 + k), F)
+        good.append(p)
+    out = tmp_path / "out"
+    report = out / "batch-report.jsonl"
+    proc = subprocess.Popen(_batch_cmd("cubic", lib, "-o", out, "--workers", "1", "--quiet"),
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None:
+        if report.exists() and sum('"done"' in x for x in report.read_text().splitlines()) >= 2:
+            break
+        time.sleep(0.02)
+    assert proc.poll() is None, "the batch ended before it could be killed"
+    workers = _worker_pids(out)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(30)
+    _wait_gone(workers)  # the workers see their driver gone and stop
+    done_before = {r["input"] for r in _records(report) if r["status"] == "done"}
+    assert 2 <= len(done_before) < len(good)
+    code = main(["batch", "cubic", str(lib), "-o", str(out), "--workers", "1", "--quiet",
+                 "--json"])
+    assert code == 0
+    recs = _records(report)
+    for p in good:
+        mine = [r for r in recs if r["input"] == str(p.resolve())]
+        assert sum(r["status"] == "done" for r in mine) == 1, mine   # nothing done twice
+        assert Path(mine[-1]["output"]).read_bytes() == _reference(p, tmp_path)
+    skipped = [r for r in recs if r["status"] == "skipped"]
+    assert len(skipped) >= len(done_before) and all(r["message"] for r in skipped)
+    assert not _no_tmp(out)
+    assert not list((out / ".batch").glob("run-*")) and not list((out / ".batch" /
+                                                                  "pending").iterdir())
+
+
+def _worker_pids(out: Path) -> set[int]:
+    pids = set()
+    for f in (out / ".batch").glob("run-*/pid-*.json"):
+        pids.add(int(f.name[len("pid-"):-len(".json")]))
+    return pids
+
+
+def _wait_gone(pids, timeout=20.0) -> None:
+    import psutil
+
+    deadline = time.time() + timeout
+    while time.time() < deadline and any(psutil.pid_exists(p) and
+                                         psutil.Process(p).status() != "zombie" for p in pids):
+        time.sleep(0.05)
+
+
+def test_a_worker_killed_mid_mesh_costs_only_that_mesh_a_retry(tmp_path):
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    slow = lib / "armadillo.obj"
+    slow.write_bytes((TEST_DATA / "armadillo.obj").read_bytes())
+    others = []
+    for k in range(3):
+        p = lib / f"s{k}.obj"
+        write_mesh(p, icosphere(2)[0] * (1 + k), icosphere(2)[1])
+        others.append(p)
+    out = tmp_path / "out"
+    proc = subprocess.Popen(_batch_cmd("cubic", lib, "-o", out, "--workers", "2", "--quiet"),
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    victim = None
+    deadline = time.time() + 120
+    while victim is None and time.time() < deadline and proc.poll() is None:
+        for f in (out / ".batch").glob("run-*/pid-*.json"):
+            try:
+                d = json.loads(f.read_text())
+            except (OSError, ValueError):
+                continue
+            if d["input"] == str(slow.resolve()):
+                victim = d["pid"]
+        time.sleep(0.01)
+    assert victim is not None, "the slow mesh never started"
+    os.kill(victim, signal.SIGKILL)
+    _, err = proc.communicate(timeout=180)
+    assert proc.returncode == 0, err
+    recs = {r["input"]: r for r in _records(out / "batch-report.jsonl")}
+    r = recs[str(slow.resolve())]
+    assert r["status"] == "done" and r["retries"] == 1 and r["attempts"] == 2, r
+    assert Path(r["output"]).read_bytes() == _reference(slow, tmp_path)
+    for p in others:
+        assert recs[str(p.resolve())]["status"] == "done"
+        assert recs[str(p.resolve())]["retries"] == 0
+    assert not _no_tmp(out)
+
+
+def test_memory_and_time_limits_fail_the_mesh_plainly_without_retry(tmp_path, capsys):
+    mesh = tmp_path / "armadillo.obj"
+    mesh.write_bytes((TEST_DATA / "armadillo.obj").read_bytes())
+    # refused before running: the estimate does not fit
+    code = main(["batch", "cubic", str(mesh), "-o", str(tmp_path / "o1"), "--workers", "1",
+                 "--memory-limit", "200MB", "--quiet"])
+    assert code == 1
+    (r,) = _records(tmp_path / "o1" / "batch-report.jsonl")
+    assert r["status"] == "failed" and "would need about" in r["message"]
+    assert "more than the memory limit per task (200 MB)" in r["message"]
+    # the watchdog stops a task over the limit (no estimate): no retry
+    job = batch.build_job("cubic")
+    s = batch.run_batch(job, [mesh], tmp_path / "o2", workers=1, memory_limit=50_000_000,
+                        precheck=False)
+    (r,) = _records(tmp_path / "o2" / "batch-report.jsonl")
+    assert s.failed == 1 and s.exit_code == 1
+    assert r["message"].startswith("it needed more than 50 MB (the memory limit per task)")
+    assert r["limit"] == "memory" and r["attempts"] == 1 and r["retries"] == 0
+    # time limit
+    code = main(["batch", "cubic", str(mesh), "-o", str(tmp_path / "o3"), "--workers", "1",
+                 "--time-limit", "0.3", "--quiet"])
+    assert code == 1
+    (r,) = _records(tmp_path / "o3" / "batch-report.jsonl")
+    assert r["message"].startswith("it took longer than 0.3 s (the time limit per task)")
+    assert r["limit"] == "time" and r["attempts"] == 1
+    assert not (tmp_path / "o3" / "armadillo.obj").exists() and not _no_tmp(tmp_path)
+
+
+def test_a_dask_local_cluster_gives_the_same_outputs(tmp_path, capsys):
+    distributed = pytest.importorskip("distributed")
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    good = []
+    for name in ("hand_lowres.obj", "spot_lowres.obj"):
+        (lib / name).write_bytes((TEST_DATA / name).read_bytes())
+        good.append(lib / name)
+    (lib / "empty.obj").write_text("")
+    out = tmp_path / "out"
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address=None) as cluster:
+        code = main(["batch", "cubic", str(lib), "-o", str(out), "--scheduler",
+                     cluster.scheduler_address, "--json", "--quiet"])
+    summary = json.loads(capsys.readouterr().out)
+    assert code == 1 and summary["executor"] == "dask"
+    assert summary["done"] == 2 and summary["failed"] == 1
+    for p in good:
+        assert (out / p.name).read_bytes() == _reference(p, tmp_path)
+    (bad,) = [r for r in _records(out / "batch-report.jsonl") if r["status"] == "failed"]
+    assert "empty" in bad["message"].lower() and "Traceback" not in bad["message"]
+
+
+def test_clean_and_a_project_input_as_the_one_mesh_command(tmp_path, bad_files):
+    from app.document import MeshState
+    from app.project import Project, save_project
+    from app.recipes import LAMBDA_FIELD
+
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    dup = lib / "duplicates.obj"
+    dup.write_bytes(bad_files["duplicates"].read_bytes())
+    V, F = icosphere(2)
+    state = MeshState.make(V, F).with_field(LAMBDA_FIELD, np.linspace(0.0, 2.0, len(V)))
+    scene = save_project(lib / "scene.s3d", Project(state))  # painted λ, no saved settings
+    out = tmp_path / "out"
+    assert main(["batch", "cubic", str(lib), "-o", str(out), "--workers", "1", "--quiet"]) == 1
+    recs = {Path(r["input"]).name: r for r in _records(out / "batch-report.jsonl")}
+    assert recs["duplicates.obj"]["status"] == "failed"
+    assert "--clean" in recs["duplicates.obj"]["message"]
+    assert recs["scene.s3d"]["status"] == "done"
+    assert Path(recs["scene.s3d"]["output"]) == (out / "scene.obj").resolve()
+    assert (out / "scene.obj").read_bytes() == _reference(scene, tmp_path)
+    assert main(["batch", "cubic", str(lib), "-o", str(out), "--workers", "1", "--quiet",
+                 "--clean"]) == 0
+    recs = _records(out / "batch-report.jsonl")[-2:]
+    assert {r["status"] for r in recs} == {"done"}  # --clean changes the key: both run again
+    assert (out / "duplicates.obj").read_bytes() == _reference(dup, tmp_path, "--clean")
+
+
+def test_progress_bar_on_a_terminal_and_no_qt(tmp_path):
+    import io
+
+    from rich.console import Console
+
+    from app.cli.batch import _Progress
+
+    buf = io.StringIO()
+    bar = _Progress("cubic", quiet=False, console=Console(file=buf, force_terminal=True,
+                                                          width=160))
+    bar(None, {"total": 3, "done": 0, "failed": 0, "skipped": 1, "remaining": 2})
+    bar({"input": "a.obj", "output": "o/a.obj", "status": "failed", "message": "it is empty",
+         "seconds": 0.1}, {"total": 3, "done": 0, "failed": 1, "skipped": 1, "remaining": 1})
+    bar.close()
+    text = buf.getvalue()
+    assert "a.obj: it is empty" in text and "failed 1" in text and "skipped 1" in text
+    assert "remaining 1" in text and "ETA" in text and "/min" in text
+    mesh = tmp_path / "m.obj"
+    write_mesh(mesh, *icosphere(1))
+    code = (f"import sys\nfrom app.__main__ import main\n"
+            f"assert main(['batch', 'cubic', {str(mesh)!r}, '-o', {str(tmp_path / 'o')!r}, "
+            f"'--workers', '1', '--quiet']) == 0\n"
+            f"print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            f"('PySide6', 'vtkmodules', 'pyvista', 'pyvistaqt')))")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0 and r.stdout.splitlines()[-1] == "[]", r.stdout + r.stderr
+
+
+@pytest.mark.parametrize("method, flags", [
+    ("smooth", ["--iterations", "2"]),
+    ("subdivide", ["--method", "loop", "--levels", "1"]),
+    ("analogy", ["--style", "octahedron", "--max-iterations", "5"]),
+])
+def test_other_methods_write_what_their_one_mesh_command_writes(tmp_path, method, flags):
+    mesh = tmp_path / "m.obj"
+    write_mesh(mesh, *torus(n_major=20, n_minor=10))
+    out = tmp_path / "out"
+    assert main(["batch", method, str(mesh), "-o", str(out), "--workers", "1", "--quiet",
+                 *flags]) == 0
+    ref = tmp_path / "ref.obj"
+    quiet = [] if method == "subdivide" else ["--quiet"]  # subdivide prints no progress
+    assert main([method, str(mesh), "-o", str(ref), *quiet, *flags]) == 0
+    assert (out / "m.obj").read_bytes() == ref.read_bytes()
