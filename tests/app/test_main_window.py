@@ -280,3 +280,45 @@ def test_a_nan_vertex_is_not_a_dead_end(window, dialogs, tmp_path):
     assert len(window.document.F) == len(F) - n_tris
     assert np.isfinite(window.document.V).all() and len(window.document.V) == len(V) - 1
     assert f"{n_tris:,} triangle" in dialogs.questions[-1][1]
+
+
+def test_ctrl_z_in_a_number_field_undoes_the_document(window, dialogs, qtbot):
+    """Issue 24 item 5: after typing λ and Enter, Ctrl+Z sent to the focused number field undoes
+    the last change of the document (the field no longer swallows it); while a value is being
+    typed, Ctrl+Z still undoes the typing."""
+    from PySide6.QtCore import Qt
+    from PySide6.QtWidgets import QApplication
+
+    assert window.open_path(SAMPLE)
+    panel = window.panels["Cubic"]
+    panel.raise_()
+    panel.live_box.setChecked(False)
+    panel.form.editors["max_iterations"].setValue(5)
+    V0 = np.array(window.document.V)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    assert window.undo_stack.count() == 1 and window.undo_stack.index() == 1
+    window.activateWindow()
+    qtbot.waitUntil(lambda: window.isActiveWindow(), timeout=5000)
+    spin = panel.form.editors["lam"].spin
+    spin.setFocus()
+    qtbot.waitUntil(lambda: QApplication.focusWidget() in (spin, spin.lineEdit()), timeout=5000)
+    spin.selectAll()
+    focused = QApplication.focusWidget()
+    qtbot.keyClicks(focused, "0.5")
+    qtbot.keyClick(focused, Qt.Key.Key_Return)
+    assert abs(panel.form.params().lam - 0.5) < 1e-9
+    qtbot.keyClick(QApplication.focusWidget(), Qt.Key.Key_Z, Qt.KeyboardModifier.ControlModifier)
+    assert window.undo_stack.index() == 0
+    np.testing.assert_array_equal(window.document.V, V0)
+    qtbot.keyClick(QApplication.focusWidget(), Qt.Key.Key_Z,
+                   Qt.KeyboardModifier.ControlModifier | Qt.KeyboardModifier.ShiftModifier)
+    assert window.undo_stack.index() == 1
+    qtbot.keyClick(QApplication.focusWidget(), Qt.Key.Key_Z, Qt.KeyboardModifier.ControlModifier)
+    qtbot.keyClick(QApplication.focusWidget(), Qt.Key.Key_Y, Qt.KeyboardModifier.ControlModifier)
+    assert window.undo_stack.index() == 1
+    # typing in progress: the field's own undo, not the document's
+    spin.selectAll()
+    qtbot.keyClicks(QApplication.focusWidget(), "0.7")
+    qtbot.keyClick(QApplication.focusWidget(), Qt.Key.Key_Z, Qt.KeyboardModifier.ControlModifier)
+    assert window.undo_stack.index() == 1
