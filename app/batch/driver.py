@@ -115,7 +115,7 @@ class ReportWriter:
 
     def write(self, rec: dict) -> None:
         self.fh.seek(0, os.SEEK_END)
-        self.fh.write((json.dumps(rec, default=str, allow_nan=False) + "\n").encode())
+        self.fh.write((json.dumps(rec, default=str) + "\n").encode())
         self.fh.flush()
         os.fsync(self.fh.fileno())
 
@@ -147,19 +147,15 @@ def plan(job: Job, inputs, outputs, report, redo: bool = False) -> list[Item]:
     items = []
     for inp, out in zip(inputs, outputs):
         it = Item(str(inp), str(out), input_id=input_id(inp))
-        try:
-            it.key = record_key(file_sha256(inp), job.key)
-        except OSError as e:
-            it.reason = f"the input cannot be read ({e.strerror or e})"
-            items.append(it)
-            continue
         prev = recorded.get(it.input)
         if redo:
             it.reason = "--overwrite: run again"
         elif prev is None:
-            it.reason = "not done yet"
+            it.reason = "not done yet"   # its key is the worker's to compute (one read)
         elif prev.get("status") not in ("done", "skipped"):
             it.reason = f"{prev.get('status')} last time"
+        elif not _key(it, job):
+            it.reason = "the input cannot be read"
         elif prev.get("key") != it.key:
             it.reason = "the input or the settings changed since it was done"
         elif prev.get("output") != it.output:
@@ -174,6 +170,16 @@ def plan(job: Job, inputs, outputs, report, redo: bool = False) -> list[Item]:
                          f"settings; its result {Path(out).name} is unchanged")
         items.append(it)
     return items
+
+
+def _key(it: Item, job: Job) -> str:
+    """Set and return the item's key (SHA-256 of the input's bytes and the job); "" when the
+    input cannot be read (its worker will say why)."""
+    try:
+        it.key = record_key(file_sha256(it.input), job.key)
+    except OSError:
+        it.key = ""
+    return it.key
 
 
 # ----------------------------------------------------------------------------- executors
@@ -331,10 +337,10 @@ def run_batch(job: Job, inputs, out_dir, *, workers: int | None = None,
     from app.batch.inputs import output_names
 
     t_start = time.perf_counter()
-    inputs = [Path(p).resolve() for p in inputs]
-    out = Path(out_dir).resolve()
+    inputs = [Path(os.path.abspath(p)) for p in inputs]
+    out = Path(os.path.abspath(out_dir))
     outputs = [Path(p) for p in outputs] if outputs is not None else output_names(inputs, out)
-    report = Path(report).resolve() if report else out / REPORT_NAME
+    report = Path(os.path.abspath(report)) if report else out / REPORT_NAME
     workers = max(1, int(workers or os.cpu_count() or 1))
     if memory_limit == "auto":
         memory_limit = None if scheduler else default_memory_limit(workers)

@@ -33,16 +33,17 @@ def _search(folder: Path, out_dir: Path | None) -> list[Path]:
     for root, dirs, files in os.walk(folder):
         here = Path(root)
         dirs[:] = sorted(d for d in dirs if not d.startswith(_SKIP_PREFIX)
-                         and (out_dir is None or (here / d).resolve() != out_dir))
+                         and Path(os.path.abspath(here / d)) != out_dir)
         found += [here / f for f in sorted(files) if _is_input(here / f)]
     return found
 
 
 def collect_inputs(items, out_dir=None) -> list[Path]:
-    """The input files (absolute, each once, in the order given; a folder's sorted), from
-    files, folders (recursively, mesh and project files only, never inside ``out_dir``) and
-    globs. An item that is none of these raises :class:`BatchUsageError` (exit status 2)."""
-    out = Path(out_dir).resolve() if out_dir is not None else None
+    """The input files (absolute, symbolic links kept, each once, in the order given; a
+    folder's sorted), from files, folders (recursively, mesh and project files only, never
+    inside ``out_dir``) and globs. An item that is none of these raises
+    :class:`BatchUsageError` (exit status 2)."""
+    out = Path(os.path.abspath(out_dir)) if out_dir is not None else None
     seen: dict[Path, None] = {}
     for item in map(str, items):
         p = Path(item)
@@ -62,14 +63,14 @@ def collect_inputs(items, out_dir=None) -> list[Path]:
                 raise BatchUsageError(f"{item}: there is no such file or folder, and no file "
                                       "matches it.")
         for f in found:
-            seen.setdefault(f.resolve(), None)
+            seen.setdefault(Path(os.path.abspath(f)), None)
     return list(seen)
 
 
 def output_names(inputs: list[Path], out_dir) -> list[Path]:
     """The result file of each input (module docstring); refuses a result that would replace
     an input."""
-    out_dir = Path(out_dir).resolve()
+    out_dir = Path(os.path.abspath(out_dir))
     if not inputs:
         return []
     parents = [str(p.parent) for p in inputs]

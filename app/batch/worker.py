@@ -52,7 +52,7 @@ def file_sha256(path) -> str:
 
 def input_id(path) -> str:
     """A short name of an input (its absolute path's hash) for the run folder's files."""
-    return hashlib.sha256(str(Path(path).resolve()).encode()).hexdigest()[:16]
+    return hashlib.sha256(os.path.abspath(path).encode()).hexdigest()[:16]
 
 
 def record_key(input_sha256: str, job_key: str) -> str:
@@ -281,6 +281,10 @@ def run_task(job, task: dict) -> dict:
         rec = _run(job, task, rec)
     except Stylize3DError as e:
         rec = {**rec, "status": "failed", "message": str(e)}
+    except OSError as e:  # the input vanished or cannot be read, a folder cannot be made
+        rec = {**rec, "status": "failed",
+               "message": f"{e.filename or 'a file'} cannot be read or written "
+                          f"({e.strerror or e}); nothing was written."}
     except MemoryError:
         rec = {**rec, "status": "failed",
                "message": "it ran out of memory; nothing was written. Decimate it first, or "
