@@ -48,6 +48,11 @@ def open_file(parent: QWidget | None, title: str, filter: str, directory: str = 
     return path or None
 
 
+def open_folder(parent: QWidget | None, title: str, directory: str = "") -> str | None:
+    path = QFileDialog.getExistingDirectory(parent, title, directory)
+    return path or None
+
+
 def save_file(parent: QWidget | None, title: str, filter: str, directory: str = "") -> str | None:
     """Ask for a path to write. Does not confirm overwriting: the caller asks (app-wide policy)."""
     path, _ = QFileDialog.getSaveFileName(parent, title, directory, filter,

@@ -198,6 +198,9 @@ class MainWindow(QMainWindow):
         A("export_colored", "Export &Coloured Mesh…", lambda: self.export_colored_dialog(),
           tip="Save the mesh with the colour view shown now as vertex colours (.ply, .obj), "
               "to show it in another program")
+        A("batch", "&Batch…", lambda: self.show_batch(),
+          tip="Apply a panel's current settings to a whole folder of meshes, with progress "
+              "and Stop (the window stays usable; a stopped batch continues when started again)")
         A("study", "Start &Study Session…", lambda: self.start_study_dialog(),
           tip="Run a user-study protocol (.json / .toml): tasks, locked panels, a log of every "
               "action (docs/study.md)")
@@ -250,6 +253,7 @@ class MainWindow(QMainWindow):
         m.addAction(a["export_field"])
         m.addAction(a["export_colored"])
         m.addSeparator()
+        m.addAction(a["batch"])
         m.addAction(a["study"])
         m.addSeparator()
         m.addAction(a["quit"])
@@ -454,6 +458,17 @@ class MainWindow(QMainWindow):
     def open_dialog(self) -> bool:
         path = dialogs.open_file(self, "Open mesh", file_filter(), self._last_dir())
         return self.open_path(path) if path else False
+
+    def show_batch(self):
+        """File > Batch…: one non-modal dialog (kept while it runs)."""
+        from app.batch_dialog import BatchDialog
+
+        dlg = getattr(self, "batch_dialog", None)
+        if dlg is None:
+            dlg = self.batch_dialog = BatchDialog(self)
+        dlg.show()
+        dlg.raise_()
+        return dlg
 
     # ------------------------------------------------------------------------------ projects
     def panel_settings(self) -> dict:
@@ -1082,6 +1097,15 @@ class MainWindow(QMainWindow):
         if not self._confirm_discard():
             event.ignore()
             return
+        bd = getattr(self, "batch_dialog", None)
+        if bd is not None and bd.running:
+            if not dialogs.confirm(self, "A batch is running", "Stop the batch and quit? "
+                                   "(Starting it again later continues it.)", yes="Stop and quit",
+                                   no="Cancel"):
+                event.ignore()
+                return
+            bd.stop()
+            bd.thread_.wait(60000)
         QApplication.instance().removeEventFilter(self._undo_keys)
         for panel in self.panels.values():
             panel.shutdown()

@@ -40,13 +40,16 @@ class DialogRecorder:
     def save_file(self, parent, title, filter, directory=""):
         return self.save_paths.pop(0)
 
+    def open_folder(self, parent, title, directory=""):
+        return self.open_paths.pop(0)
+
 
 @pytest.fixture
 def dialogs(monkeypatch):
     from app import dialogs as mod
 
     rec = DialogRecorder()
-    for name in ("error", "info", "choose", "confirm", "open_file", "save_file"):
+    for name in ("error", "info", "choose", "confirm", "open_file", "save_file", "open_folder"):
         monkeypatch.setattr(mod, name, getattr(rec, name))
     return rec
 
