@@ -52,6 +52,18 @@ def _faces_vtk(F: np.ndarray) -> np.ndarray:
     return np.hstack([np.full((len(F), 1), 3, dtype=np.int64), F]).ravel()
 
 
+def legend_font_file():
+    """A TrueType font with Greek letters for the colour bar (DejaVu Sans, installed with the
+    app's system packages), or None to keep VTK's built-in font."""
+    from pathlib import Path
+
+    for p in ("/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+              "/usr/share/fonts/TTF/DejaVuSans.ttf", "/usr/share/fonts/dejavu/DejaVuSans.ttf"):
+        if Path(p).is_file():
+            return Path(p)
+    return None
+
+
 @dataclass(frozen=True)
 class PickResult:
     """A point of the mesh under the mouse: world ``position`` (3,), triangle index ``face``,
@@ -452,7 +464,7 @@ class Viewport(QWidget):
             bar = vtkScalarBarActor()
             bar.SetOrientationToHorizontal()
             bar.SetNumberOfLabels(5)
-            bar.SetLabelFormat("%-#6.3g")
+            bar.SetLabelFormat("%.3g")  # "-346", "0.5", "1e+03" (no dangling "346.")
             bar.GetPositionCoordinate().SetCoordinateSystemToNormalizedViewport()
             bar.GetPositionCoordinate().SetValue(0.30, 0.02)
             bar.SetWidth(0.45)
@@ -467,6 +479,10 @@ class Viewport(QWidget):
                 prop.SetBold(False)
                 prop.SetItalic(False)
                 prop.SetFontSize(13)
+                font = legend_font_file()
+                if font is not None:  # VTK's own Arial has no Greek: "λ scale" lost its λ
+                    prop.SetFontFamilyAsString("File")
+                    prop.SetFontFile(str(font))
             bar.SetPickable(False)
             self.plotter.renderer.AddViewProp(bar)
             self.legend = bar

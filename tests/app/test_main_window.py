@@ -322,3 +322,22 @@ def test_ctrl_z_in_a_number_field_undoes_the_document(window, dialogs, qtbot):
     qtbot.keyClicks(QApplication.focusWidget(), "0.7")
     qtbot.keyClick(QApplication.focusWidget(), Qt.Key.Key_Z, Qt.KeyboardModifier.ControlModifier)
     assert window.undo_stack.index() == 1
+
+
+def test_colour_bar_text_has_its_greek_letters_and_no_dangling_dots(window, dialogs):
+    """Issue 24 item 10: "λ scale" rendered without its λ (VTK's built-in font has no Greek)
+    and tick labels ended in a dot ("-346.")."""
+    from app.viewport import legend_font_file
+
+    assert window.open_path(SAMPLE)
+    panel = window.panels["Cubic"]
+    panel.raise_()
+    panel.tool_buttons["lambda"].click()
+    bar = window.viewport.legend
+    assert bar is not None and bar.GetVisibility()
+    assert "λ" in bar.GetTitle()
+    assert bar.GetLabelFormat() % -346.0 == "-346" and bar.GetLabelFormat() % 0.5 == "0.5"
+    font = legend_font_file()
+    if font is not None:  # DejaVu Sans comes with the app's system packages
+        for prop in (bar.GetTitleTextProperty(), bar.GetLabelTextProperty()):
+            assert prop.GetFontFile() == str(font)
