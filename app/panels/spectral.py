@@ -113,6 +113,9 @@ class SpectralPanel(MethodPanel):
         self.show_combo.currentIndexChanged.connect(lambda _i: self.show_result())
         self.eig_index.valueChanged.connect(lambda _i: self.show_result())
         window.mesh_shown.connect(self._fit_size_to_mesh)
+        # the base's tooltip promises an undo: an analysis changes nothing to undo
+        self.run_button.setToolTip("Coarsen the operator and compare with the baselines. The "
+                                   "mesh is not changed; the results appear below.")
 
     def _fit_size_to_mesh(self) -> None:
         """A newly opened mesh gets a coarse size that suits it: the thesis's 500, but at most
@@ -132,6 +135,11 @@ class SpectralPanel(MethodPanel):
             self.status_label.setText(
                 f"Coarse size set to m = {m} for this {n:,}-vertex mesh (spectral coarsening "
                 f"is made for strong reductions: at most n/8), k = {round(m / 3)} eigenvectors.")
+        elif untouched:  # a word about this mesh, never the last mesh's
+            self.status_label.setText(f"Coarse size m = {m} suits this {n:,}-vertex mesh.")
+        else:
+            self.status_label.setText(f"Coarse size m = {current} (your choice) for this "
+                                      f"{n:,}-vertex mesh; Defaults suggests {m}.")
 
     # -- the job ---------------------------------------------------------------------------------
     def job_options(self) -> dict:

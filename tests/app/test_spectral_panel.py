@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.conftest import SAMPLES
+from tests.conftest import ROOT, SAMPLES
+
+DATA = ROOT / "tests" / "data"
 
 
 def test_panel_produces_heatmaps_eigenvalue_plot_and_browser(window, dialogs, qtbot):
@@ -69,9 +71,17 @@ def test_opening_a_small_mesh_fits_the_coarse_size(window, dialogs, qtbot):
     assert "m = 404" in panel.status_label.text()
     assert window.open_path(SAMPLES / "bumpy.obj")         # 4,932 vertices: n/8 > 500
     assert panel.form.params().m == 500
+    # another mesh with the same suggestion: the text speaks of the mesh open now (issue 24
+    # item 10: "m = 500 for this 4,932-vertex mesh" stayed with another mesh open)
+    assert window.open_path(DATA / "bob.obj")
+    n = len(window.document.V)
+    assert panel.form.params().m == 500 and f"{n:,}-vertex" in panel.status_label.text()
+    assert "4,932" not in panel.status_label.text()
+    assert "undo" not in panel.run_button.toolTip().lower()
     panel.form.editors["m"].setValue(77)                    # the user's choice is kept
     assert window.open_path(SAMPLES / "blob.obj")
     assert panel.form.params().m == 77
+    assert "77 (your choice)" in panel.status_label.text()
 
 
 def test_failure_shows_a_plain_message_and_leaves_the_document(window, dialogs, qtbot,
