@@ -957,8 +957,11 @@ class MainWindow(QMainWindow):
                                           merge_id=getattr(self, "_job_merge_id", -1)))
         self._job_before = None
         self.job_committed.emit(self.last_job_name, after)
-        self.report(f"{self.last_job_name} finished in {self.runner.last_duration:.2f} s "
-                    f"({plural(step.iteration, 'iteration')}). Undo with Ctrl+Z.")
+        panel = self.panels.get(self.last_job_name)
+        counted = (getattr(panel, "counts_iterations", True) and step.iteration > 0)
+        what = f" ({plural(step.iteration, 'iteration')})" if counted else ""
+        self.report(f"{self.last_job_name} finished in {self.runner.last_duration:.2f} s"
+                    f"{what}. Undo with Ctrl+Z.")
 
     def _on_job_cancelled(self, message: str) -> None:
         if not self.runner.busy:  # a restarted (live) job keeps streaming instead

@@ -33,6 +33,16 @@ if TYPE_CHECKING:  # pragma: no cover
     from app.main_window import MainWindow
 
 
+def step_text(step: Step) -> str:
+    """A streamed step in words: a stage's own message with its share done (per-mille progress
+    of a blocking computation, see algorithms.steps.with_progress), else "Iteration i/total"."""
+    if step.message and step.total == 1000:
+        return f"{step.message} — {step.iteration / 10:.0f} %"
+    total = f"/{step.total}" if step.total else ""
+    text = f"Iteration {step.iteration}{total}"
+    return f"{text}: {step.message}" if step.message else text
+
+
 class MethodPanel(QDockWidget):
     title = "Method"
     description = ""
@@ -58,6 +68,9 @@ class MethodPanel(QDockWidget):
     #: the steps may carry new faces (``step.F``): streamed and committed as whole meshes
     #: (see the module docstring)
     changes_faces = False
+    #: a run's steps are iterations of the method (False: stages of a computation, such as
+    #: "QSlim", "subdivision", whose count would mean nothing to the user)
+    counts_iterations = True
     #: undo-merge id of live re-runs (one per panel class)
     _merge_ids: dict = {}
 
@@ -566,14 +579,22 @@ class MethodPanel(QDockWidget):
             return
         if self._mesh_job is not None and self._mesh_job["active"]:
             self.show_step_mesh(step)
-        total = f"/{step.total}" if step.total else ""
-        self.status_label.setText(f"Iteration {step.iteration}{total}")
+        self.status_label.setText(step_text(step))
 
     def _on_finished(self, step: Step) -> None:
         if self.window_.last_job_name != self.title:
             return
-        self.status_label.setText(f"Done: {plural(step.iteration, 'iteration')} in "
-                                  f"{self.window_.runner.last_duration:.2f} s. Undo with Ctrl+Z.")
+        seconds = f"{self.window_.runner.last_duration:.2f} s"
+        if self.counts_iterations and step.iteration > 0:
+            text = f"Done: {plural(step.iteration, 'iteration')} in {seconds}."
+        else:
+            text = f"Done in {seconds}."
+        recipe = self.recipe()
+        from app.recipes import unchanged_result
+
+        if recipe is None or recipe.result is not unchanged_result:
+            text += " Undo with Ctrl+Z."
+        self.status_label.setText(text)
         self.stop_button.setEnabled(False)
 
     def _on_stopped(self, message: str) -> None:

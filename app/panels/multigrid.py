@@ -45,6 +45,7 @@ FLOW_JOB = "Mean curvature flow"
 
 
 class MultigridPanel(MethodPanel):
+    counts_iterations = False  # its steps are stages and solver cycles
     title = "Multigrid smoothing"
     description = ("Smooths a signal on the surface with surface multigrid: a noisy test field, "
                    "a field from a file, or the shape itself. Drag Smoothness: every change "

@@ -37,6 +37,7 @@ def heatmap_image(C: np.ndarray, size: int = 140) -> QImage:
 
 
 class SpectralPanel(MethodPanel):
+    counts_iterations = False  # its steps are stages and solver cycles
     title = "Spectral coarsening"
     description = ("Builds a small operator (m rows) whose low eigenvectors and eigenvalues match "
                    "the mesh's, and compares it with simplification (QSlim) and algebraic "

@@ -31,6 +31,7 @@ _CHOICE_INDEX = {"shipped": 0, "trained": 1, "file": 2}
 
 
 class SubdivisionPanel(MethodPanel):
+    counts_iterations = False  # its steps are stages and solver cycles
     title = "Subdivision"
     description = ("Subdivides the mesh: neural subdivision (learned from example meshes, "
                    "thesis ch. 4) or Loop, modified butterfly, mid-point. Try 'Coarsen first' "
