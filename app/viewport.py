@@ -310,7 +310,8 @@ class Viewport(QWidget):
         poly.point_data["Normals"] = vertex_normals(np.asarray(V, dtype=np.float64), self._F)
         poly.point_data.active_normals_name = "Normals"
         self.poly = poly
-        self.plotter.remove_actor(["mesh", "overlay"], render=False)
+        # marker dots belong to the mesh they were put on (e.g. spectral coarsening's roots)
+        self.plotter.remove_actor(["mesh", "overlay", "markers"], render=False)
         self.mesh_actor = self.plotter.add_mesh(
             poly, name="mesh", color=MESH_COLOR, smooth_shading=False, show_edges=self._edges,
             edge_color="#404040", line_width=0.5, specular=0.25, specular_power=20,

@@ -390,9 +390,15 @@ class MethodPanel(QDockWidget):
         """Draw this panel's colour view / overlays on the viewport (subclasses). Called when
         the panel comes to the front; not called while it is behind another tab."""
 
+    def hide_view(self) -> None:
+        """Take this panel's own drawings (marker dots, its colour view) off the 3D view: it
+        went behind another tab or was closed (subclasses that draw overlays)."""
+
     def _on_visibility_changed(self, visible: bool) -> None:
         if visible:  # the tab bar switches after this signal: look once the layout settled
             QTimer.singleShot(0, self._refresh_if_shown)
+        else:
+            self.hide_view()
 
     def _refresh_if_shown(self) -> None:
         doc = self.window_.document

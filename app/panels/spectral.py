@@ -114,6 +114,7 @@ class SpectralPanel(MethodPanel):
         self.show_combo.currentIndexChanged.connect(lambda _i: self.show_result())
         self.eig_index.valueChanged.connect(lambda _i: self.show_result())
         window.mesh_shown.connect(self._fit_size_to_mesh)
+        window.document.subscribe(self._on_doc)
         # the base's tooltip promises an undo: an analysis changes nothing to undo
         self.run_button.setToolTip("Coarsen the operator and compare with the baselines. The "
                                    "mesh is not changed; the results appear below.")
@@ -219,6 +220,27 @@ class SpectralPanel(MethodPanel):
             self.show_combo.setCurrentIndex(1)
         else:
             self.show_result()
+
+    #: colour views this panel draws (taken off the 3D view with its root dots when hidden)
+    _own_fields = ("clusters", "eigenfunction")
+
+    def hide_view(self) -> None:
+        vp = self.window_.viewport
+        vp.show_points(None)
+        if getattr(vp, "_field_name", None) in self._own_fields:
+            vp.show_field(None)
+
+    def refresh_view(self) -> None:
+        self.show_result()
+
+    def _on_doc(self, what: str) -> None:
+        # the roots and colours were computed on the mesh as it was: when it moves or changes,
+        # draw them again (show_result checks the result still fits) or take them off
+        if what in ("positions", "topology", "mesh"):
+            if self.is_shown():
+                self.show_result()
+            else:
+                self.hide_view()
 
     def show_result(self) -> None:
         vp = self.window_.viewport

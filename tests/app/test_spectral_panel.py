@@ -236,3 +236,33 @@ def test_job_options_are_json_and_restore_the_operator(window, dialogs, qtbot):
         panel.operator_combo.setCurrentText(labels[(labels.index(label) + 1) % len(labels)])
         panel.restore_options(saved)
         assert panel.operator_combo.currentText() == label and panel.job_options() == opts
+
+
+def test_overlay_leaves_with_the_panel_and_with_the_mesh(window, dialogs, qtbot):
+    """Issue 24 item 2: the black root dots and the cluster colours stayed on the 3D view after
+    switching panels and after another panel changed the mesh."""
+    panel = window.panels["Spectral coarsening"]
+    panel.raise_()
+    assert window.open_path(SAMPLES / "blob.obj")
+    for name, v in (("m", 60), ("k", 15), ("max_iterations", 20)):
+        panel.form.editors[name].setValue(v)
+    with qtbot.waitSignal(window.runner.finished, timeout=240000):
+        panel.run_button.click()
+    vp = window.viewport
+    qtbot.waitUntil(lambda: "markers" in vp.plotter.actors, timeout=10000)
+    assert vp._field_name == "clusters"
+    cubic = window.panels["Cubic"]
+    cubic.raise_()
+    qtbot.waitUntil(lambda: "markers" not in vp.plotter.actors, timeout=5000)
+    assert vp._field_name != "clusters"
+    panel.raise_()  # back: drawn again
+    qtbot.waitUntil(lambda: "markers" in vp.plotter.actors, timeout=5000)
+    sub = window.panels["Subdivision"]
+    sub.raise_()
+    sub.form.set_params(sub.form.params().__class__(method="loop", levels=1))
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        sub.run_button.click()
+    assert "markers" not in vp.plotter.actors
+    panel.raise_()  # the result no longer fits the mesh: nothing is drawn
+    qtbot.wait(200)
+    assert "markers" not in vp.plotter.actors and vp._field_name != "clusters"
