@@ -1037,6 +1037,11 @@ class MainWindow(QMainWindow):
             self.before_view.link_camera(self.viewport)
         else:
             self.before_view.unlink_camera()
+        self.before_view.set_label("Before — as opened" if on else None)
+        self.viewport.set_label("After — now" if on else None)
+        # each half (or the whole view again) is a new size: fit the mesh once the layout
+        # settled, keeping the direction the user looks from (both halves share the camera)
+        QTimer.singleShot(60, self.viewport.fit_view)
 
     def _refresh_before(self) -> None:
         bv = self.before_view

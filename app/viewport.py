@@ -512,6 +512,29 @@ class Viewport(QWidget):
         self._home_camera()
         self.render()
 
+    def fit_view(self) -> None:
+        """Fit the whole mesh in the view, keeping the direction the user looks from (after the
+        view changed size: Before / After split on or off)."""
+        if self.poly is None:
+            return
+        self.plotter.reset_camera()
+        self.plotter.camera.zoom(1.15)
+        self.render()
+
+    def set_label(self, text: str | None) -> None:
+        """A caption at the top of the view ("Before", "After"); None removes it."""
+        self.plotter.remove_actor("view_label", render=False)
+        if text:
+            actor = self.plotter.add_text(text, position="upper_edge", font_size=9,
+                                          color="#222222", name="view_label")
+            font = legend_font_file()
+            if font is not None:
+                prop = actor.GetTextProperty()
+                prop.SetFontFamilyAsString("File")
+                prop.SetFontFile(str(font))
+        self.label_text = text or ""
+        self.render()
+
     #: standard views of a Y-up mesh: (direction from the centre to the camera, up)
     STANDARD_VIEWS = {"front": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
                       "top": ((0.0, 1.0, 0.0), (0.0, 0.0, -1.0)),

@@ -597,3 +597,38 @@ def test_shown_field_exports_and_reads_back(window, dialogs, qtbot, tmp_path):
     back = read_field(str(out) + ".txt", len(doc.V))
     np.testing.assert_allclose(back, lam, rtol=1e-9, atol=1e-12)
     assert "lambda_scale" in window.message_log.all_text()
+
+
+def _inside(vp, V, margin=2):
+    """Share of the points whose projection lies inside the view, and the projected extent
+    relative to the view's size (how much of the view the mesh fills)."""
+    xy = vp.project(V)
+    w, h = vp.width(), vp.height()
+    inside = ((xy[:, 0] >= -margin) & (xy[:, 0] <= w + margin) & (xy[:, 1] >= -margin)
+              & (xy[:, 1] <= h + margin)).mean()
+    extent = max(np.ptp(xy[:, 0]) / w, np.ptp(xy[:, 1]) / h)
+    return float(inside), float(extent)
+
+
+def test_before_after_fits_both_halves_labels_them_and_comes_back_unzoomed(window, dialogs,
+                                                                          qtbot):
+    """Issue 24 item 9: both halves were cropped until R was pressed, had no labels, and
+    turning the split off left the main view zoomed out."""
+    assert window.open_path(SAMPLES / "blob.obj")
+    V = window.document.V
+    _i, full_extent = _inside(window.viewport, V)
+    qtbot.mouseClick(window.toolbar_buttons["before_after"], Qt.MouseButton.LeftButton)
+    before = window.before_view
+    qtbot.waitUntil(before.isVisible)
+    qtbot.wait(300)
+    for vp in (before, window.viewport):
+        inside, extent = _inside(vp, V)
+        assert inside == 1.0, "a half crops the mesh"
+        assert extent > 0.5
+    assert before.label_text.startswith("Before") and window.viewport.label_text.startswith(
+        "After")
+    qtbot.mouseClick(window.toolbar_buttons["before_after"], Qt.MouseButton.LeftButton)
+    qtbot.wait(300)
+    inside, extent = _inside(window.viewport, V)
+    assert inside == 1.0 and extent > 0.8 * full_extent, (extent, full_extent)
+    assert window.viewport.label_text == ""
