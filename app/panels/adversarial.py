@@ -691,8 +691,12 @@ class AdversarialPanel(MethodPanel):
                 yield step
 
         if self.probs is None:
-            self.image_note.setText("Loading the classifier…" if self.classifier is None
-                                    else "Classifying…")
+            waiting = ("Loading the classifier…" if self.classifier is None
+                       else "Classifying…")
+            self.image_note.setText(waiting)
+            if self.shown_image is None:  # never "Open a mesh." with a mesh open
+                self.image_label.setText(waiting)
+        self._update_attack_buttons()
         self.preview_runner.start("classify", steps)
 
     def _start_request(self, recipe: str, params, options: dict, state) -> dict:
@@ -720,6 +724,7 @@ class AdversarialPanel(MethodPanel):
             self.true_edit.setStyleSheet("")
         self.image_note.setText(f"{step.covered * 100:.0f} % of the image is the shape.")
         self.preview_count += 1
+        self._update_attack_buttons()
         if self._preview_stale:     # something changed meanwhile: shown, and computed again
             self._restart_if_stale()
         else:
@@ -738,6 +743,7 @@ class AdversarialPanel(MethodPanel):
         self.top5_view.set_entries([])
         self.image_note.setText("")
         self.status_label.setText(message)
+        self._update_attack_buttons()
         if self._preview_stale:
             self._restart_if_stale()
         else:
@@ -754,9 +760,22 @@ class AdversarialPanel(MethodPanel):
             self.schedule_preview()
 
     def _on_doc(self, what: str) -> None:
+        if what == "mesh":  # another object: the last one's attack results do not apply
+            self.before_after_box.setVisible(False)
+            self.last_result = None
+            if self._revert_to is not None:  # its attacked lighting goes with it
+                self.set_lighting(*self._revert_to)
+                self._revert_to = None
+                self.revert_button.setEnabled(False)
+            self.shown_image = None
+            self.image_label.setPixmap(QPixmap())
+            self.image_label.setText("Loading the classifier…" if self.classifier is None
+                                     else "Classifying…")
+            self.top5_view.set_entries([])
         if what in ("mesh", "topology"):
             self.true_edit.clear()
             self.probs = None
+            self._update_attack_buttons()
             self._take_file_colors(self._colors_key_of_doc(), None)
             self._file_colors_key = None  # read by the next preview job, on the worker
         if what in ("mesh", "topology", "positions"):
@@ -863,6 +882,11 @@ class AdversarialPanel(MethodPanel):
             self.status_label.setText("The target is the true label: choose another target, or "
                                       "leave it empty.")
             return False
+        if true is None and self.probs is not None:
+            # the class the attack moves away from is the one shown now: write it down, so the
+            # re-classification of the attacked result does not take the fooled class for it
+            self.true_edit.setText(top_k(self.probs, self.class_names(), 1)[0][0])
+            self.true_edit.setStyleSheet("")
         params = dataclasses.replace(self.form.params(), mode=mode)
         name = rcp.LIGHTING if mode == "lighting" else rcp.GEOMETRY
         recipe = rcp.RECIPES_BY_NAME[name]
@@ -893,9 +917,20 @@ class AdversarialPanel(MethodPanel):
 
     def _on_busy(self, *_):
         super()._on_busy()
-        mine = self._attacking()
-        self.attack_light_button.setEnabled(not mine)
-        self.attack_geom_button.setEnabled(not mine)
+        self._update_attack_buttons()
+
+    def _update_attack_buttons(self) -> None:
+        """Attacks need a mesh and its first classification (the classifier loaded): until
+        then, and while an attack runs, the buttons say why they wait."""
+        ready = (not self.window_.document.is_empty and self.probs is not None
+                 and not self._attacking())
+        for b in (self.attack_light_button, self.attack_geom_button):
+            b.setEnabled(ready)
+        why = ("" if ready else "Open a mesh first." if self.window_.document.is_empty
+               else "An attack is running." if self._attacking()
+               else "Waiting for the classifier's first answer…")
+        self.attack_light_button.setStatusTip(why)
+        self.attack_geom_button.setStatusTip(why)
 
     def _on_metrics(self, history) -> None:
         if not self._mine():

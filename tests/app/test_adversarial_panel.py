@@ -377,3 +377,40 @@ def test_job_options_round_trip_with_classifier_and_file_colours(window, qtbot, 
     panel.restore_options({"classifier": "blob:" + "0" * 64 + "/gone.pt"})
     assert "gone.pt" in panel.status_label.text() and "not changed" in panel.status_label.text()
     assert panel.classifier is None and panel.job_options() == got
+
+
+def test_attacks_wait_for_the_classifier_keep_the_true_label_and_stay_with_their_mesh(
+        window, qtbot, mug_path, tmp_path):
+    """Issue 24 item 6: Attack was enabled while the classifier loaded and the picture said
+    "Open a mesh." with a mesh open; an attack filled the *true* label with the fooled class;
+    the previous mesh's before/after pictures and attacked lighting carried over."""
+    panel = window.panels[TITLE]
+    panel.raise_()
+    with qtbot.waitSignal(panel.classified, timeout=60000):
+        assert window.open_path(mug_path)
+        # right after opening, before the first classification: no attack, no stale picture
+        assert not panel.attack_light_button.isEnabled()
+        assert not panel.attack_geom_button.isEnabled()
+        assert panel.image_label.text() != "Open a mesh."
+    assert panel.attack_light_button.isEnabled() and panel.attack_geom_button.isEnabled()
+    top1 = panel.top5_view.entries[0][0]
+    panel.true_edit.clear()
+    panel.form.set_value("iterations", 4)
+    with qtbot.waitSignal(window.runner.finished, timeout=60000):
+        assert panel.attack("lighting")
+        assert not panel.attack_light_button.isEnabled()  # one attack at a time
+    qtbot.waitUntil(lambda: not window.runner.busy, timeout=30000)
+    with qtbot.waitSignal(panel.classified, timeout=60000):
+        pass
+    # the true label is the object's class before the attack, whatever the attack did
+    assert panel.true_edit.text() == top1
+    assert panel.before_after_box.isVisible() and panel.revert_button.isEnabled()
+    U_attacked = panel.lighting.copy()
+    # another mesh: the last attack's pictures and its lighting go
+    V, F, _ = SUBJECTS["orange"]()
+    other = tmp_path / "orange.obj"
+    write_mesh(other, V, F)
+    with qtbot.waitSignal(panel.classified, timeout=60000):
+        assert window.open_path(other)
+    assert not panel.before_after_box.isVisible() and not panel.revert_button.isEnabled()
+    assert not np.array_equal(panel.lighting, U_attacked)
