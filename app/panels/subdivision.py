@@ -191,7 +191,12 @@ class SubdivisionPanel(MethodPanel):
         from algorithms.errors import Stylize3DError
 
         out = self.recipe(recipe_mod.TRAIN_RECIPE).outcome(holder["last"])
-        if not out:  # stopped while making the data
+        if not out:  # stopped while making the data: say that nothing was trained
+            kept = {0: "the shipped weights", 1: "the weights trained here before",
+                    2: "the weights file"}.get(self.weights_combo.currentIndex(), "")
+            self.status_label.setText(
+                "Training stopped while making its data: no network was trained"
+                + (f"; subdividing keeps using {kept}." if kept else "."))
             return
         try:
             net = recipe_mod.load_network(out["weights"])

@@ -228,3 +228,22 @@ def test_job_options_are_json_and_restore_round_trips(window, dialogs, qtbot, tm
     panel.restore_options({"weights": "file", "weights_file": junk})
     assert panel.weights_combo.currentIndex() == 0 and panel.weights_file is None
     assert "not a Stylize3D" in panel.status_label.text()
+
+
+def test_stopping_training_while_making_data_says_nothing_was_trained(window, dialogs, qtbot,
+                                                                      tmp_path, monkeypatch):
+    """Issue 24 item 7: after Stop the panel said only "Subdivision was cancelled."; it must
+    say that no network was trained and which weights stay in use. It has a help page."""
+    monkeypatch.setenv("STYLIZE3D_CACHE", str(tmp_path / "cache"))
+    panel = open_panel(window)
+    assert panel.help_button.isVisibleTo(panel) and panel.help_path().name == "subdivision.md"
+    panel.workers = 1
+    panel.coarse_spin.setValue(200)
+    panel.train_button.click()
+    qtbot.waitUntil(lambda: window.runner.busy, timeout=10000)
+    with qtbot.waitSignal(window.runner.cancelled, timeout=60000):
+        panel.stop_button.click()
+    qtbot.waitUntil(lambda: "no network was trained" in panel.status_label.text(),
+                    timeout=10000)
+    assert "shipped weights" in panel.status_label.text()
+    assert panel.trained_net is None
