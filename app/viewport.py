@@ -78,7 +78,9 @@ class PickResult:
 class InteractionHandler(Protocol):
     """A viewport tool (brush, handle placement, ...). While one is active, left-button drags on
     the mesh go to it instead of rotating the camera (right/middle buttons and the wheel still
-    move the camera). ``press`` returns False to let the camera have the drag after all."""
+    move the camera); a drag that starts just off the mesh neither rotates the camera nor paints
+    until it reaches the mesh. ``press`` returns False to let the camera have the drag after
+    all."""
 
     def press(self, hit: PickResult) -> bool: ...
     def drag(self, hit: PickResult | None) -> None: ...
@@ -90,21 +92,35 @@ class _MouseFilter(QObject):
         super().__init__(viewport)
         self.vp = viewport
         self.dragging = False
+        #: a stroke that started off the model: it begins where the mouse first reaches it
+        self.pending = False
 
     def eventFilter(self, obj, event) -> bool:  # noqa: N802 (Qt API)
         h = self.vp.handler
         t = event.type()
         if h is None:
-            self.dragging = False
+            self.dragging = self.pending = False
             return False
         if t == QEvent.Type.MouseButtonPress and event.button() == Qt.MouseButton.LeftButton:
             hit = self.vp.pick(event.position().x(), event.position().y(), event.modifiers())
             if hit is not None and h.press(hit):
                 self.dragging = True
                 return True
+            if hit is None:  # just off the model: a tool is active, the camera stays put
+                self.pending = True
+                return True
             return False
         if t in (QEvent.Type.MouseMove, QEvent.Type.MouseButtonPress):
             self.vp.last_mouse = (event.position().x(), event.position().y())
+        if t == QEvent.Type.MouseMove and self.pending:
+            hit = self.vp.pick(event.position().x(), event.position().y(), event.modifiers())
+            if hit is not None and h.press(hit):
+                self.pending, self.dragging = False, True
+            return True
+        if t == QEvent.Type.MouseButtonRelease and self.pending and \
+                event.button() == Qt.MouseButton.LeftButton:
+            self.pending = False
+            return True
         if t == QEvent.Type.MouseMove and self.dragging:
             h.drag(self.vp.pick(event.position().x(), event.position().y(), event.modifiers()))
             return True

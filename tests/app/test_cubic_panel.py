@@ -187,3 +187,24 @@ def test_multigrid_global_step_option(window, dialogs, qtbot):
     assert np.abs(V1 - direct).max() < 1e-3 * diag  # same result as the direct global step
     panel.progressive_box.setChecked(True)
     assert not panel.multigrid_box.isChecked()
+
+
+def test_a_stroke_starting_off_the_model_paints_and_leaves_the_camera(window, dialogs, qtbot):
+    """Issue 24 item 10: starting a brush stroke just off the model rotated the camera."""
+    panel = open_cubic(window)
+    panel.tool_buttons["lambda"].click()
+    cam = window.viewport.plotter.camera
+    pose = (tuple(cam.position), tuple(cam.focal_point), tuple(cam.up))
+    V = window.document.V
+    v = front_vertex(window)
+    x, y = window.viewport.project(V[[v]])[0]
+    # from the view's corner (background) onto the model
+    drag(qtbot, window, [(4, 4), ((4 + x) / 2, (4 + y) / 2), (x, y), (x + 6, y)])
+    assert (tuple(cam.position), tuple(cam.focal_point), tuple(cam.up)) == pose
+    lam = window.document.state.fields["lambda_scale"]
+    assert (lam != 1.0).any() and window.undo_stack.undoText() == "Paint λ"
+    # a drag entirely off the model does nothing at all
+    n = window.undo_stack.count()
+    drag(qtbot, window, [(4, 4), (30, 6), (60, 8)])
+    assert window.undo_stack.count() == n
+    assert (tuple(cam.position), tuple(cam.focal_point), tuple(cam.up)) == pose
