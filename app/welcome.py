@@ -92,7 +92,10 @@ class WelcomeDialog(QDialog):
             b.setText(f"{Path(name).stem}\n{hint}")
             b.setToolTip(f"Open the sample {name} and bring the {panel} panel to the front.")
             b.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextUnderIcon)
-            b.setMinimumWidth(THUMB_SIZE[0] + 40)
+            fm = b.fontMetrics()
+            # room for the picture and both text lines (the default hint cut the second off)
+            b.setMinimumWidth(max(THUMB_SIZE[0] + 40, fm.horizontalAdvance(hint) + 24))
+            b.setMinimumHeight(THUMB_SIZE[1] + 2 * fm.lineSpacing() + 24)
             b.clicked.connect(lambda _=False, n=name, p=panel: self.open_sample(n, p))
             grid.addWidget(b, 0, col)
             self.sample_buttons[name] = b

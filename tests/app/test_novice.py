@@ -632,3 +632,19 @@ def test_before_after_fits_both_halves_labels_them_and_comes_back_unzoomed(windo
     inside, extent = _inside(window.viewport, V)
     assert inside == 1.0 and extent > 0.8 * full_extent, (extent, full_extent)
     assert window.viewport.label_text == ""
+
+
+def test_welcome_suggestions_are_not_clipped(window, dialogs, qtbot):
+    """Issue 24 item 10: the welcome window's suggestion lines were cut off under the
+    thumbnails."""
+    from app.welcome import THUMB_SIZE, WelcomeDialog
+
+    dlg = WelcomeDialog(window)
+    dlg.show()
+    qtbot.waitExposed(dlg)
+    for b in dlg.sample_buttons.values():
+        fm = b.fontMetrics()
+        lines = b.text().split("\n")
+        assert b.height() >= THUMB_SIZE[1] + len(lines) * fm.lineSpacing()
+        assert b.width() >= max(fm.horizontalAdvance(t) for t in lines)
+    dlg.close()
