@@ -321,10 +321,17 @@ def test_a_dask_local_cluster_gives_the_same_outputs(tmp_path, capsys):
         good.append(lib / name)
     (lib / "empty.obj").write_text("")
     out = tmp_path / "out"
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  host="127.0.0.1", dashboard_address=None) as cluster:
-        code = main(["batch", "cubic", str(lib), "-o", str(out), "--scheduler",
-                     cluster.scheduler_address, "--json", "--quiet"])
+    # Dask's nanny writes its worker settings (MALLOC_TRIM_THRESHOLD_, OMP_NUM_THREADS=1)
+    # into this process's environment: put it back for the rest of the test session
+    saved = dict(os.environ)
+    try:
+        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                      host="127.0.0.1", dashboard_address=None) as cluster:
+            code = main(["batch", "cubic", str(lib), "-o", str(out), "--scheduler",
+                         cluster.scheduler_address, "--json", "--quiet"])
+    finally:
+        os.environ.clear()
+        os.environ.update(saved)
     summary = json.loads(capsys.readouterr().out)
     assert code == 1 and summary["executor"] == "dask"
     assert summary["done"] == 2 and summary["failed"] == 1
