@@ -5,7 +5,8 @@ docs/batch.md).
 METHOD is a sub-command with a batch form (cubic, analogy, smooth, subdivide, paparazzi), a
 project (``.s3d``: the settings of its panel, ``--panel NAME``) or a panel-settings ``.json``.
 Exit status: 0 when every input is done or skipped, 1 when some failed (or the batch was
-stopped), 2 for a mistyped METHOD, a missing INPUT or an unreadable settings file, 5 for a bad
+stopped), 2 for a mistyped METHOD, a missing INPUT or an unreadable settings file, 3 when
+results would replace files the batch did not write (without --overwrite), 5 for a bad
 parameter; 130 when interrupted (what is done is recorded: run the same command again).
 """
 
@@ -102,6 +103,25 @@ class _Progress:
             self.bar.stop()
 
 
+def _refuse_replacing(inputs, outputs, report) -> None:
+    """Like every other command, never replace a file without --overwrite: only outputs this
+    batch's report says it wrote itself are written again (a resumed or re-run batch)."""
+    import os
+
+    from algorithms.errors import MeshWriteError
+    from app.batch import read_report
+
+    recorded = read_report(report)
+    clash = [str(o) for i, o in zip(inputs, outputs) if Path(o).exists()
+             and (recorded.get(os.path.abspath(i)) or recorded.get(str(i)) or {}).get("output")
+             not in (str(o), os.path.abspath(o))]
+    if clash:
+        raise MeshWriteError(
+            f"{len(clash)} result(s) would replace files that are already in the output folder "
+            f"and were not written by this batch (e.g. {clash[0]}); nothing was run. Give "
+            "another -o folder, or --overwrite to replace them.")
+
+
 def cmd_batch(args: argparse.Namespace) -> int:
     from app import batch
 
@@ -120,6 +140,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
         out.resolve() / batch.REPORT_NAME
     if bargs.dry_run:
         return _dry_run(job, bargs, inputs, outputs, report)
+    if not bargs.overwrite:
+        _refuse_replacing(inputs, outputs, report)
     memory = batch.parse_size(bargs.memory_limit) if bargs.memory_limit else "auto"
     progress = _Progress(job.method, bargs.quiet)
     try:
@@ -156,7 +178,8 @@ def add_parsers(sub) -> None:
                     "file names, one JSON line per input goes to the report. A batch that is "
                     "stopped and started again skips what is done. 'stylize3d batch METHOD "
                     "--help' lists the method's flags and the batch's. Exit status: 0 all "
-                    "done or skipped, 1 some failed, 2 usage, 5 bad parameter.")
+                    "done or skipped, 1 some failed, 2 usage, 3 would replace files it did "
+                    "not write (--overwrite), 5 bad parameter.")
     s.add_argument("method", metavar="METHOD",
                    help=f"{', '.join(METHODS)}; or a project (.s3d) or panel-settings .json "
                         "whose settings to apply")

@@ -412,3 +412,25 @@ def test_other_methods_write_what_their_one_mesh_command_writes(tmp_path, method
     quiet = [] if method == "subdivide" else ["--quiet"]  # subdivide prints no progress
     assert main([method, str(mesh), "-o", str(ref), *quiet, *flags]) == 0
     assert (out / "m.obj").read_bytes() == ref.read_bytes()
+
+
+def test_existing_files_are_not_replaced_without_overwrite(tmp_path, capsys):
+    """Like every command: a result never replaces a file the batch did not write, unless
+    --overwrite (exit 3, nothing run); the batch's own results are written again freely."""
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    V, F = icosphere(2)
+    write_mesh(lib / "a.obj", V, F)
+    write_mesh(lib / "b.obj", V * 1.1, F)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "a.obj").write_text("precious")
+    args = ["batch", "cubic", str(lib), "-o", str(out), "--workers", "1", "--quiet",
+            "--max-iterations", "3"]
+    assert main(args) == 3
+    assert (out / "a.obj").read_text() == "precious" and not (out / "b.obj").exists()
+    assert "--overwrite" in capsys.readouterr().err
+    assert main(args + ["--overwrite"]) == 0
+    assert (out / "a.obj").read_text() != "precious"
+    # the batch's own results: a run with other settings writes them again without asking
+    assert main(args[:-1] + ["4"]) == 0
