@@ -14,8 +14,8 @@ import dataclasses
 import math
 from typing import Any
 
-from PySide6.QtCore import Qt, Signal
-from PySide6.QtGui import QValidator
+from PySide6.QtCore import QEvent, QObject, Qt, Signal
+from PySide6.QtGui import QKeySequence, QValidator
 from PySide6.QtWidgets import (QAbstractSpinBox, QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout,
                                QHBoxLayout, QLabel, QSlider, QSpinBox, QVBoxLayout,
                                QWidget)
@@ -81,6 +81,45 @@ def glossary_for(*texts: str) -> list[str]:
     return out
 
 
+class _DocumentUndoKeys(QObject):
+    """Ctrl+Z / Ctrl+Y / Ctrl+Shift+Z while the cursor is in a form's number field: the field's
+    own text editor would take the keys (and do nothing visible once the value was entered);
+    they undo / redo the document (the window's Undo / Redo actions) instead, unless the field
+    holds text being typed. Installed on each form's spin boxes only (an application-wide
+    Python event filter would see every event of the app)."""
+
+    def eventFilter(self, obj, event) -> bool:  # noqa: N802 - Qt override
+        if event.type() != QEvent.Type.ShortcutOverride:
+            return False
+        spin = obj if isinstance(obj, QAbstractSpinBox) else obj.parent()
+        if not isinstance(spin, QAbstractSpinBox):
+            return False
+        actions = getattr(spin.window(), "actions_by_name", None)
+        if not actions or "undo" not in actions or "redo" not in actions:
+            return False
+        keys = QKeySequence(event.keyCombination())
+        wanted = [*actions["undo"].shortcuts(), *actions["redo"].shortcuts()]
+        if not any(keys.matches(k) == QKeySequence.SequenceMatch.ExactMatch for k in wanted):
+            return False
+        value = getattr(spin, "value", None)
+        if callable(value) and hasattr(spin, "textFromValue") and \
+                spin.cleanText() != spin.textFromValue(value()):
+            return False  # an edit in progress: the field undoes its own typing
+        event.ignore()  # not for the field: the window's shortcut gets the keys
+        return True
+
+
+_undo_keys: _DocumentUndoKeys | None = None
+
+
+def document_undo_keys() -> _DocumentUndoKeys:
+    """The one filter object (see :class:`_DocumentUndoKeys`)."""
+    global _undo_keys
+    if _undo_keys is None:
+        _undo_keys = _DocumentUndoKeys()
+    return _undo_keys
+
+
 class _ScientificSpinBox(QDoubleSpinBox):
     """A float spin box that shows and accepts numbers like 1e-06 or 0.0025 (4 significant
     digits), for log-scale parameters spanning many decades."""
@@ -142,6 +181,7 @@ class _NumberEditor(QWidget):
                 self.spin.setSingleStep(spec.step or 0.1)
         self.spin.setKeyboardTracking(False)
         self.spin.setMinimumWidth(90)
+        self.spin.installEventFilter(document_undo_keys())  # Ctrl+Z undoes the document
         self.slider = None
         if spec.minimum is not None and spec.maximum is not None:
             self.slider = QSlider(Qt.Orientation.Horizontal)

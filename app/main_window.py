@@ -11,10 +11,10 @@ import os
 from pathlib import Path
 
 import numpy as np
-from PySide6.QtCore import QObject, QSettings, Qt, QTimer, Signal
+from PySide6.QtCore import QSettings, Qt, QTimer, Signal
 from PySide6.QtGui import QAction, QKeySequence, QShortcut, QUndoStack
-from PySide6.QtWidgets import (QApplication, QDockWidget, QLabel, QMainWindow, QProgressBar,
-                               QPushButton, QWidget)
+from PySide6.QtWidgets import (QDockWidget, QLabel, QMainWindow, QProgressBar, QPushButton,
+                               QWidget)
 
 from algorithms.errors import Stylize3DError
 from algorithms.mesh import (SUPPORTED_READ, SUPPORTED_WRITE, clean_mesh, file_filter, read_mesh,
@@ -71,39 +71,6 @@ SHORTCUTS_TEXT = ("<table>" + "".join(
       "or Shift+left: pan</td></tr></table>")
 
 
-class _UndoKeysInFields(QObject):
-    """Ctrl+Z / Ctrl+Y / Ctrl+Shift+Z while the cursor is in a number field: the field's own
-    text editor would take the keys (and do nothing visible once the value was entered); they
-    undo / redo the document instead, unless the field holds text being typed."""
-
-    def __init__(self, window: "MainWindow"):
-        super().__init__(window)
-        self.window_ = window
-
-    def eventFilter(self, obj, event) -> bool:  # noqa: N802 - Qt override
-        from PySide6.QtCore import QEvent
-        from PySide6.QtGui import QKeySequence
-        from PySide6.QtWidgets import QAbstractSpinBox
-
-        if event.type() != QEvent.Type.ShortcutOverride:
-            return False
-        spin = obj if isinstance(obj, QAbstractSpinBox) else obj.parent()
-        if not isinstance(spin, QAbstractSpinBox) or spin.window() is not self.window_:
-            return False
-        keys = QKeySequence(event.keyCombination())
-        wanted = [*self.window_.actions_by_name["undo"].shortcuts(),
-                  *self.window_.actions_by_name["redo"].shortcuts()]
-        if not any(keys.matches(k) == QKeySequence.SequenceMatch.ExactMatch for k in wanted):
-            return False
-        value = getattr(spin, "value", None)
-        typing = (callable(value) and hasattr(spin, "textFromValue")
-                  and spin.cleanText() != spin.textFromValue(value()))
-        if typing:
-            return False  # an edit in progress: the field undoes its own typing
-        event.ignore()  # not for the field: the window's Undo / Redo shortcut gets the keys
-        return True
-
-
 class MainWindow(QMainWindow):
     """See the module docstring. ``mesh_shown`` is emitted after a mesh is opened and drawn."""
 
@@ -134,8 +101,6 @@ class MainWindow(QMainWindow):
         self.setDockOptions(QMainWindow.DockOption.AnimatedDocks | QMainWindow.DockOption.AllowTabbedDocks)
 
         self._build_actions()
-        self._undo_keys = _UndoKeysInFields(self)
-        QApplication.instance().installEventFilter(self._undo_keys)
         self._build_menus()
         self._build_status_bar()
         self._build_toolbar()
@@ -1114,7 +1079,6 @@ class MainWindow(QMainWindow):
                 return
             bd.stop()
             bd.thread_.wait(60000)
-        QApplication.instance().removeEventFilter(self._undo_keys)
         for panel in self.panels.values():
             panel.shutdown()
         self.runner.shutdown()
