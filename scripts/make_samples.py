@@ -73,9 +73,35 @@ def main(argv: list[str] | None = None) -> int:
             write_mesh(path, V, F)
         problems += check(path, genus)
         print(f"{path}: {path.stat().st_size / 1000:.0f} kB")
+    project = args.out / "blob-painted.s3d"
+    if not args.check:
+        write_sample_project(args.out / "blob.obj", project)
+    print(f"{project}: {project.stat().st_size / 1000:.0f} kB")
     for p in problems:
         print("PROBLEM:", p, file=sys.stderr)
     return 1 if problems else 0
+
+
+def write_sample_project(mesh: Path, out: Path) -> None:
+    """A project made from the blob as a user would make it in the app: λ painted stronger on
+    the upper half and weaker below, the lowest region fixed, one handle pulling the top out,
+    and the Cubic and Subdivision panels' settings (the README's project examples use it)."""
+    from app.document import MeshState
+    from app.project import Project, save_project
+
+    data = read_mesh(mesh)
+    V, F = data.V, data.F
+    z = V[:, 1]  # the samples are Y-up
+    st = MeshState.make(V, F)
+    st = st.with_field("lambda_scale", np.where(z > np.median(z), 2.0, 0.5))
+    st = st.with_field("fixed", (z < z.min() + 0.1 * np.ptp(z)).astype(float))
+    top = int(np.argmax(z))
+    st = st.with_handles({top: tuple(float(x) for x in V[top] + [0.0, 0.15 * np.ptp(z), 0.0])})
+    panels = {"Cubic": {"params": {"lam": 0.4}, "options": {"plane_axis": 1, "progressive": None,
+                                                            "multigrid": False}},
+              "Subdivision": {"params": {"method": "neural", "levels": 1, "coarsen_first": 0},
+                              "options": {"weights": "shipped"}}}
+    save_project(out, Project(st, panels=panels, source=mesh.name))
 
 
 if __name__ == "__main__":

@@ -247,3 +247,30 @@ def test_what_opens_the_app_and_what_is_a_typo(monkeypatch, tmp_path, capsys):
     assert main(["subdivde", "x.obj"]) == 2
     assert "Did you mean 'subdivide'?" in capsys.readouterr().err
     assert len(opened) == n                        # none of them opened the app
+
+
+def test_the_readme_project_examples_run(tmp_path):
+    """The README's project examples use the bundled resources/samples/blob-painted.s3d (made by
+    scripts/make_samples.py): the painting and the saved settings are used."""
+    import json as _json
+
+    from app.project import read_project
+    from app.recipes import run
+    from tests.conftest import ROOT
+
+    sample = ROOT / "resources" / "samples" / "blob-painted.s3d"
+    settings = ROOT / "resources" / "samples" / "cubic-params.json"
+    project = read_project(sample)
+    assert {"lambda_scale", "fixed"} <= set(project.state.fields) and project.state.handles
+    out = tmp_path / "out.obj"
+    assert main(["cubic", str(sample), "-o", str(out), "--quiet"]) == 0
+    from algorithms.mesh import read_mesh
+
+    np.testing.assert_allclose(read_mesh(out).V, run("cubic", project).state.V, atol=1e-6)
+    out2 = tmp_path / "out2.obj"
+    assert main(["cubic", str(sample), "-o", str(out2), "--params", str(settings),
+                 "--lambda", "0.5", "--quiet"]) == 0
+    assert _json.loads(settings.read_text())["max_iterations"] == 60
+    fine = tmp_path / "fine.obj"
+    assert main(["subdivide", str(sample), "-o", str(fine)]) == 0
+    assert len(read_mesh(fine).F) == 4 * len(project.state.F)
