@@ -301,19 +301,26 @@ def _to_sample(arrays: dict, levels: int) -> CoarseSample:
                                  for lv in range(levels + 1)])
 
 
+def dask_client(scheduler: str):
+    """A Dask distributed ``Client`` of the scheduler at ``scheduler`` (e.g. tcp://host:8786);
+    a missing Dask or an unreachable scheduler raise ParameterError with a plain message.
+    Shared by training-data generation and ``stylize3d batch``."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise ParameterError("A scheduler address needs Dask distributed, which is not "
+                             "installed: pip install 'stylize3d[cluster]'.") from None
+    try:
+        return Client(scheduler, timeout=SCHEDULER_TIMEOUT)
+    except Exception as exc:  # noqa: BLE001 - a plain message
+        raise ParameterError(f"Could not reach the Dask scheduler at {scheduler!r} "
+                             f"({exc}). Check the address (e.g. tcp://host:8786) and that "
+                             f"the scheduler is running.") from None
+
+
 def _make_executor(workers: int | None, scheduler: str | None, shapes=()):
     if scheduler:
-        try:
-            from distributed import Client
-        except ImportError:
-            raise ParameterError("A scheduler address needs Dask distributed, which is not "
-                                 "installed: pip install 'stylize3d[cluster]'.") from None
-        try:
-            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
-        except Exception as exc:  # noqa: BLE001 - a plain message
-            raise ParameterError(f"Could not reach the Dask scheduler at {scheduler!r} "
-                                 f"({exc}). Check the address (e.g. tcp://host:8786) and that "
-                                 f"the scheduler is running.") from None
+        client = dask_client(scheduler)
         return client.get_executor(), client.close
     w = max(1, int(workers if workers else min(2, os.cpu_count() or 1)))
     ex = cf.ProcessPoolExecutor(max_workers=w, mp_context=multiprocessing.get_context("spawn"),

@@ -43,7 +43,6 @@ from app.batch.worker import file_sha256, init_pool_worker, input_id, limit_file
 
 REPORT_NAME = "batch-report.jsonl"
 BATCH_DIR = ".batch"
-SCHEDULER_TIMEOUT = 20  # seconds to reach a Dask scheduler
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                      "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
 _UNITS = {"": 1, "b": 1, "k": 1e3, "kb": 1e3, "m": 1e6, "mb": 1e6, "g": 1e9, "gb": 1e9,
@@ -204,17 +203,9 @@ def make_executor(job: Job, workers: int, scheduler: str | None):
     """``(executor, close, job argument of run_task, slots)``: a local spawn pool whose
     processes get ``job`` once, or a Dask client's executor with ``job`` scattered once."""
     if scheduler:
-        try:
-            from distributed import Client
-        except ImportError:
-            raise ParameterError("A scheduler address needs Dask distributed, which is not "
-                                 "installed: pip install 'stylize3d[cluster]'.") from None
-        try:
-            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
-        except Exception as exc:  # noqa: BLE001 - a plain message
-            raise ParameterError(f"Could not reach the Dask scheduler at {scheduler!r} "
-                                 f"({exc}). Check the address (e.g. tcp://host:8786) and that "
-                                 f"the scheduler is running.") from None
+        from algorithms.subdivision.data import dask_client
+
+        client = dask_client(scheduler)
         slots = max(1, sum(client.nthreads().values()))
         job_ref = client.scatter(job, broadcast=True, hash=False)
         return client.get_executor(), client.close, job_ref, slots
