@@ -63,6 +63,7 @@ class BatchDialog(QDialog):
         self.window_ = window
         self.setWindowTitle("Batch: apply a panel's settings to many meshes")
         self.thread_: BatchThread | None = None
+        self._running = False
         self.summary = None
         self._t0 = 0.0
         lay = QVBoxLayout(self)
@@ -183,7 +184,10 @@ class BatchDialog(QDialog):
     # -- running ----------------------------------------------------------------------------
     @property
     def running(self) -> bool:
-        return self.thread_ is not None and self.thread_.isRunning()
+        # True from Start until the thread's queued ``finished`` reaches this (GUI) thread, which
+        # is after its ``done``/``error``: whoever sees ``running`` False also sees the summary.
+        # (``QThread.isRunning()`` turns False before the queued ``done`` is delivered.)
+        return self._running
 
     def _job(self):
         from app.batch import job_from_settings
@@ -244,6 +248,7 @@ class BatchDialog(QDialog):
             self.cancel_button.setEnabled(False)
 
     def _set_running(self, on: bool) -> None:
+        self._running = on
         for w in (self.start_button, self.panel_combo, self.add_files_button,
                   self.add_folder_button, self.remove_button, self.out_button, self.out_edit,
                   self.workers_spin):

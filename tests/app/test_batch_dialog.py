@@ -95,11 +95,13 @@ def test_batch_dialog_stop_then_continue(window, dialogs, qtbot, tmp_path):
     dlg.cancel_button.click()
     qtbot.waitUntil(lambda: not dlg.running, timeout=240000)
     first = dlg.summary
+    assert first is not None, dlg.status.text()
     assert first.stopped and first.done + first.failed < 9
     assert not list(out.rglob("*.tmp"))  # no half-written file
     dlg.start_button.click()
     qtbot.waitUntil(lambda: not dlg.running, timeout=240000)
     second = dlg.summary
+    assert second is not None, dlg.status.text()  # the summary is there once it stops running
     assert not second.stopped
     assert second.done + first.done == 8  # nothing done twice, nothing left out
     assert second.skipped >= first.done
