@@ -42,9 +42,11 @@ from ..compiled import KernelModule
 from ..errors import InvalidMeshError, ParameterError, Stylize3DError
 from ..params import param
 from .data import check_manifold, normalization
+from .inference import SHIPPED_REFERENCE_EDGE, WeightsError, shipped_weights_path
 from .topology import half_flaps, refine
 
-__all__ = ["SubdivideParams", "SubdivisionNet", "MeshLevels", "neural_subdivide", "save_weights",
+__all__ = ["SubdivideParams", "SubdivisionNet", "MeshLevels", "neural_subdivide",
+           "neural_subdivide_torch", "save_weights",
            "load_weights", "shipped_weights_path", "WeightsError", "FORMAT", "FEATURES",
            "compiled_kernels", "set_compiled_kernels"]
 
@@ -72,18 +74,6 @@ class SubdivideParams:
                                tooltip="0: off. Otherwise QSlim the mesh to about this many "
                                        "vertices first (e.g. 400), so you can watch the method "
                                        "rebuild the detail.")
-
-
-class WeightsError(Stylize3DError):
-    """A weights file is missing, unreadable or not a neural-subdivision weights file."""
-
-    exit_code = 2
-
-
-def shipped_weights_path() -> Path:
-    """The weights trained by the project (resources/subdivision/neural_subdivision.pt)."""
-    return Path(__file__).resolve().parents[2] / "resources" / "subdivision" / \
-        "neural_subdivision.pt"
 
 
 def _torch():
@@ -467,8 +457,45 @@ class SubdivisionNet:
         self.module.load_state_dict(state)
 
 
-def neural_subdivide(V, F, levels: int = 2, weights=None) -> tuple[np.ndarray, np.ndarray]:
-    """Subdivide a triangle mesh with the neural subdivision network.
+def neural_subdivide(V, F, levels: int = 2, weights=None, *, adapt_scale: bool = True
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Subdivide a triangle mesh with the neural subdivision network (NumPy inference,
+    :mod:`.inference`; no PyTorch unless ``weights`` is a :class:`SubdivisionNet`).
+
+    Parameters
+    ----------
+    V : (n, 3) float, F : (m, 3) int -- a manifold, consistently oriented triangle mesh (closed
+        or with boundary, any genus).
+    levels : 1..3 (the shipped network was trained for 2).
+    weights : an :class:`~algorithms.subdivision.inference.Network`, a
+        :class:`SubdivisionNet`, a path to a weights file (ours or the thesis author's), or None
+        (the shipped weights).
+    adapt_scale : scale inputs far outside the training edge length to it
+        (:func:`~algorithms.subdivision.inference.scale_plan`).
+
+    Returns
+    -------
+    V_sub : (n_L, 3) float64 (input vertices first, moved; then one vertex per edge per level, in
+        the order of :func:`algorithms.subdivision.topology.refine`), F_sub : (m 4^L, 3) int64.
+    """
+    from .inference import (Network, load_network, network_from_state, neural_subdivide_np)
+
+    if isinstance(weights, Network):
+        net = weights
+    elif isinstance(weights, SubdivisionNet):
+        net = network_from_state(weights.state(), "stylize3d",
+                                 reference_edge=getattr(weights, "reference_edge", None)
+                                 or SHIPPED_REFERENCE_EDGE)
+    else:
+        net = load_network(weights)
+    V_sub, F_sub, _ = neural_subdivide_np(V, F, levels, net, adapt_scale=adapt_scale)
+    return V_sub, F_sub
+
+
+def neural_subdivide_torch(V, F, levels: int = 2, weights=None) -> tuple[np.ndarray, np.ndarray]:
+    """The PyTorch path of :func:`neural_subdivide` (``SubdivisionNet.forward``, the code
+    training differentiates), without the scale guard: the peer the NumPy inference is tested
+    and timed against.
 
     Parameters
     ----------

@@ -1,0 +1,657 @@
+"""Neural subdivision with a trained network, in NumPy (no PyTorch): the project's networks and
+the thesis author's published one.
+
+PyTorch is needed to *train* (:mod:`.model`, :mod:`.train`); subdividing with trained weights
+runs here, on float32 arrays, with the same mathematics as ``SubdivisionNet.forward`` (tested to
+agree within 1e-5 of the bounding-box diagonal) and without importing torch.
+
+**Two formulations** (the file says which, see :func:`load_network`):
+
+* ``"stylize3d"`` (ours, :mod:`.model`'s docstring): per half-flap ``(i, j, k, l)`` in its local
+  frame, ``I`` sees the edge vectors ``j-i, k-i, l-i`` and the four differential coordinates;
+  ``V`` and ``E`` see the edge vectors and each vertex's ``[delta_v, z_v]`` (differential
+  coordinates recomputed from the current positions + 29 learned features); 137 inputs. Inputs
+  are scaled by :func:`algorithms.subdivision.data.normalization` (centroid, farthest vertex).
+* ``"author"`` (the thesis author's published network, ``netparams.dat`` + its
+  ``hyperparameters.json``; described in ../shared/reference/neural_subdivision/README.md): per
+  half-flap the four vertices' vectors in the local frame with the first vertex's position (the
+  origin, always 0) left out -- ``I``: ``[d_i, p_j, d_j, p_k, d_k, p_l, d_l]`` (21),
+  ``V``/``E``: ``[z_i, p_j, z_j, p_k, z_k, p_l, z_l]`` (125; positions and 29 learned features,
+  no differential coordinates). The mesh is scaled to the unit cube first,
+  ``(V - min V) / max(V - min V)``, and back after.
+
+Everything else is shared, and was checked against the author's outputs (the reproduction test):
+the local frame (x along the half-edge, z the sum of its two face normals made orthogonal to x,
+y = z x x), the uniform differential coordinates ``v - mean(neighbours)``, averaging the 32
+outputs of the half-flaps into their first vertex (``I``, ``V``: the first 3, turned back to world
+axes, move the vertex) or their edge (``E``: the new vertex is the edge mid-point of the updated
+vertices plus the averaged displacement), and the order I, then per level V then E. On a
+boundary edge the missing ``l`` is ``k`` turned by pi about the edge (ours; the author's code
+refuses meshes with boundary).
+
+**Staying inside what the network was trained on** (:func:`scale_plan`). The network is not
+scale invariant (thesis §4.7): it was trained on coarse meshes of 150-300 vertices, so in its
+normalized frame it has only seen edges of about one length (``reference_edge``: the mean edge
+length of its training meshes, in the file's ``info`` or, for older files, the values measured
+below). A dense mesh (fandisk's 7,229 vertices) normalized by its overall size has edges ~5x
+shorter, and the network's displacements -- learned at the training edge length -- come out as
+dimples of about one edge all over flat and smooth parts. So when the input's mean edge length
+(in the normalized frame) is more than :data:`SCALE_TOLERANCE` times off the reference, the
+input is scaled (about its centre) so that its mean edge length *is* the reference, and the
+result scaled back; a message says so (``SubdividedStep.note``). Inputs within the tolerance are
+left exactly as the formulation scales them (so the author's outputs and the Table 4.2 protocol,
+meshes of 350-450 vertices, are unchanged). ``adapt_scale=False`` turns the guard off.
+
+**Progress and Stop**: :func:`neural_subdivision_iter` works in chunks of about
+:data:`CHUNK_FLAPS` half-flaps and yields a progress step after each (``"Level 1 of 2: ..."``
+with per-mille progress), so a consumer that stops listening stops the work within one chunk.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from ..errors import InvalidMeshError, ParameterError, Stylize3DError
+from ..steps import Step
+from .topology import half_flaps, refine
+from .weights_file import NotATorchFile, read_torch_file
+
+__all__ = ["Network", "load_network", "WeightsError", "shipped_weights_path", "network_from_state", "neural_subdivision_iter",
+           "neural_subdivide_np", "SubdividedStep", "scale_plan", "mean_edge_length",
+           "FORMULATIONS", "SCALE_TOLERANCE", "CHUNK_FLAPS", "OUR_FORMAT",
+           "SHIPPED_REFERENCE_EDGE", "AUTHOR_REFERENCE_EDGE"]
+
+OUR_FORMAT = "stylize3d-neural-subdivision"
+FORMULATIONS = ("stylize3d", "author")
+FEATURES = 32
+MAX_LEVELS = 3
+#: inputs whose mean edge length is within this factor of the training meshes' are left as is
+SCALE_TOLERANCE = 1.5
+#: half-flaps per chunk of work between two progress steps (~10-30 ms of work here)
+CHUNK_FLAPS = 40_000
+#: mean edge length of the training coarse meshes in the normalized frame, for files that do
+#: not record it (files trained since record theirs as ``info["mean_edge_length"]``): the
+#: shipped weights' data (armadillo scaled by
+#: :func:`~algorithms.subdivision.data.normalization`, coarse meshes of 150-300 vertices by
+#: :func:`~algorithms.subdivision.data.generate_coarse_sample`): 0.268 on the first 12 of
+#: them (0.226-0.306), measured 2026-11-26
+SHIPPED_REFERENCE_EDGE = 0.268
+#: the same for the author's network: its validation meshes (cartoon_elephant_10/subd0, ~300
+#: vertices, of the shape its 200 training meshes came from) in the unit cube: 0.0961
+#: (0.0895-0.1025); test-checked
+AUTHOR_REFERENCE_EDGE = 0.0961
+
+
+class WeightsError(Stylize3DError):
+    """A weights file is missing, unreadable or not a neural-subdivision weights file."""
+
+    exit_code = 2
+
+
+class WeightsFileError(Exception):
+    """Why a file is not a network (inside :func:`load_network`)."""
+
+
+def shipped_weights_path() -> Path:
+    """The weights trained by the project (resources/subdivision/neural_subdivision.pt)."""
+    return Path(__file__).resolve().parents[2] / "resources" / "subdivision" / \
+        "neural_subdivision.pt"
+
+
+# ------------------------------------------------------------------------------ BLAS threads
+_BLAS: dict = {}
+
+
+def _openblas():
+    """(get, set) of the thread count of NumPy's bundled OpenBLAS, or None (another BLAS)."""
+    if "fns" in _BLAS:
+        return _BLAS["fns"]
+    fns = None
+    try:
+        import ctypes
+        import glob
+
+        libdir = Path(np.__file__).resolve().parent.parent / "numpy.libs"
+        for lib in sorted(glob.glob(str(libdir / "libscipy_openblas*.so*"))):
+            dll = ctypes.CDLL(lib)
+            for suffix in ("64_", "_64_", ""):
+                get = getattr(dll, f"scipy_openblas_get_num_threads{suffix}", None)
+                put = getattr(dll, f"scipy_openblas_set_num_threads{suffix}", None)
+                if get is not None and put is not None:
+                    get.restype = ctypes.c_int
+                    put.argtypes = [ctypes.c_int]
+                    fns = (get, put)
+                    break
+            if fns:
+                break
+    except Exception:  # noqa: BLE001 - no such library: leave BLAS alone
+        fns = None
+    _BLAS["fns"] = fns
+    return fns
+
+
+class _OneBlasThread:
+    """Run NumPy's matrix products on one thread inside the block (restored after).
+
+    The network's products are narrow ((h, 21..137) x (.., 32)); OpenBLAS's threads do not pay
+    there and, when the cores are busy with other work, they cost up to 10x (measured: a
+    (77k, 21) x (21, 32) product 3 ms on one thread, 40-75 ms on two with the machine loaded)."""
+
+    def __enter__(self):
+        fns = _openblas()
+        self.old = None
+        if fns is not None:
+            self.old = int(fns[0]())
+            if self.old != 1:
+                fns[1](1)
+        return self
+
+    def __exit__(self, *exc):
+        fns = _openblas()
+        if fns is not None and self.old is not None and self.old != 1:
+            fns[1](self.old)
+        return False
+
+
+# ------------------------------------------------------------------------------ the network
+@dataclass
+class _Module:
+    """One half-flap MLP, its first layer split into geometric and feature columns.
+
+    ``slots``: which of the 7 canonical flap vectors (``p_j, p_k, p_l, d_i, d_j, d_k, d_l`` in
+    the local frame) it reads; ``Wg`` (3 len(slots), H1); ``Wz`` (29, 4 H1) or None: the feature
+    columns of the 4 flap vertices side by side; ``b0`` (H1,); ``rest``: [(W^T, b)] of the other
+    layers (ReLU between layers, none after the last)."""
+
+    slots: tuple
+    Wg: np.ndarray
+    Wz: np.ndarray | None
+    b0: np.ndarray
+    rest: list
+
+    def hidden(self, geo: np.ndarray, Zw: np.ndarray | None, ijkl: np.ndarray) -> np.ndarray:
+        """(h, 32) outputs for the flap vectors ``geo`` (h, 3 len(slots)) and the per-vertex
+        feature products ``Zw`` (n, 4 H1)."""
+        h = geo @ self.Wg
+        h += self.b0
+        if Zw is not None:
+            H1 = self.b0.shape[0]
+            flat = Zw.reshape(-1, H1)
+            idx = ijkl * 4 + np.arange(4)
+            h += flat[idx[:, 0]]
+            h += flat[idx[:, 1]]
+            h += flat[idx[:, 2]]
+            h += flat[idx[:, 3]]
+        for W, b in self.rest:
+            np.maximum(h, 0, out=h)
+            h = h @ W
+            h += b
+        return h
+
+
+@dataclass
+class Network:
+    """A trained neural-subdivision network, ready for NumPy inference.
+
+    formulation : "stylize3d" or "author" (module docstring).
+    modules : {"I", "V", "E"} -> _Module.
+    reference_edge : mean edge length of the training meshes in the normalized frame (None:
+        unknown, no scale guard).
+    info : what the file says about its training (plain values).
+    name : a short description for messages.
+    state : the layers as read, {name: array} (for comparisons and saving).
+    """
+
+    formulation: str
+    modules: dict
+    reference_edge: float | None
+    info: dict = field(default_factory=dict)
+    name: str = "network"
+    state: dict = field(default_factory=dict)
+
+    @property
+    def uses_differential_coordinates(self) -> bool:
+        return self.formulation == "stylize3d"
+
+    def normalization(self, V: np.ndarray) -> tuple[np.ndarray, float]:
+        """(centre, scale) of the formulation: normalized = (V - centre) * scale."""
+        if self.formulation == "author":
+            lo = V.min(axis=0)
+            ext = float((V - lo).max()) if len(V) else 0.0
+            if not np.isfinite(ext) or ext <= 0:
+                raise InvalidMeshError("The mesh has no extent (all vertices at one point), so "
+                                       "it cannot be subdivided.")
+            return lo, 1.0 / ext
+        from .data import normalization
+
+        return normalization(V)
+
+
+def _relu_chain(layers: list, fin_expected: int, what: str) -> list:
+    """Check a list of (W (out, in), b (out,)) layers; returns them as float32."""
+    out = []
+    fin = fin_expected
+    for W, b in layers:
+        W = np.asarray(W)
+        b = np.asarray(b)
+        if W.ndim != 2 or b.ndim != 1 or W.shape[1] != fin or b.shape[0] != W.shape[0]:
+            raise WeightsFileError(f"the {what} network's layers do not fit together")
+        out.append((W.astype(np.float32), b.astype(np.float32)))
+        fin = W.shape[0]
+    if fin != FEATURES:
+        raise WeightsFileError(f"the {what} network has {fin} outputs, not {FEATURES}")
+    return out
+
+
+def _make_module(layers: list, geo_cols: dict, z_cols: list | None) -> _Module:
+    """``geo_cols``: canonical slot -> its 3 input columns; ``z_cols``: per flap vertex its 29
+    feature columns (or None)."""
+    W0, b0 = layers[0]
+    slots = tuple(sorted(geo_cols))
+    Wg = np.concatenate([W0[:, geo_cols[s]] for s in slots], axis=1).T.copy()
+    Wz = None
+    if z_cols is not None:
+        Wz = np.concatenate([W0[:, c] for c in z_cols], axis=0)  # (4 H1, 29)
+        Wz = np.ascontiguousarray(Wz.T)  # (29, 4 H1)
+    rest = [(np.ascontiguousarray(W.T), b.copy()) for W, b in layers[1:]]
+    return _Module(slots, np.ascontiguousarray(Wg), Wz, b0.copy(), rest)
+
+
+def _r(a, n=3):
+    return list(range(a, a + n))
+
+
+def _ours_modules(state: dict) -> dict:
+    """Our layout (model.py: Sequential Linear-ReLU-Linear-ReLU-Linear, keys ``I.0.weight``)."""
+    mods = {}
+    for name, fin in (("I", 21), ("V", 137), ("E", 137)):
+        idx = sorted({int(k.split(".")[1]) for k in state if k.startswith(name + ".")
+                      and k.count(".") == 2 and k.split(".")[1].isdigit()})
+        try:
+            if not idx:
+                raise KeyError(name)
+            layers = [(state[f"{name}.{i}.weight"], state[f"{name}.{i}.bias"]) for i in idx]
+        except KeyError:
+            raise WeightsFileError(f"module {name} is missing or incomplete") from None
+        layers = _relu_chain(layers, fin, name)
+        if name == "I":  # [e_ij, e_ik, e_il, d_i, d_j, d_k, d_l]
+            geo = {s: _r(3 * s) for s in range(7)}
+            mods[name] = _make_module(layers, geo, None)
+        else:  # [e_ij, e_ik, e_il, d_i, z_i, d_j, z_j, d_k, z_k, d_l, z_l]
+            geo = {0: _r(0), 1: _r(3), 2: _r(6)}
+            for v in range(4):
+                geo[3 + v] = _r(9 + 32 * v)
+            z = [_r(12 + 32 * v, 29) for v in range(4)]
+            mods[name] = _make_module(layers, geo, z)
+    return mods
+
+
+def _author_modules(state: dict) -> dict:
+    """The author's layout (``net_init`` / ``net_vertex`` / ``net_edge``, layers ``layerIn``,
+    ``hidden.N``, ``layerOut``)."""
+    mods = {}
+    for name, key, fin in (("I", "net_init", 21), ("V", "net_vertex", 125),
+                           ("E", "net_edge", 125)):
+        try:
+            hid = sorted({int(k.split(".")[2]) for k in state
+                          if k.startswith(f"{key}.hidden.") and k.endswith(".weight")})
+            names = ["layerIn"] + [f"hidden.{i}" for i in hid] + ["layerOut"]
+            layers = [(state[f"{key}.{n}.weight"], state[f"{key}.{n}.bias"]) for n in names]
+        except (KeyError, ValueError):
+            raise WeightsFileError(f"{key} is missing or incomplete") from None
+        layers = _relu_chain(layers, fin, key)
+        if name == "I":  # [d_i, p_j, d_j, p_k, d_k, p_l, d_l]
+            geo = {3: _r(0), 0: _r(3), 4: _r(6), 1: _r(9), 5: _r(12), 2: _r(15), 6: _r(18)}
+            mods[name] = _make_module(layers, geo, None)
+        else:  # [z_i, p_j, z_j, p_k, z_k, p_l, z_l]
+            geo = {0: _r(29), 1: _r(61), 2: _r(93)}
+            z = [_r(0, 29), _r(32, 29), _r(64, 29), _r(96, 29)]
+            mods[name] = _make_module(layers, geo, z)
+    return mods
+
+
+def network_from_state(state: dict, formulation: str = "stylize3d", *,
+                       reference_edge: float | None = None, info: dict | None = None,
+                       name: str = "network") -> Network:
+    """A :class:`Network` from layer arrays (NumPy arrays or anything ``np.asarray`` takes,
+    e.g. a ``SubdivisionNet.state()`` of tensors)."""
+    st = {str(k): np.asarray(v.detach().cpu().numpy() if hasattr(v, "detach") else v)
+          for k, v in state.items()}
+    if formulation == "stylize3d":
+        mods = _ours_modules(st)
+    elif formulation == "author":
+        mods = _author_modules(st)
+    else:
+        raise ValueError(f"unknown formulation {formulation!r}")
+    return Network(formulation, mods, reference_edge, dict(info or {}), name, st)
+
+
+def _author_hyperparameters(path: Path) -> dict:
+    hp = path.with_name("hyperparameters.json")
+    if not hp.is_file():
+        return {}
+    try:
+        d = json.loads(hp.read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError):
+        raise WeightsFileError(f"its {hp.name} could not be read") from None
+    if not isinstance(d, dict):
+        raise WeightsFileError(f"its {hp.name} is not a settings file")
+    if d.get("Din", 6) != 6 or d.get("Dout", FEATURES) != FEATURES:
+        raise WeightsFileError(f"its {hp.name} describes another network (Din {d.get('Din')}, "
+                               f"Dout {d.get('Dout')}; this reader knows Din 6, Dout 32)")
+    return d
+
+
+def load_network(path=None) -> Network:
+    """Read a weights file without PyTorch (None: the shipped weights): the project's
+    (``torch.save`` of our dict, with ``format`` = :data:`OUR_FORMAT`) or the thesis author's
+    ``netparams.dat`` (a state dict of ``net_init`` / ``net_vertex`` / ``net_edge``; its
+    ``hyperparameters.json`` beside it is read and checked when present). Raises
+    :class:`WeightsError` with a plain message otherwise."""
+    p = Path(os.fspath(path)) if path is not None else shipped_weights_path()
+    if not p.is_file():
+        if path is None:
+            raise WeightsError(f"The shipped neural-subdivision weights are missing ({p}). "
+                               f"Reinstall Stylize3D, or train weights with 'stylize3d "
+                               f"subdivide-train'.")
+        raise WeightsError(f"The weights file '{p}' does not exist.")
+    try:
+        return _load_network(p)
+    except WeightsFileError as exc:
+        raise WeightsError(f"'{p.name}' is not a Stylize3D neural-subdivision weights file, nor "
+                           f"the thesis author's published network: {exc}. Use a file made by "
+                           f"'stylize3d subdivide-train' or the Subdivision panel, or the "
+                           f"author's netparams.dat with its hyperparameters.json.") from None
+
+
+def _load_network(p: Path) -> Network:
+    try:
+        obj = read_torch_file(p)
+    except NotATorchFile as exc:
+        raise WeightsFileError(f"it could not be read as one ({exc})") from None
+    except OSError as exc:
+        raise WeightsFileError(f"it could not be opened ({exc.strerror or exc})") from None
+    if isinstance(obj, dict) and obj.get("format") == OUR_FORMAT and isinstance(
+            obj.get("state"), dict):
+        info = {str(k): v for k, v in dict(obj.get("info") or {}).items()
+                if isinstance(v, (int, float, str, bool))}
+        ref = info.get("mean_edge_length")
+        if not isinstance(ref, (int, float)) or not ref > 0:
+            ref = SHIPPED_REFERENCE_EDGE
+        if int(obj.get("version", 0)) > 1:
+            raise WeightsFileError(f"it was written by a newer Stylize3D (format version "
+                                   f"{obj.get('version')}); update Stylize3D to read it")
+        return network_from_state(obj["state"], "stylize3d", reference_edge=float(ref),
+                                  info={**info, "format_version": int(obj.get("version", 0))},
+                                  name=p.name)
+    if isinstance(obj, dict) and any(str(k).startswith("net_init.") for k in obj):
+        hp = _author_hyperparameters(p)
+        info = {"trained_by": "the thesis author (published weights)"}
+        info.update({k: v for k, v in hp.items() if isinstance(v, (int, float, str, bool))})
+        return network_from_state(obj, "author", reference_edge=AUTHOR_REFERENCE_EDGE,
+                                  info=info, name=p.name)
+    raise WeightsFileError("it holds something else than a neural-subdivision network")
+
+
+# ------------------------------------------------------------------------------ geometry
+def mean_edge_length(V: np.ndarray, F: np.ndarray) -> float:
+    """Mean length of the mesh's undirected edges."""
+    F = np.asarray(F, dtype=np.int64)
+    a = F.reshape(-1)
+    b = F[:, [1, 2, 0]].reshape(-1)
+    n = len(V)
+    key = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
+    i, j = key // n, key % n
+    return float(np.linalg.norm(V[i] - V[j], axis=1).mean())
+
+
+def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = True
+               ) -> tuple[np.ndarray, float, str]:
+    """(centre, scale, note): the network sees ``(V - centre) * scale``.
+
+    The formulation's normalization; then, with ``adapt`` and a known reference edge length,
+    an extra factor bringing the mean edge length to the reference when it is more than
+    :data:`SCALE_TOLERANCE` times off (``note`` says so; empty otherwise)."""
+    c, s = network.normalization(V)
+    if not adapt or not network.reference_edge:
+        return c, s, ""
+    ell = mean_edge_length(V, F) * s
+    ratio = ell / network.reference_edge
+    if not np.isfinite(ratio) or ratio <= 0 or 1 / SCALE_TOLERANCE <= ratio <= SCALE_TOLERANCE:
+        return c, s, ""
+    how = (f"{1 / ratio:.1f}x shorter" if ratio < 1 else f"{ratio:.1f}x longer")
+    note = (f"This mesh's edges are {how} than those the network was trained on (coarse meshes "
+            f"of 150-300 vertices), so it was scaled to match before subdividing and scaled "
+            f"back after.")
+    return c, s / ratio, note
+
+
+class _Level:
+    """Index arrays of one level: the half-flaps sorted by their vertex and by their edge."""
+
+    def __init__(self, F: np.ndarray, n: int):
+        hf = half_flaps(F, n)
+        ijkl = hf.ijkl
+        has_l = ijkl[:, 3] >= 0
+        ijkl = ijkl.copy()
+        ijkl[~has_l, 3] = ijkl[~has_l, 2]
+        self.n, self.F, self.E, self.EF = n, F, hf.E, hf.EF
+        self.boundary = bool((~has_l).any())
+        self.by_vertex = self._grouped(ijkl, has_l, ijkl[:, 0], n)
+        self.by_edge = self._grouped(ijkl, has_l, hf.edge, len(hf.E))
+        self.degree = np.maximum(hf.degree, 1.0).astype(np.float32)
+        self.H = len(ijkl)
+
+    @staticmethod
+    def _grouped(ijkl, has_l, dst, N):
+        order = np.argsort(dst, kind="stable")
+        d = dst[order]
+        starts = np.flatnonzero(np.r_[True, d[1:] != d[:-1]])
+        counts = np.diff(np.r_[starts, len(d)])
+        return {"ijkl": np.ascontiguousarray(ijkl[order]), "has_l": has_l[order],
+                "starts": starts, "dst": d[starts], "inv": (1.0 / counts).astype(np.float32),
+                "N": N}
+
+    def laplace(self, V: np.ndarray) -> np.ndarray:
+        i, j = self.E[:, 0], self.E[:, 1]
+        acc = np.empty_like(V)
+        for d in range(3):
+            acc[:, d] = (np.bincount(i, weights=V[j, d], minlength=self.n)
+                         + np.bincount(j, weights=V[i, d], minlength=self.n))
+        return (V - acc / self.degree[:, None]).astype(V.dtype)
+
+
+def _flaps(Vc, Dc, ijkl, has_l, slots):
+    """The first-layer input of a chunk of half-flaps: ``geo`` (h, 3 len(slots)), the canonical
+    flap vectors ``slots`` (0-2: ``p_j, p_k, p_l``, 3-6: ``d_i, d_j, d_k, d_l``) in the local
+    frame, and the frame rows ``(x, y, z)`` as (3, 3, h) (row, component, flap).
+
+    ``Vc``, ``Dc``: (3, n) component-major positions / differential coordinates (every
+    operation here is on contiguous (h,) arrays; NumPy's einsum over (h, 7, 3) was ~10x
+    slower)."""
+    i, j, k, l = ijkl[:, 0], ijkl[:, 1], ijkl[:, 2], ijkl[:, 3]
+    pi = [Vc[d][i] for d in range(3)]
+    a = [Vc[d][j] - pi[d] for d in range(3)]
+    b = [Vc[d][k] - pi[d] for d in range(3)]
+    c = [Vc[d][l] - pi[d] for d in range(3)]
+
+    def cross(u, v):
+        return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0]]
+
+    def unit(u):
+        r = 1.0 / np.maximum(np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]), 1e-12)
+        r = r.astype(u[0].dtype, copy=False)
+        return [u[0] * r, u[1] * r, u[2] * r]
+
+    x = unit(a)
+    nz = unit(cross(a, b))
+    if has_l.any():
+        f2 = unit(cross(c, a))
+        if has_l.all():
+            nz = [nz[d] + f2[d] for d in range(3)]
+        else:
+            nz = [nz[d] + np.where(has_l, f2[d], 0) for d in range(3)]
+    p = nz[0] * x[0] + nz[1] * x[1] + nz[2] * x[2]
+    z = unit([nz[d] - p * x[d] for d in range(3)])
+    y = cross(z, x)
+    rows = (x, y, z)
+    vecs = {0: a, 1: b, 2: c}
+    if any(s >= 3 for s in slots):
+        for s, v in zip((3, 4, 5, 6), (i, j, k, l)):
+            vecs[s] = [Dc[d][v] for d in range(3)]
+    h = len(ijkl)
+    geo = np.empty((h, 3 * len(slots)), dtype=Vc.dtype)
+    boundary = not has_l.all()
+    for col, s in enumerate(slots):
+        u = vecs[s]
+        for r in range(3):
+            q = rows[r]
+            geo[:, 3 * col + r] = u[0] * q[0] + u[1] * q[1] + u[2] * q[2]
+    if boundary:  # no l: the mirror of k (turned by pi about the edge)
+        nb = ~has_l
+        pos = {s: col for col, s in enumerate(slots)}
+        for sl, sk in ((2, 1), (6, 5)):
+            if sl in pos and sk in pos:
+                cl, ck = 3 * pos[sl], 3 * pos[sk]
+                geo[nb, cl] = geo[nb, ck]
+                geo[nb, cl + 1] = -geo[nb, ck + 1]
+                geo[nb, cl + 2] = -geo[nb, ck + 2]
+    return geo, rows
+
+
+def _stage(module: _Module, Vc, Dc, Z, group: dict, out: np.ndarray,
+           chunk: int) -> Iterator[int]:
+    """Run ``module`` over the flaps of ``group`` in chunks, averaging into ``out`` (N, 32):
+    [world displacement, feature]; yields the number of flaps done after each chunk."""
+    ijkl, has_l = group["ijkl"], group["has_l"]
+    starts, dst, inv = group["starts"], group["dst"], group["inv"]
+    H = len(ijkl)
+    Zw = None
+    if module.Wz is not None and Z is not None:
+        with _OneBlasThread():
+            Zw = Z @ module.Wz  # (n, 4 H1): the feature columns, once per vertex
+    out[:] = 0
+    G = len(starts)
+    cuts = np.unique(np.r_[0, np.searchsorted(starts, np.arange(chunk, H, chunk)), G])
+    for ga, gb in zip(cuts[:-1], cuts[1:]):
+        s0 = starts[ga]
+        s1 = starts[gb] if gb < G else H
+        sl = slice(s0, s1)
+        geo, (x, y, z) = _flaps(Vc, Dc, ijkl[sl], has_l[sl], module.slots)
+        with _OneBlasThread():
+            o = module.hidden(geo, Zw, ijkl[sl])
+        o0, o1, o2 = o[:, 0].copy(), o[:, 1].copy(), o[:, 2].copy()
+        for d in range(3):  # the displacement back to world axes
+            o[:, d] = o0 * x[d] + o1 * y[d] + o2 * z[d]
+        sums = np.add.reduceat(o, starts[ga:gb] - s0, axis=0)
+        out[dst[ga:gb]] = sums * inv[ga:gb, None]
+        yield s1 - s0
+
+
+@dataclass
+class SubdividedStep(Step):
+    """The last step of :func:`neural_subdivision_iter`: ``V`` the subdivided vertices
+    (float64), ``F`` its faces, ``note`` what was done to stay in the network's range ('' when
+    nothing)."""
+
+    F: np.ndarray | None = None
+    note: str = ""
+
+
+def _check_levels(levels) -> int:
+    try:
+        lv = int(levels)
+        if lv != levels:
+            raise ValueError
+    except (TypeError, ValueError):
+        raise ParameterError(f"The number of levels must be a whole number, not {levels!r}.") \
+            from None
+    if not 1 <= lv <= MAX_LEVELS:
+        raise ParameterError(f"Neural subdivision makes 1 to {MAX_LEVELS} levels (asked for "
+                             f"{lv}); for more, continue with Loop subdivision.")
+    return lv
+
+
+def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale: bool = True,
+                            chunk: int = CHUNK_FLAPS) -> Iterator[Step]:
+    """Subdivide with ``network``, in steps: progress steps (``iteration`` per mille of the
+    work, ``total`` 1000, ``V`` the input unchanged, ``message`` "Level 1 of 2: ...") after
+    every chunk of half-flaps, then one :class:`SubdividedStep` with the result (input vertices
+    first, moved; then one vertex per edge per level, in the order of
+    :func:`~algorithms.subdivision.topology.refine`). Stopping the iteration stops the work."""
+    lv = _check_levels(levels)
+    from ..mesh.subdivision import midpoint_subdivide
+    from .data import check_manifold
+
+    V_in = V
+    V, F = midpoint_subdivide(V, F, 0)  # the project's input checks
+    check_manifold(V, F, "Neural subdivision")
+    if len(F) * 4 ** lv > 20_000_000:
+        raise ParameterError(f"{lv} levels would make {len(F) * 4 ** lv:,} triangles; use fewer "
+                             f"levels.")
+    c, s, note = scale_plan(network, V, F, adapt_scale)
+    X = ((V - c) * s).astype(np.float32)
+    m = len(F)
+    work = 3 * m + sum(2 * 3 * m * 4 ** k for k in range(lv))  # flaps over all stages
+    done = 0
+
+    def progress(msg):
+        return Step(int(min(999, 1000 * done / work)), 1000, V_in, {}, msg)
+
+    try:
+        level = _Level(F, len(X))
+    except Exception as exc:  # noqa: BLE001
+        raise InvalidMeshError(f"Neural subdivision could not read the mesh's connectivity "
+                               f"({exc}). Run 'Clean' first.") from None
+    acc = np.empty((len(X), FEATURES), np.float32)
+    D = level.laplace(X)
+    for k in _stage(network.modules["I"], X.T.copy(), D.T.copy(), None, level.by_vertex, acc,
+                    chunk):
+        done += k
+        yield progress(f"Level 1 of {lv}: initialization")
+    X = X + acc[:, :3]
+    Z = acc[:, 3:].copy()
+    with_d = network.uses_differential_coordinates
+    for li in range(lv):
+        head = f"Level {li + 1} of {lv}"
+        D = level.laplace(X).T.copy() if with_d else None
+        acc = np.empty((level.n, FEATURES), np.float32)
+        for k in _stage(network.modules["V"], X.T.copy(), D, Z, level.by_vertex, acc, chunk):
+            done += k
+            yield progress(f"{head}: moving the vertices")
+        X = X + acc[:, :3]
+        Z = acc[:, 3:].copy()
+        D = level.laplace(X).T.copy() if with_d else None
+        accE = np.empty((len(level.E), FEATURES), np.float32)
+        for k in _stage(network.modules["E"], X.T.copy(), D, Z, level.by_edge, accE, chunk):
+            done += k
+            yield progress(f"{head}: placing the new vertices")
+        mid = 0.5 * (X[level.E[:, 0]] + X[level.E[:, 1]]) + accE[:, :3]
+        X = np.concatenate([X, mid])
+        Z = np.concatenate([Z, accE[:, 3:]])
+        F_next = refine(level.F, level.n, level.EF)
+        if li + 1 < lv:
+            level = _Level(F_next, len(X))
+            yield progress(f"{head}: splitting the triangles")
+    out = X.astype(np.float64) / s + c
+    if not np.isfinite(out).all():
+        raise InvalidMeshError("Neural subdivision produced invalid positions (degenerate "
+                               "triangles in the input?). Run 'Clean' first.")
+    yield SubdividedStep(1000, 1000, out, {}, f"{len(F_next):,} triangles", F=F_next,
+                         note=note)
+
+
+def neural_subdivide_np(V, F, levels: int, network: Network, *, adapt_scale: bool = True
+                        ) -> tuple[np.ndarray, np.ndarray, str]:
+    """:func:`neural_subdivision_iter` run to the end: (V_sub, F_sub, note)."""
+    last = None
+    for last in neural_subdivision_iter(V, F, levels, network, adapt_scale=adapt_scale):
+        pass
+    return last.V, last.F, last.note

@@ -1,0 +1,197 @@
+"""NumPy inference of neural subdivision (no PyTorch), the thesis author's published network,
+and the torch-free weights reader."""
+
+from __future__ import annotations
+
+import pickle
+import shutil
+import zipfile
+
+import numpy as np
+import pytest
+
+from algorithms.mesh import read_mesh
+from algorithms.subdivision.inference import (AUTHOR_REFERENCE_EDGE, SCALE_TOLERANCE,
+                                              SubdividedStep, WeightsError, load_network,
+                                              mean_edge_length, neural_subdivide_np,
+                                              neural_subdivision_iter, scale_plan)
+from algorithms.subdivision.topology import refine, unique_edge_ids
+from algorithms.subdivision.weights_file import NotATorchFile, read_torch_file
+from tests.conftest import ROOT
+
+REF = ROOT.parent / "shared" / "reference" / "neural_subdivision"
+AUTHOR = REF / "author_network" / "netparams.dat"
+needs_reference = pytest.mark.skipif(
+    not AUTHOR.is_file(), reason=f"the thesis author's network and outputs are not here ({REF}; "
+                                 f"MPL-2.0 data kept outside the repository)")
+DATA = ROOT / "tests" / "data"
+
+
+def _new_vertex_of_edges(F_fine: np.ndarray, n: int, E: np.ndarray) -> np.ndarray:
+    """Index, in a Loop 1-to-4 split ``F_fine`` of a mesh with ``n`` vertices, of the new vertex
+    of each edge ``E`` (read off the corner faces: one old vertex and two new ones)."""
+    corner = F_fine[(F_fine < n).sum(axis=1) == 1]
+    old = np.where(corner < n, corner, -1).max(axis=1)
+    pairs = {}
+    for f, a in zip(corner, old):
+        for v in f:
+            if v >= n:
+                pairs.setdefault(int(v), set()).add(int(a))
+    index = {tuple(sorted(s)): v for v, s in pairs.items()}
+    return np.array([index[(int(a), int(b))] for a, b in E])
+
+
+def _author_order(F0: np.ndarray, n0: int, F1a: np.ndarray, F2a: np.ndarray) -> np.ndarray:
+    """For each vertex of our level 2 (refine twice), its index in the author's level 2."""
+    E0, _ = unique_edge_ids(F0, n0)
+    perm1 = np.r_[np.arange(n0), _new_vertex_of_edges(F1a, n0, E0)]
+    F1 = refine(F0, n0)
+    n1 = len(perm1)
+    E1, _ = unique_edge_ids(F1, n1)
+    return np.r_[perm1, _new_vertex_of_edges(F2a, n1, np.sort(perm1[E1], axis=1))]
+
+
+@needs_reference
+def test_reproduces_the_authors_outputs_on_its_validation_set():
+    net = load_network(AUTHOR)
+    assert net.formulation == "author" and net.info["Dout"] == 32
+    worst = 0.0
+    for k in range(1, 11):
+        m = read_mesh(REF / "cartoon_elephant_10" / "subd0" / f"{k:03d}.obj")
+        V, F, note = neural_subdivide_np(m.V, m.F, 2, net)
+        assert note == ""  # the validation meshes are inside the training range
+        a1 = read_mesh(REF / "author_outputs" / f"{k:03d}_level1.obj")
+        a2 = read_mesh(REF / "author_outputs" / f"{k:03d}_level2.obj")
+        order = _author_order(m.F, len(m.V), a1.F, a2.F)
+        diag = np.linalg.norm(m.V.max(0) - m.V.min(0))
+        err = np.abs(V - a2.V[order]).max() / diag
+        worst = max(worst, err)
+        # same triangles, as vertex sets
+        ours = {tuple(sorted(f)) for f in order[F].tolist()}
+        assert ours == {tuple(sorted(f)) for f in a2.F.tolist()}
+        # and it is not the input: the network moved the coarse vertices
+        assert np.abs(V[:len(m.V)] - m.V).max() > 1e-5 * diag
+    assert worst <= 1e-5, worst
+
+
+@needs_reference
+def test_author_reference_edge_is_its_validation_meshes():
+    ell = []
+    for k in range(1, 11):
+        m = read_mesh(REF / "cartoon_elephant_10" / "subd0" / f"{k:03d}.obj")
+        lo = m.V.min(0)
+        ell.append(mean_edge_length((m.V - lo) / (m.V - lo).max(), m.F))
+    assert abs(np.mean(ell) - AUTHOR_REFERENCE_EDGE) < 0.005 * AUTHOR_REFERENCE_EDGE
+
+
+@needs_reference
+def test_reader_matches_torch_load_on_both_layouts():
+    torch = pytest.importorskip("torch")
+    ours = ROOT / "resources" / "subdivision" / "neural_subdivision.pt"
+    a = read_torch_file(AUTHOR)
+    b = torch.load(AUTHOR, weights_only=True, map_location="cpu")
+    assert list(a) == list(b) and all(np.array_equal(a[k], b[k].numpy()) for k in b)
+    a = read_torch_file(ours)
+    b = torch.load(ours, weights_only=True)
+    assert a["format"] == b["format"] and a["info"] == b["info"]
+    assert all(np.array_equal(a["state"][k], b["state"][k].numpy()) for k in b["state"])
+
+
+@needs_reference
+def test_broken_files_get_a_plain_message(tmp_path):
+    garbage = tmp_path / "garbage.dat"
+    garbage.write_bytes(np.random.default_rng(0).bytes(5000))
+    cut = tmp_path / "netparams.dat"
+    cut.write_bytes(AUTHOR.read_bytes()[:40_000])  # truncated inside the tensor data
+    head = tmp_path / "head.dat"
+    head.write_bytes(AUTHOR.read_bytes()[:300])  # truncated inside the pickle
+    zcut = tmp_path / "ours.pt"
+    zcut.write_bytes((ROOT / "resources" / "subdivision" / "neural_subdivision.pt")
+                     .read_bytes()[:20_000])
+    for p in (garbage, cut, head, zcut):
+        with pytest.raises(WeightsError, match="not a Stylize3D neural-subdivision weights "
+                                               "file, nor the thesis author's") as err:
+            load_network(p)
+        assert p.name in str(err.value) and "Traceback" not in str(err.value)
+    # hyperparameters of another network beside it
+    d = tmp_path / "other"
+    d.mkdir()
+    shutil.copy(AUTHOR, d / "netparams.dat")
+    (d / "hyperparameters.json").write_text('{"Din": 9, "Dout": 32}')
+    with pytest.raises(WeightsError, match="Din 9"):
+        load_network(d / "netparams.dat")
+    with pytest.raises(WeightsError, match="does not exist"):
+        load_network(tmp_path / "missing.dat")
+
+
+def test_reader_runs_no_code(tmp_path):
+    """A pickle that would call a function is refused before anything runs."""
+    marker = tmp_path / "ran"
+
+    class Evil:
+        def __reduce__(self):
+            return (shutil.copy, (__file__, str(marker)))
+
+    p = tmp_path / "evil.pt"
+    with zipfile.ZipFile(p, "w") as z:
+        z.writestr("archive/data.pkl", pickle.dumps({"format": Evil()}, protocol=2))
+    with pytest.raises(NotATorchFile, match="shutil"):
+        read_torch_file(p)
+    legacy = tmp_path / "evil.dat"
+    legacy.write_bytes(pickle.dumps(0x1950A86A20F9469CFC6C) + pickle.dumps(1001)
+                       + pickle.dumps({"little_endian": True}) + pickle.dumps(Evil()))
+    with pytest.raises(NotATorchFile):
+        read_torch_file(legacy)
+    with pytest.raises(WeightsError):
+        load_network(p)
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize("name", ["spot_lowres.obj", "hand_lowres.obj"])
+def test_same_numbers_as_the_pytorch_path(name):
+    pytest.importorskip("torch")
+    from algorithms.subdivision.model import load_weights, neural_subdivide_torch
+
+    m = read_mesh(DATA / name)
+    net = load_network(None)
+    V, F, _ = neural_subdivide_np(m.V, m.F, 2, net, adapt_scale=False)
+    Vt, Ft = neural_subdivide_torch(m.V, m.F, 2, load_weights(None)[0])
+    assert np.array_equal(F, Ft)
+    diag = np.linalg.norm(m.V.max(0) - m.V.min(0))
+    assert np.abs(V - Vt).max() <= 1e-5 * diag
+
+
+def test_scale_guard_says_what_it_did():
+    net = load_network(None)
+    m = read_mesh(DATA / "hand_lowres.obj")
+    c, s, note = scale_plan(net, m.V, m.F)
+    c0, s0, none = scale_plan(net, m.V, m.F, adapt=False)
+    ratio = mean_edge_length(m.V, m.F) * s0 / net.reference_edge
+    assert none == "" and ratio < 1 / SCALE_TOLERANCE  # a dense mesh for this network
+    assert "shorter than those the network was trained on" in note
+    assert np.isclose(mean_edge_length(m.V, m.F) * s, net.reference_edge)
+    # a mesh in range is left as its formulation scales it
+    V2 = m.V * 7.0
+    F2 = m.F
+    assert scale_plan(net, V2, F2)[1] == pytest.approx(s / 7.0)
+
+
+def test_steps_are_small_and_stoppable():
+    """Progress steps come every chunk of half-flaps with "Level i of L" words; stopping after
+    the first step leaves the rest of the work undone."""
+    m = read_mesh(DATA / "hand_lowres.obj")
+    net = load_network(None)
+    steps = list(neural_subdivision_iter(m.V, m.F, 2, net, chunk=2000))
+    last = steps[-1]
+    assert isinstance(last, SubdividedStep) and len(last.F) == 16 * len(m.F)
+    progress = steps[:-1]
+    # 3 m flaps for I, then 2 x 3 m 4^k per level: at least one step per 2000 flaps
+    assert len(progress) >= (3 * len(m.F) * (1 + 2 + 8)) // 2000
+    assert all(s.total == 1000 and s.V is m.V for s in progress)
+    assert [s.iteration for s in progress] == sorted(s.iteration for s in progress)
+    assert all(s.message.startswith(("Level 1 of 2", "Level 2 of 2")) for s in progress)
+    assert not any("Iteration" in s.message for s in steps)
+    gen = neural_subdivision_iter(m.V, m.F, 2, net, chunk=2000)
+    first = next(gen)
+    gen.close()
+    assert first.iteration < 100 and first.message.startswith("Level 1 of 2")
