@@ -34,7 +34,9 @@ Choices written down here (the thesis gives no smoothing method for the foundati
 * Metrics per step: ``bending_energy`` = Σᵢ Mᵢᵢ |Hᵢ|² with the
   mean curvature Hᵢ = |M⁻¹LV|ᵢ / 2 of the current mesh (the discrete Willmore energy ∫H² dA,
   4π for a round sphere; what a user sees fall as bumps disappear); ``displacement`` is the
-  largest vertex move of the step relative to the bounding-box diagonal of the input.
+  largest vertex move of the step relative to the bounding-box diagonal of the input, ``moved``
+  the largest move since the input (same unit: what a user can see; the app says so when a run
+  changed little).
 """
 
 from __future__ import annotations
@@ -108,8 +110,8 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
 
     Yields
     ------
-    Step with ``V`` (n, 3) the positions after each step and metrics ``bending_energy`` and
-    ``displacement`` (and ``cycles`` with ``multigrid``).
+    Step with ``V`` (n, 3) the positions after each step and metrics ``bending_energy``,
+    ``displacement`` and ``moved`` (and ``cycles`` with ``multigrid``).
     """
     validate_params(params)
     V0 = np.array(V, dtype=np.float64, copy=True)
@@ -183,10 +185,11 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
                 scale = np.sqrt(area0 / area)
             Xn[used] = (Xn[used] - C) * scale + C0
         disp = float(np.linalg.norm(Xn - X, axis=1).max()) / max(diag, 1e-300)
+        moved = float(np.linalg.norm(Xn - V0, axis=1).max()) / max(diag, 1e-300)
         X = Xn
         yield Step(iteration=it, total=params.iterations, V=X.copy(),
                    metrics={"bending_energy": bending(X),
-                            "displacement": disp, **extra},
+                            "displacement": disp, "moved": moved, **extra},
                    message=f"step {it}/{params.iterations}")
 
 

@@ -1,5 +1,6 @@
-"""The welcome window: shown on first start (and from Help > Welcome). Open a file, or one of the
-bundled samples from its thumbnail, each with one suggestion of what to try first.
+"""The welcome window: shown on first start (and from Help > Welcome). Open a file, or start from
+one of eight suggestions, one per panel: a bundled sample (its thumbnail), the panel brought to
+the front, and what to try first.
 
 Thumbnails are rendered by the app itself (an off-screen pyvista plot of the sample, the same
 colours as the viewport) on first use and cached in the user's cache folder.
@@ -19,12 +20,20 @@ if TYPE_CHECKING:  # pragma: no cover
     from app.main_window import MainWindow
 
 SAMPLES_DIR = Path(__file__).resolve().parents[1] / "resources" / "samples"
-#: (file, panel brought to the front, what to try first)
+#: One suggestion per panel, in the panels' tab order: (sample file, panel title, short name of
+#: the panel, what to try first). The orange is coloured (its vertex colours are what the
+#: classifier sees), so the Adversarial panel starts from an object it recognizes.
 SAMPLES = (
-    ("blob.obj", "Cubic", "Cubic: drag λ and watch it turn into cubes"),
-    ("bumpy.obj", "Smooth", "Smooth: press Run to smooth the bumps away"),
-    ("pretzel.obj", "Analogies", "Analogies: pick a style in the gallery, drag λ"),
+    ("blob.obj", "Cubic", "Cubic", "drag λ: it turns into cubes"),
+    ("pretzel.obj", "Analogies", "Analogies", "pick a style, drag λ"),
+    ("bumpy.obj", "Smooth", "Smooth", "Run smooths the bumps away"),
+    ("bumpy.obj", "Multigrid smoothing", "Multigrid", "Run, then compare solvers"),
+    ("pretzel.obj", "Spectral coarsening", "Spectral", "Run: a small operator alike"),
+    ("blob.obj", "Subdivision", "Subdivision", "Run: a finer, smooth mesh"),
+    ("blob.obj", "Paparazzi", "Paparazzi", "Run: an image filter shapes it"),
+    ("orange.obj", "Adversarial lighting", "Adversarial", "Attack: fool it with light"),
 )
+COLUMNS = 4
 THUMB_SIZE = (176, 132)
 
 
@@ -67,7 +76,8 @@ def _render_thumbnail(mesh: Path, png: Path) -> None:
 
 
 class WelcomeDialog(QDialog):
-    """See the module docstring. ``sample_buttons[file]`` are the thumbnails (tests click them)."""
+    """See the module docstring. ``sample_buttons[panel title]`` are the suggestions' thumbnails
+    (tests click them)."""
 
     def __init__(self, window: "MainWindow"):
         super().__init__(window)
@@ -76,29 +86,36 @@ class WelcomeDialog(QDialog):
         lay = QVBoxLayout(self)
         intro = QLabel("<h2>Welcome to Stylize3D</h2>"
                        "Stylize a 3D surface mesh: make it cubic, give it the look of another "
-                       "shape, smooth it, or coarsen its operator. Open your own mesh (OBJ, PLY, "
-                       "STL, OFF; or drop it on the window), or start with a sample:")
+                       "shape, smooth it, subdivide it, shape it with image filters. Open your "
+                       "own mesh (OBJ, PLY, STL, OFF; or drop it on the window), or start with "
+                       "one of these samples, one for each panel:")
         intro.setWordWrap(True)
         lay.addWidget(intro)
         grid = QGridLayout()
         self.sample_buttons: dict[str, QToolButton] = {}
-        for col, (name, panel, hint) in enumerate(SAMPLES):
+        icons: dict[str, QIcon] = {}
+        for i, (name, panel, short, hint) in enumerate(SAMPLES):
             path = SAMPLES_DIR / name
             if not path.exists():
                 continue
+            if name not in icons:
+                icons[name] = thumbnail(path)
             b = QToolButton()
-            b.setIcon(thumbnail(path))
+            b.setIcon(icons[name])
             b.setIconSize(QSize(*THUMB_SIZE))
-            b.setText(f"{Path(name).stem}\n{hint}")
-            b.setToolTip(f"Open the sample {name} and bring the {panel} panel to the front.")
+            text = f"{short} · {Path(name).stem}\n{hint}"
+            b.setText(text)
+            b.setToolTip(f"Open the sample {name} and bring the {panel} panel to the front: "
+                         f"{hint}.")
             b.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextUnderIcon)
             fm = b.fontMetrics()
             # room for the picture and both text lines (the default hint cut the second off)
-            b.setMinimumWidth(max(THUMB_SIZE[0] + 40, fm.horizontalAdvance(hint) + 24))
+            b.setMinimumWidth(max(THUMB_SIZE[0] + 16,
+                                  *(fm.horizontalAdvance(t) + 24 for t in text.split("\n"))))
             b.setMinimumHeight(THUMB_SIZE[1] + 2 * fm.lineSpacing() + 24)
             b.clicked.connect(lambda _=False, n=name, p=panel: self.open_sample(n, p))
-            grid.addWidget(b, 0, col)
-            self.sample_buttons[name] = b
+            grid.addWidget(b, i // COLUMNS, i % COLUMNS)
+            self.sample_buttons[panel] = b
         lay.addLayout(grid)
         row = QHBoxLayout()
         self.open_button = QPushButton("Open a mesh file…")
@@ -132,7 +149,8 @@ class WelcomeDialog(QDialog):
         if dock is not None:
             dock.show()
             dock.raise_()
-            dock.status_label.setText(next(h for n, _p, h in SAMPLES if n == name) + ".")
+            short, hint = next((sh, h) for n, p, sh, h in SAMPLES if (n, p) == (name, panel))
+            dock.status_label.setText(f"{short}: {hint}.")
         self.close()
         return True
 

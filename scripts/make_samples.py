@@ -3,12 +3,14 @@
 
 Usage::
 
-    python scripts/make_samples.py            # writes blob.obj, bumpy.obj, pretzel.obj
+    python scripts/make_samples.py            # writes blob.obj, bumpy.obj, pretzel.obj, orange.obj
     python scripts/make_samples.py --check    # only validate the shipped files (no writing)
 
 The shapes come from :func:`algorithms.mesh.primitives.organic_sample` (marching cubes of
 implicit fields made by the project, so there are no third-party licence questions).
-Coordinates are rounded to 6 decimals to keep the files small; every file is validated after
+``orange.obj`` is :func:`algorithms.adversarial.shapes.orange` (procedural too) with its colours
+as OBJ vertex colours (each vertex the mean of its faces' colours), so the Adversarial panel
+starts from an object the classifier recognizes. Coordinates are rounded to 6 decimals to keep the files small; every file is validated after
 writing (closed, manifold, outward, expected genus).
 """
 
@@ -38,6 +40,19 @@ def build(name: str) -> tuple[np.ndarray, np.ndarray]:
     """The sample ``name`` as it is stored: (V rounded to DECIMALS, F)."""
     V, F = organic_sample(name)
     return np.round(V, DECIMALS) + 0.0, F
+
+
+def build_orange() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The coloured orange: (V rounded, F, vertex colours in [0, 1])."""
+    from algorithms.adversarial.shapes import orange
+
+    V, F, A = orange()
+    C = np.zeros((len(V), 3))
+    count = np.zeros(len(V))
+    for k in range(3):
+        np.add.at(C, F[:, k], A)
+        np.add.at(count, F[:, k], 1.0)
+    return np.round(V, DECIMALS) + 0.0, F, np.round(C / count[:, None], 3)
 
 
 def check(path: Path, genus: int) -> list[str]:
@@ -73,6 +88,12 @@ def main(argv: list[str] | None = None) -> int:
             write_mesh(path, V, F)
         problems += check(path, genus)
         print(f"{path}: {path.stat().st_size / 1000:.0f} kB")
+    orange = args.out / "orange.obj"
+    if not args.check:
+        V, F, C = build_orange()
+        write_mesh(orange, V, F, vertex_colors=C)
+    problems += check(orange, 0)
+    print(f"{orange}: {orange.stat().st_size / 1000:.0f} kB")
     project = args.out / "blob-painted.s3d"
     if not args.check:
         write_sample_project(args.out / "blob.obj", project)

@@ -385,11 +385,13 @@ def _field_blob(P: np.ndarray) -> np.ndarray:
 
 
 def _field_bumpy(P: np.ndarray) -> np.ndarray:
-    """Sphere with smooth sinusoidal bumps: negative inside."""
+    """Sphere with big smooth lobes and small bumps all over (what the default Smooth removes):
+    negative inside."""
     r = np.linalg.norm(P, axis=-1)
     x, y, z = P[..., 0], P[..., 1], P[..., 2]
     bumps = 0.11 * np.sin(6 * x) * np.sin(6 * y) * np.sin(6 * z) + 0.04 * np.cos(5 * (x + y - z))
-    return r - (0.78 + bumps)
+    small = 0.025 * np.sin(21 * x + 1) * np.sin(21 * y + 2) * np.sin(21 * z + 3)
+    return r - (0.78 + bumps + small)
 
 
 def _field_pretzel(P: np.ndarray) -> np.ndarray:
@@ -406,7 +408,7 @@ def _field_pretzel(P: np.ndarray) -> np.ndarray:
 
 _FIELDS = {"blob": _field_blob, "bumpy": _field_bumpy, "pretzel": _field_pretzel}
 _BOUNDS = {"blob": 1.3, "bumpy": 1.1, "pretzel": 1.2}
-_RESOLUTION = {"blob": 56, "bumpy": 44, "pretzel": 58}
+_RESOLUTION = {"blob": 56, "bumpy": 48, "pretzel": 58}
 
 
 def _relax_on_surface(V: np.ndarray, F: np.ndarray, field, iterations: int = 8) -> np.ndarray:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from algorithms.smoothing import SmoothParams
-from app.recipes.smooth import smooth_steps
+from app.recipes.smooth import change_advice, smooth_steps
 from app.panels.base import MethodPanel
 
 
@@ -17,3 +17,12 @@ class SmoothPanel(MethodPanel):
 
     def build_steps(self, state, params):
         return smooth_steps(state, params)
+
+    def _on_finished(self, step) -> None:
+        super()._on_finished(step)
+        if self.window_.last_job_name != self.title:
+            return
+        params = (self.last_request or {}).get("params") or self.form.params()
+        advice = change_advice(step, params)
+        if advice:
+            self.status_label.setText(f"{self.status_label.text()} {advice}")

@@ -14,6 +14,22 @@ def smooth_steps(state, params, options=None, cache=None) -> Iterator[Step]:
     return smooth_iter(state.V, state.F, params)
 
 
+#: Below this largest move (fraction of the bounding-box diagonal) a result looks unchanged.
+VISIBLE_MOVE = 0.005
+
+
+def change_advice(last: Step, params) -> str:
+    """What to tell a user whose run barely changed the shape (empty when it visibly did):
+    the input was already smooth at this step size, and how to smooth more."""
+    moved = float(last.metrics.get("moved", 1.0))
+    if moved >= VISIBLE_MOVE:
+        return ""
+    stronger = min(1.0, float(params.step_size) * 10.0)
+    return (f"The shape changed little (at most {100 * moved:.2g} % of its size): it is already "
+            f"smooth at this step size. Raise Step size (e.g. to {stronger:.0e}) or Iterations "
+            "to smooth more.")
+
+
 def _smooth_params():
     from algorithms.smoothing import SmoothParams
 

@@ -346,6 +346,8 @@ class StudySession(QObject):
         self._log("open", mesh=task.mesh, mesh_hash=_state_hash(st),
                   state_file=self._save_state(st)[1])
         self._apply_setup(task)
+        # the camera the task opens with is where moves are counted from (the app placed it)
+        self._camera, self._camera_moving = self._camera_now(), False
         self.bar.title.setText(f"Task {len(self.order) - len(self.remaining)} of "
                                f"{len(self.order)}: {task.title}")
         self.bar.instructions.setText(task.instructions)
@@ -651,12 +653,18 @@ class StudySession(QObject):
                               **extra, **_edit_details(now[i]))
         self._snapshot_undo()
 
+    def _camera_now(self) -> dict | None:
+        pose = getattr(self.window.viewport, "camera_pose", None)
+        return pose() if callable(pose) else None
+
     def _poll_camera(self) -> None:
         if self.log.task is None:
             return
-        pose = getattr(self.window.viewport, "camera_pose", None)
-        cam = pose() if callable(pose) else None
+        cam = self._camera_now()
         if cam is None:
+            return
+        if self._camera is None:  # the first pose seen is not a move
+            self._camera = cam
             return
         if cam != self._camera:
             self._camera = cam

@@ -419,9 +419,10 @@ def test_welcome_opens_a_sample_from_its_thumbnail(window, dialogs, qtbot):
     window.actions_by_name["welcome"].trigger()
     dlg = window.welcome_dialog
     qtbot.waitExposed(dlg)
-    assert set(dlg.sample_buttons) == {"blob.obj", "bumpy.obj", "pretzel.obj"}
-    b = dlg.sample_buttons["pretzel.obj"]
-    assert "Analogies" in b.text()  # one suggestion per sample
+    # issue 24: one suggestion for each of the eight panels
+    assert set(dlg.sample_buttons) == set(window.panels)
+    b = dlg.sample_buttons["Analogies"]
+    assert "Analogies" in b.text() and "pretzel" in b.text()
     assert not b.icon().isNull()  # a thumbnail made by the app
     qtbot.mouseClick(b, Qt.MouseButton.LeftButton)
     assert window.document.path.name == "pretzel.obj" and window.viewport.n_points > 0

@@ -113,3 +113,20 @@ def test_two_task_session_counts_exactly_what_the_participant_did(window, dialog
     assert [b[f"q_sus{i}"] for i in range(1, 11)] == ["5", "1"] * 5
     ends = [e for e in ev if e["action"] == "task_end"]
     assert a["result_hash"] == ends[0]["result_hash"] and b["result_hash"] == ends[1]["result_hash"]
+
+
+def test_camera_moves_count_only_the_participants_moves(window, dialogs, qtbot, tmp_path):
+    """The camera the app places when a task opens its mesh is not a move (a task that lasted
+    over a second counted one); one real rotation is one move."""
+    from app.study.session import CAMERA_POLL_MS, start_study
+
+    session = start_study(window, _protocol(tmp_path), log_dir=tmp_path / "logs",
+                          participant="P12", condition="A")
+    qtbot.wait(4 * CAMERA_POLL_MS)  # idle: several polls
+    assert not [e for e in read_log(session.log.path).events if e["action"] == "camera"]
+    cam = window.viewport.plotter.camera
+    cam.azimuth = cam.azimuth + 30.0  # the participant turns the model
+    window.viewport.render()
+    qtbot.wait(4 * CAMERA_POLL_MS)
+    cams = [e for e in read_log(session.log.path).events if e["action"] == "camera"]
+    assert len(cams) == 1 and cams[0]["task"] == "first"
