@@ -400,8 +400,10 @@ def _load_network(p: Path) -> Network:
 
 
 # ------------------------------------------------------------------------------ geometry
-def mean_edge_length(V: np.ndarray, F: np.ndarray) -> float:
-    """Mean length of the mesh's undirected edges."""
+def mean_edge_length(V: np.ndarray, F: np.ndarray, edges: np.ndarray | None = None) -> float:
+    """Mean length of the mesh's undirected edges (``edges`` (e, 2): them, if known)."""
+    if edges is not None:
+        return float(np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1).mean())
     F = np.asarray(F, dtype=np.int64)
     a = F.reshape(-1)
     b = F[:, [1, 2, 0]].reshape(-1)
@@ -411,8 +413,8 @@ def mean_edge_length(V: np.ndarray, F: np.ndarray) -> float:
     return float(np.linalg.norm(V[i] - V[j], axis=1).mean())
 
 
-def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = True
-               ) -> tuple[np.ndarray, float, str]:
+def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = True, *,
+               edges: np.ndarray | None = None) -> tuple[np.ndarray, float, str]:
     """(centre, scale, note): the network sees ``(V - centre) * scale``.
 
     The formulation's normalization; then, with ``adapt`` and a known reference edge length,
@@ -421,7 +423,7 @@ def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = Tru
     c, s = network.normalization(V)
     if not adapt or not network.reference_edge:
         return c, s, ""
-    ell = mean_edge_length(V, F) * s
+    ell = mean_edge_length(V, F, edges) * s
     ratio = ell / network.reference_edge
     if not np.isfinite(ratio) or ratio <= 0 or 1 / SCALE_TOLERANCE <= ratio <= SCALE_TOLERANCE:
         return c, s, ""
@@ -432,25 +434,78 @@ def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = Tru
     return c, s / ratio, note
 
 
+def _argsort_int(key: np.ndarray) -> np.ndarray:
+    """``np.argsort`` of non-negative int64 keys (ties in any order), as one ``np.sort`` of
+    ``key << b | index`` when that fits in 63 bits (about 2x faster here: NumPy's sort of
+    int64 uses the CPU's vector sort, its argsort less so)."""
+    H = len(key)
+    if H == 0:
+        return np.zeros(0, dtype=np.int64)
+    bits = max(1, int(H - 1).bit_length())
+    top = int(key.max())
+    if top < 0 or top.bit_length() + bits > 63:
+        return np.argsort(key)
+    packed = np.sort((key << bits) | np.arange(H, dtype=np.int64))
+    return packed & ((1 << bits) - 1)
+
+
 class _Level:
-    """Index arrays of one level: the half-flaps sorted by their vertex and by their edge."""
+    """Index arrays of one level: the half-flaps grouped by their vertex and by their edge.
+
+    :meth:`build` makes them in three pieces (a generator), so that a consumer can stop
+    between them on a big mesh."""
 
     def __init__(self, F: np.ndarray, n: int):
-        hf = half_flaps(F, n)
-        ijkl = hf.ijkl
-        has_l = ijkl[:, 3] >= 0
-        ijkl = ijkl.copy()
-        ijkl[~has_l, 3] = ijkl[~has_l, 2]
-        self.n, self.F, self.E, self.EF = n, F, hf.E, hf.EF
+        self.F, self.n = F, int(n)
+
+    def build(self) -> Iterator[None]:
+        """The same half-flaps, edges (sorted, as :func:`~.topology.unique_edge_ids`) and edge
+        of every corner as :func:`~.topology.half_flaps` (tested equal), from ONE sort of the
+        undirected edge keys: equal keys are an edge's two half-edges (twins), the sorted keys'
+        runs the edges in order, and that order groups the flaps by edge for the EDGE step.
+        (half_flaps sorts three times; this is ~3x faster on a 400k-face level.)"""
+        F = np.ascontiguousarray(self.F, dtype=np.int64)
+        n = self.n
+        src = F.reshape(-1)
+        dst = F[:, [1, 2, 0]].reshape(-1)
+        opp = F[:, [2, 0, 1]].reshape(-1)
+        H = len(src)
+        key = np.minimum(src, dst) * n + np.maximum(src, dst)
+        order = _argsort_int(key)
+        yield
+        sk = key[order]
+        new = np.r_[True, sk[1:] != sk[:-1]]
+        starts = np.flatnonzero(new)
+        counts = np.diff(np.r_[starts, H])
+        if counts.max(initial=1) > 2:
+            raise InvalidMeshError("Neural subdivision needs a manifold mesh: an edge is shared "
+                                   "by more than two triangles. Run 'Clean' first.")
+        ukey = sk[starts]
+        self.E = np.stack([ukey // n, ukey % n], axis=1)
+        edge = np.empty(H, dtype=np.int64)
+        edge[order] = np.cumsum(new) - 1
+        self.EF = edge.reshape(-1, 3)
+        twin = np.full(H, -1, dtype=np.int64)
+        pair = starts[counts == 2]
+        twin[order[pair]] = order[pair + 1]
+        twin[order[pair + 1]] = order[pair]
+        has_l = twin >= 0
+        l = np.where(has_l, opp[np.maximum(twin, 0)], opp)  # no l: k (mirrored later)
+        ijkl = np.stack([src, dst, opp, l], axis=1)
         self.boundary = bool((~has_l).any())
-        self.by_vertex = self._grouped(ijkl, has_l, ijkl[:, 0], n)
-        self.by_edge = self._grouped(ijkl, has_l, hf.edge, len(hf.E))
-        self.degree = np.maximum(hf.degree, 1.0).astype(np.float32)
-        self.H = len(ijkl)
+        deg = np.bincount(self.E.reshape(-1), minlength=n)
+        self.degree = np.maximum(deg, 1).astype(np.float32)
+        self.H = H
+        self.by_edge = {"ijkl": np.ascontiguousarray(ijkl[order]), "has_l": has_l[order],
+                        "starts": starts, "dst": np.arange(len(starts)),
+                        "inv": (1.0 / counts).astype(np.float32), "N": len(starts)}
+        yield
+        self.by_vertex = self._grouped(ijkl, has_l, src, n)
+        yield
 
     @staticmethod
     def _grouped(ijkl, has_l, dst, N):
-        order = np.argsort(dst, kind="stable")
+        order = _argsort_int(dst)  # the order inside a group does not matter (a sum)
         d = dst[order]
         starts = np.flatnonzero(np.r_[True, d[1:] != d[:-1]])
         counts = np.diff(np.r_[starts, len(d)])
@@ -580,13 +635,14 @@ def _check_levels(levels) -> int:
 
 
 def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale: bool = True,
-                            chunk: int = CHUNK_FLAPS) -> Iterator[Step]:
+                            chunk: int | None = None) -> Iterator[Step]:
     """Subdivide with ``network``, in steps: progress steps (``iteration`` per mille of the
     work, ``total`` 1000, ``V`` the input unchanged, ``message`` "Level 1 of 2: ...") after
     every chunk of half-flaps, then one :class:`SubdividedStep` with the result (input vertices
     first, moved; then one vertex per edge per level, in the order of
     :func:`~algorithms.subdivision.topology.refine`). Stopping the iteration stops the work."""
     lv = _check_levels(levels)
+    chunk = int(CHUNK_FLAPS if chunk is None else chunk)
     from ..mesh.subdivision import midpoint_subdivide
     from .data import check_manifold
 
@@ -596,8 +652,6 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
     if len(F) * 4 ** lv > 20_000_000:
         raise ParameterError(f"{lv} levels would make {len(F) * 4 ** lv:,} triangles; use fewer "
                              f"levels.")
-    c, s, note = scale_plan(network, V, F, adapt_scale)
-    X = ((V - c) * s).astype(np.float32)
     m = len(F)
     work = 3 * m + sum(2 * 3 * m * 4 ** k for k in range(lv))  # flaps over all stages
     done = 0
@@ -605,11 +659,12 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
     def progress(msg):
         return Step(int(min(999, 1000 * done / work)), 1000, V_in, {}, msg)
 
-    try:
-        level = _Level(F, len(X))
-    except Exception as exc:  # noqa: BLE001
-        raise InvalidMeshError(f"Neural subdivision could not read the mesh's connectivity "
-                               f"({exc}). Run 'Clean' first.") from None
+    yield progress(f"Level 1 of {lv}: reading the mesh")
+    level = _Level(F, len(V))
+    for _ in level.build():
+        yield progress(f"Level 1 of {lv}: reading the mesh")
+    c, s, note = scale_plan(network, V, F, adapt_scale, edges=level.E)
+    X = ((V - c) * s).astype(np.float32)
     acc = np.empty((len(X), FEATURES), np.float32)
     D = level.laplace(X)
     for k in _stage(network.modules["I"], X.T.copy(), D.T.copy(), None, level.by_vertex, acc,
@@ -638,8 +693,10 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
         Z = np.concatenate([Z, accE[:, 3:]])
         F_next = refine(level.F, level.n, level.EF)
         if li + 1 < lv:
-            level = _Level(F_next, len(X))
             yield progress(f"{head}: splitting the triangles")
+            level = _Level(F_next, len(X))
+            for _ in level.build():
+                yield progress(f"{head}: splitting the triangles")
     out = X.astype(np.float64) / s + c
     if not np.isfinite(out).all():
         raise InvalidMeshError("Neural subdivision produced invalid positions (degenerate "

@@ -543,12 +543,24 @@ def neural_subdivide_torch(V, F, levels: int = 2, weights=None) -> tuple[np.ndar
 
 
 # ------------------------------------------------------------------------------ weights files
-def save_weights(path, net: SubdivisionNet, info: dict | None = None) -> None:
-    """Write ``net`` to ``path`` atomically (a dict of plain tensors, numbers and strings)."""
+def save_weights(path, net, info: dict | None = None) -> None:
+    """Write ``net`` (a :class:`SubdivisionNet`, or a NumPy
+    :class:`~algorithms.subdivision.inference.Network` of our formulation) to ``path``
+    atomically (a dict of plain tensors, numbers and strings)."""
     torch = _torch()
     from ..mesh.io import atomic_write
+    from .inference import Network
 
-    obj = {"format": FORMAT, "version": FORMAT_VERSION, "state": net.state(),
+    if isinstance(net, Network):
+        if net.formulation != "stylize3d":
+            raise WeightsError("Only networks of Stylize3D's formulation can be saved as "
+                               "Stylize3D weights (this one is the thesis author's).")
+        state = {k: torch.from_numpy(np.array(v)) for k, v in net.state.items()}
+        if net.reference_edge:  # the scale guard's reference goes with the weights
+            info = {"mean_edge_length": float(net.reference_edge), **(info or {})}
+    else:
+        state = net.state()
+    obj = {"format": FORMAT, "version": FORMAT_VERSION, "state": state,
            "info": {str(k): v for k, v in (info or {}).items()
                     if isinstance(v, (int, float, str, bool))}}
     atomic_write(path, lambda fh: torch.save(obj, fh))

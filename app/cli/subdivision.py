@@ -95,13 +95,16 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
     dt = time.perf_counter() - t0
     V, F = after.V, after.F
     write_mesh(args.output, V, F)
+    note = str(getattr(last, "note", "") or "")
     out = {"input": args.mesh, "output": args.output, "method": params.method,
            "levels": params.levels, "coarsen_first": params.coarsen_first,
            "vertices_in": int(len(data.V)), "faces_in": int(len(data.F)),
-           "vertices": int(len(V)), "faces": int(len(F)), "seconds": dt}
+           "vertices": int(len(V)), "faces": int(len(F)), "seconds": dt, "note": note}
     if args.json:
         print_json(out)
     else:
+        if note:
+            say(f"stylize3d subdivide: {note}")
         print(f"Wrote {args.output}: {params.method} subdivision, {params.levels} level(s), "
               f"{len(data.F):,} -> {len(F):,} triangles in {dt:.2f} s.")
     return 0
@@ -285,7 +288,9 @@ def add_parsers(sub) -> None:
     s.add_argument("--coarsen-first", type=int, metavar="N",
                    help="QSlim the mesh to about N vertices first, as the Subdivision panel "
                         "does (0: off). Default: 0.")
-    s.add_argument("--weights", help="a weights file from subdivide-train (default: shipped)")
+    s.add_argument("--weights", help="a weights file from subdivide-train, or the thesis "
+                                     "author's netparams.dat (its hyperparameters.json beside "
+                                     "it is checked); default: shipped")
     s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
     s.add_argument("--json", action="store_true",
                    help='print {"method", "levels", "vertices", "faces", "seconds", ...}')

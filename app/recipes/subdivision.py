@@ -64,6 +64,9 @@ class MeshStep(Step):
     Qt-free twin of :class:`app.jobs.MeshStep`)."""
 
     F: np.ndarray | None = None
+    #: what neural subdivision did to stay in its network's range ('' when nothing), for the
+    #: panel to show (see algorithms.subdivision.inference.scale_plan)
+    note: str = ""
 
 
 @dataclass
@@ -115,62 +118,87 @@ def weights_ref(options: dict | None) -> str | None:
 
 
 def load_network(ref: str | None, cache: dict | None = None):
-    """The :class:`~algorithms.subdivision.model.SubdivisionNet` of a weights blob (None: the
-    shipped weights). A blob's network is kept in ``cache`` (blobs are content addressed).
-    Raises a plain error (WeightsError, ParameterError) for a missing or foreign file."""
-    from algorithms.subdivision.model import load_weights
+    """The network (:class:`~algorithms.subdivision.inference.Network`, NumPy; no PyTorch) of a
+    weights blob (None: the shipped weights): ours or the thesis author's ``netparams.dat``. A
+    blob's network is kept in ``cache`` (blobs are content addressed). Raises a plain error
+    (WeightsError, ParameterError) for a missing or foreign file."""
+    from algorithms.subdivision.inference import load_network as read_network
 
     if ref is None:
-        return load_weights(None)[0]
+        return read_network(None)
     nets = None if cache is None else cache.setdefault("networks", {})
     if nets is not None and ref in nets:
         return nets[ref]
-    net = load_weights(blob_path(ref))[0]
+    net = read_network(blob_path(ref))
     if nets is not None:
         nets[ref] = net
     return net
 
 
 def weights_blob_from_file(path) -> str:
-    """Check a weights file (a plain error if it is not ours) and store it as a blob; returns
-    the reference for the ``weights_file`` option."""
-    from algorithms.subdivision.model import load_weights
+    """Check a weights file (a plain error if it is neither ours nor the author's network) and
+    store it as a blob; returns the reference for the ``weights_file`` option."""
+    from algorithms.subdivision.inference import load_network as read_network
 
-    load_weights(path)
+    read_network(path)
     return put_blob_file(path)
 
 
 # ------------------------------------------------------------------------------ subdividing
 def subdivision_steps(state, params, options: dict | None = None, cache: dict | None = None
                       ) -> Iterator[Step]:
-    """The Subdivision panel's Run: progress steps ("QSlim to N vertices", "<method>
-    subdivision"; cancellable), then one :class:`MeshStep` with the subdivided mesh."""
+    """The Subdivision panel's Run: progress steps (per-mille ``iteration`` of ``total`` 1000,
+    ``V`` the input, a message: "QSlim to N vertices", "Level 1 of 2: moving the vertices", ...),
+    then one :class:`MeshStep` with the subdivided mesh (its ``note`` says what neural
+    subdivision did to stay within its network's training range, '' when nothing).
+
+    The subdivision itself runs in this generator in small pieces (neural: chunks of
+    half-flaps, :func:`~algorithms.subdivision.inference.neural_subdivision_iter`; the classic
+    schemes: one level at a time), so a consumer that stops asking (Stop) stops it within one
+    piece; nothing is imported from PyTorch."""
     from algorithms.steps import with_progress
 
     options = options or {}
     cache = {} if cache is None else cache
     net = load_network(weights_ref(options), cache) if params.method == "neural" else None
+    V, F = np.asarray(state.V), np.asarray(state.F)
+    if params.coarsen_first and params.coarsen_first < len(V):
+        def work(progress):
+            from algorithms.subdivision.metrics import coarsen_to_vertices
 
-    def work(progress):
-        from algorithms.subdivision.baselines import subdivide_baseline
-        from algorithms.subdivision.metrics import coarsen_to_vertices
-        from algorithms.subdivision.model import neural_subdivide
-
-        V, F = np.asarray(state.V), np.asarray(state.F)
-        if params.coarsen_first and params.coarsen_first < len(V):
             progress(0.1, f"QSlim to {params.coarsen_first} vertices")
-            V, F = coarsen_to_vertices(V, F, params.coarsen_first)
-        progress(0.5, f"{params.method} subdivision")
-        if params.method == "neural":
-            return neural_subdivide(V, F, params.levels, net)
-        return subdivide_baseline(V, F, params.levels, params.method)
+            return coarsen_to_vertices(V, F, params.coarsen_first)
 
-    box: dict = {}
-    yield from with_progress(work, state.V, box)
-    if "value" in box:
+        box: dict = {}
+        yield from with_progress(work, state.V, box)
+        if "value" not in box:
+            return
         V, F = box["value"]
-        yield MeshStep(1, 1, np.asarray(V, dtype=np.float64), {}, f"{len(F):,} triangles",
-                       F=np.asarray(F, dtype=np.int64))
+    levels = int(params.levels)
+    note = ""
+    if params.method == "neural":
+        from algorithms.subdivision.inference import SubdividedStep, neural_subdivision_iter
+
+        last = None
+        for step in neural_subdivision_iter(V, F, levels, net):
+            if isinstance(step, SubdividedStep):
+                last = step
+            else:
+                step.V = state.V
+                yield step
+        V, F, note = last.V, last.F, last.note
+    else:
+        from algorithms.subdivision.baselines import subdivide_baseline
+
+        name = {"loop": "Loop", "butterfly": "Butterfly", "midpoint": "Mid-point"}.get(
+            params.method, params.method)
+        for k in range(levels):
+            yield Step(int(1000 * k / levels), 1000, state.V, {},
+                       f"Level {k + 1} of {levels}: {name} subdivision")
+            V, F = subdivide_baseline(V, F, 1, params.method)
+    message = f"{len(F):,} triangles" + (f". {note}" if note else "")
+    yield MeshStep(1, 1, np.asarray(V, dtype=np.float64), {}, message,
+                   F=np.asarray(F, dtype=np.int64), note=note)
 
 
 def _subdivide_params():
@@ -184,6 +212,8 @@ def _subdivision_outcome(last: Step) -> dict:
     out = {"vertices": int(len(last.V))}
     if F is not None:
         out["faces"] = int(len(F))
+    if getattr(last, "note", ""):
+        out["note"] = str(last.note)
     return out
 
 
@@ -275,7 +305,12 @@ def training_steps(state, params, options: dict | None = None, cache: dict | Non
         return
     data_seconds = time.perf_counter() - t0
     trainer = Trainer(box["value"], tparams)
-    info = {**params_to_dict(dparams), **params_to_dict(tparams)}
+    from algorithms.subdivision.inference import mean_edge_length
+
+    # the edge length the network is trained at (its scale guard's reference, see
+    # algorithms.subdivision.inference.scale_plan)
+    ref_edge = float(np.mean([mean_edge_length(s.V, s.F) for s in box["value"]]))
+    info = {**params_to_dict(dparams), **params_to_dict(tparams), "mean_edge_length": ref_edge}
     losses: list[float] = []
     vlosses: list[float] = []
     steps = trainer.steps()

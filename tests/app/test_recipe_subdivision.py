@@ -83,7 +83,8 @@ def test_neural_shipped_with_coarsen_first_streams_progress(spot):
     V, F = neural_subdivide(V0, F0, 1, None)
     assert r.state.V.tobytes() == V.tobytes() and np.array_equal(r.state.F, F)
     assert all(s.total == 1000 and s.V is spot.V for s in seen[:-1])
-    assert isinstance(seen[-1], rs.MeshStep) and seen[-1].message.endswith("triangles")
+    assert isinstance(seen[-1], rs.MeshStep) and seen[-1].message.startswith(f"{len(F):,} "
+                                                                             f"triangles")
     # same inputs, same bits
     again = run("subdivide", spot, {"method": "neural", "levels": 1, "coarsen_first": 300},
                 {"weights": "shipped"})
@@ -107,7 +108,7 @@ def test_weights_options(spot, trained, tmp_path):
     assert is_blob_ref(ref) and ref.endswith("/mine.pt")
     path.unlink()  # the run does not need the file any more
     by_file = run("subdivide", spot, p, {"weights": "file", "weights_file": ref}).state
-    V, F = neural_subdivide(spot.V, spot.F, 1, load_weights(blob_path(ref))[0])
+    V, F = neural_subdivide(spot.V, spot.F, 1, blob_path(ref))
     assert by_file.V.tobytes() == V.tobytes() and np.array_equal(by_file.F, F)
     assert not np.array_equal(by_file.V, shipped.V)
     # the other choice's weights are not used; a choice without weights is the shipped one;
@@ -199,9 +200,9 @@ def test_stopping_keeps_the_best_weights_so_far(spot):
     assert out["epochs"] == 2 and len(out["losses"]) == 2
     # the same as a whole 2-epoch run (the first epochs do not depend on the total)
     whole = run("subdivide-train", spot, {**TINY, "epochs": 2}, LOCAL)
-    a = rs.load_network(out["weights"]).state()
-    b = rs.load_network(whole.outcome["weights"]).state()
-    assert all(torch.equal(v, b[k]) for k, v in a.items())
+    a = rs.load_network(out["weights"]).state
+    b = rs.load_network(whole.outcome["weights"]).state
+    assert all(np.array_equal(v, b[k]) for k, v in a.items())
     assert out["losses"].tobytes() == whole.outcome["losses"].tobytes()
     # stopped while making the data: no outcome
     gen = recipe.steps(spot, params, LOCAL, {})
@@ -215,3 +216,72 @@ def test_training_input_errors(spot):
         run("subdivide-train", spot, {"coarse_meshes": 3, "max_vertices": 900}, LOCAL)
     with pytest.raises(ParameterError):
         run("subdivide-train", spot, {**TINY, "min_vertices": 90}, LOCAL)
+
+
+def test_subdividing_imports_no_torch():
+    """Subdividing with a trained network (here the shipped one, and a weights file as the
+    panel / CLI store it) runs without PyTorch."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numpy as np\n"
+        "from algorithms.mesh import read_mesh\n"
+        "from app.document import MeshState\n"
+        "from app.recipes import run\n"
+        "from app.recipes import subdivision as rs\n"
+        "m = read_mesh('tests/data/spot_lowres.obj')\n"
+        "s = MeshState.make(m.V, m.F)\n"
+        "r = run('subdivide', s, {'method': 'neural', 'levels': 1}, {})\n"
+        "ref = rs.weights_blob_from_file('resources/subdivision/neural_subdivision.pt')\n"
+        "f = run('subdivide', s, {'method': 'neural', 'levels': 1},\n"
+        "        {'weights': 'file', 'weights_file': ref})\n"
+        "assert np.array_equal(r.state.V, f.state.V) and len(f.state.F) == 4 * len(m.F)\n"
+        "print('torch' in sys.modules)\n")
+    from tests.conftest import ROOT
+
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False"]
+
+
+def test_stop_after_the_first_step_does_little_work(monkeypatch):
+    """The recipe's steps are the work's own pieces (no helper thread): a consumer that stops
+    after the first step has made at most one chunk of half-flaps, and a whole run yields a
+    step at least every CHUNK_FLAPS half-flaps, with "Level i of L" words."""
+    import threading
+
+    from algorithms.subdivision import inference
+
+    m = read_mesh("tests/data/hand_lowres.obj")
+    state = MeshState.make(m.V, m.F)
+    flaps = []
+    real = inference._Module.hidden
+
+    def counting(self, geo, Zw, ijkl):
+        flaps.append(len(geo))
+        return real(self, geo, Zw, ijkl)
+
+    monkeypatch.setattr(inference._Module, "hidden", counting)
+    monkeypatch.setattr(inference, "CHUNK_FLAPS", 3000)
+    recipe = get_recipe("Subdivision")
+    params = recipe.make_params({"method": "neural", "levels": 2})
+    threads = threading.active_count()
+    gen = recipe.steps(state, params, {}, {})
+    first = next(gen)
+    gen.close()
+    assert first.total == 1000 and first.message.startswith("Level 1 of 2")
+    assert sum(flaps) <= 3000 and threading.active_count() == threads
+    # a whole run: one step per chunk (and per piece of reading each level)
+    flaps.clear()
+    steps = list(recipe.steps(state, params, {}, {}))
+    assert isinstance(steps[-1], rs.MeshStep) and len(steps[-1].F) == 16 * len(m.F)
+    progress = steps[:-1]
+    assert max(flaps) <= 3000 + 40 and len(progress) >= sum(flaps) / 3040  # + one vertex's flaps
+    assert all(s.total == 1000 and s.message.startswith(("Level 1 of 2", "Level 2 of 2"))
+               for s in progress)
+    # the classic schemes say their level too
+    loop = list(recipe.steps(state, recipe.make_params({"method": "loop", "levels": 2}), {}, {}))
+    assert [s.message for s in loop[:-1]] == ["Level 1 of 2: Loop subdivision",
+                                             "Level 2 of 2: Loop subdivision"]
