@@ -12,6 +12,13 @@
 
 Every timing is wall-clock on a possibly shared machine: the load average is printed with them.
 
+``--inference`` (issue 22) runs only this: the whole ``stylize3d subdivide`` process (neural,
+shipped weights, 2 levels; median of 5 runs of the whole command) on a ~1k-face and a ~10k-face
+mesh against ``stylize3d subdivide --method loop`` on the same mesh in the same run (the
+process's fixed cost is the same; targets <= 1.2 s and <= 2 s), the time of ``python -c
+'import torch'`` (what the command no longer pays), and in this process the NumPy inference
+against the PyTorch path (``neural_subdivide_torch``, one torch thread) on the same meshes.
+
 Usage: ``python benchmarks/subdivision.py [--quick] [--full [--save W.pt]]`` (``--quick``: fewer
 repeats and meshes; ``--full``: also runs the whole default training once -- 200 coarse meshes
 with 2 workers, then ``TrainParams()`` -- and prints its measured split).
@@ -59,6 +66,8 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--learn-loop", nargs=2, type=int, metavar=("N", "EPOCHS"))
+    ap.add_argument("--inference", action="store_true",
+                    help="only the inference figures (whole CLI process, NumPy vs PyTorch)")
     ap.add_argument("--coarse", type=int, default=0,
                     help="coarse meshes for the data-generation timing (default 4 quick, 8)")
     ap.add_argument("--mesh", default="armadillo.obj",
@@ -74,6 +83,8 @@ def main() -> int:
                     help="with --full: data cache folder (default: a fresh temporary one, so "
                          "the data generation is timed)")
     args = ap.parse_args()
+    if args.inference:
+        return inference(5 if not args.quick else 3)
     import torch
 
     torch.set_num_threads(1)
@@ -217,6 +228,81 @@ def main() -> int:
     print(f"end: {_load()}", flush=True)
     if args.full:
         return full(shape, args)
+    return 0
+
+
+def _inference_meshes(tmp: Path) -> list:
+    """(label, path, V, F): spot QSlim-ed to ~1k faces, armadillo to ~10k faces."""
+    from algorithms.mesh import read_mesh, write_mesh
+    from algorithms.subdivision.metrics import coarsen_to_vertices
+
+    out = []
+    for label, name, nv in (("1k faces", "spot_lowres.obj", 502),
+                            ("10k faces", "armadillo.obj", 5002)):
+        m = read_mesh(mesh_path(name))
+        V, F = coarsen_to_vertices(m.V, m.F, nv)
+        p = tmp / f"{Path(name).stem}_{len(F)}.obj"
+        write_mesh(p, V, F)
+        out.append((label, p, V, F))
+    return out
+
+
+def _process_seconds(args: list, repeat: int) -> float:
+    """Median wall time of a whole ``python ...`` process (OMP / BLAS threads as a user has)."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+
+    def once():
+        r = subprocess.run([sys.executable, *args], cwd=root, capture_output=True, text=True)
+        if r.returncode != 0:
+            raise RuntimeError(r.stderr)
+
+    once()  # warm the file cache
+    return median_seconds(once, repeat)
+
+
+def inference(repeat: int) -> int:
+    """Issue 22's figures: whole-process ``stylize3d subdivide`` and NumPy vs PyTorch."""
+    print(f"start: {_load()}", flush=True)
+    with tempfile.TemporaryDirectory(prefix="s3d-bench-") as d:
+        tmp = Path(d)
+        meshes = _inference_meshes(tmp)
+        t_torch = _process_seconds(["-c", "import torch"], repeat)
+        print(f"whole process, median of {repeat} runs of the command:")
+        print(f"  python -c 'import torch'           {t_torch:6.2f} s  (no longer paid)")
+        for label, p, V, F in meshes:
+            out = tmp / "out.obj"
+            base = ["-m", "app", "subdivide", str(p), "-o", str(out), "--overwrite",
+                    "--levels", "2"]
+            t_n = _process_seconds(base, repeat)
+            t_l = _process_seconds(base + ["--method", "loop"], repeat)
+            target = 1.2 if len(F) < 5000 else 2.0
+            print(f"  stylize3d subdivide {label:9s} ({len(V)} V / {len(F)} F -> {16 * len(F)} F):"
+                  f" neural {t_n:5.2f} s (target <= {target} s), Loop {t_l:5.2f} s, "
+                  f"ratio {t_n / t_l:4.2f}", flush=True)
+        print(f"  ({_load()})")
+        import torch
+
+        torch.set_num_threads(1)
+        from algorithms.subdivision.inference import load_network, neural_subdivide_np
+        from algorithms.subdivision.model import load_weights, neural_subdivide_torch
+
+        net = load_network(None)
+        tnet = load_weights(None)[0]
+        print(f"in this process, median of {repeat}: NumPy inference vs the PyTorch path "
+              f"(1 torch thread, Numba kernels as configured), shipped weights, 2 levels")
+        for label, p, V, F in meshes:
+            a = neural_subdivide_np(V, F, 2, net, adapt_scale=False)[0]
+            b = neural_subdivide_torch(V, F, 2, tnet)[0]
+            diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+            t_np = median_seconds(lambda: neural_subdivide_np(V, F, 2, net, adapt_scale=False),
+                                  repeat)
+            t_pt = median_seconds(lambda: neural_subdivide_torch(V, F, 2, tnet), repeat)
+            print(f"  {label:9s} ({len(V)} V): NumPy {t_np * 1e3:7.1f} ms, PyTorch "
+                  f"{t_pt * 1e3:7.1f} ms, ratio {t_np / t_pt:4.2f}; max difference "
+                  f"{np.abs(a - b).max() / diag:.1e} of the diagonal", flush=True)
+    print(f"end: {_load()}")
     return 0
 
 
