@@ -469,8 +469,59 @@ def _check_input(V, F, target_faces) -> tuple[np.ndarray, np.ndarray, int]:
     return V, F, target_faces
 
 
+def _compiled_loop():
+    """The compiled collapse loop (:mod:`algorithms.mesh.decimate_kernel`), or None when Numba
+    is missing or ``STYLIZE3D_NUMBA=0``."""
+    import os
+
+    if os.environ.get("STYLIZE3D_NUMBA", "1") == "0":
+        return None
+    try:
+        from .decimate_kernel import collapse_loop
+    except ImportError:
+        return None
+    return collapse_loop
+
+
+def _from_kernel(out, V, F, strategy: str, target: int) -> Decimation:
+    """A :class:`Decimation` from the compiled loop's arrays."""
+    (P, Fm, falive, alive, nf, reached, K, r_kept, r_removed, r_pos, r_cost, rf_cnt, rf_ids,
+     rf_tri, cf_cnt, cf_ids, cf_corner, ring_cnt, ring, rk_cnt, rk, rr_cnt, rr) = out
+
+    def ptr(cnt):
+        p = np.zeros(len(cnt) + 1, dtype=np.int64)
+        np.cumsum(cnt, out=p[1:])
+        return p
+
+    n = len(V)
+    coarse_to_fine = np.flatnonzero(alive)
+    remap = np.full(n, -1, dtype=np.int64)
+    remap[coarse_to_fine] = np.arange(len(coarse_to_fine))
+    coarse_faces = np.flatnonzero(falive)
+    notes: list[str] = []
+    if not reached:
+        notes.append(f"Decimation stopped at {int(nf):,} triangles instead of {target:,}: "
+                     f"no further edge could be collapsed without changing the topology or "
+                     f"folding triangles over.")
+    return Decimation(
+        V=np.ascontiguousarray(P[coarse_to_fine]), F=remap[Fm[coarse_faces]],
+        coarse_to_fine=coarse_to_fine, coarse_faces=coarse_faces, n_fine=n, m_fine=len(F),
+        kept=r_kept.copy(), removed=r_removed.copy(),
+        kept_position=r_pos[:, 0:3].copy(), removed_position=r_pos[:, 3:6].copy(),
+        merged_position=r_pos[:, 6:9].copy(), cost=r_cost.copy(),
+        removed_faces_ptr=ptr(rf_cnt), removed_faces=rf_ids.copy(),
+        removed_face_vertices=rf_tri.reshape(-1, 3).copy(),
+        changed_faces_ptr=ptr(cf_cnt), changed_faces=cf_ids.copy(),
+        changed_corners=cf_corner.copy(),
+        ring_ptr=ptr(ring_cnt), ring=ring.copy(),
+        ring_kept_ptr=ptr(rk_cnt), ring_kept=rk.copy(),
+        ring_removed_ptr=ptr(rr_cnt), ring_removed=rr.copy(),
+        strategy=strategy, target_faces=target, reached_target=bool(reached), notes=notes)
+
+
 def decimate(V, F, target_faces: int, *, strategy: str = "qslim", keep=None,
-             boundary_weight: float = 100.0, min_normal_dot: float = 0.2) -> Decimation:
+             boundary_weight: float = 100.0, min_normal_dot: float = 0.2,
+             engine: str = "auto") -> Decimation:
     """Collapse edges until the mesh has ``target_faces`` triangles, recording every collapse.
 
     Parameters
@@ -485,6 +536,8 @@ def decimate(V, F, target_faces: int, *, strategy: str = "qslim", keep=None,
     min_normal_dot : a collapse is refused if a changed triangle's unit normal turns so that
         its dot product with the old one falls below this (0.2: about 78 degrees; -1 allows
         everything but degenerate triangles).
+    engine : "auto" (the compiled loop when Numba is available, else plain Python),
+        "compiled" or "python" (the reference; same checks, much slower).
 
     Returns
     -------
@@ -498,6 +551,9 @@ def decimate(V, F, target_faces: int, *, strategy: str = "qslim", keep=None,
     if strategy not in STRATEGIES:
         raise ParameterError(f"Unknown decimation strategy {strategy!r}; choose one of "
                              f"{', '.join(STRATEGIES)}.")
+    if engine not in ("auto", "compiled", "python"):
+        raise ParameterError(f"Unknown decimation engine {engine!r}; choose auto, compiled or "
+                             f"python.")
     if not -1.0 <= float(min_normal_dot) <= 1.0:
         raise ParameterError("min_normal_dot must lie between -1 and 1.")
     V, F, target_faces = _check_input(V, F, target_faces)
@@ -522,6 +578,16 @@ def decimate(V, F, target_faces: int, *, strategy: str = "qslim", keep=None,
     anch_b = protect[b] | (bnd[b] & ~bnd[a])
     cost, pos, keep_a = _costs_vectorized(Q[a] + Q[b], V[a], V[b], anch_a, anch_b, strategy)
     feas = np.isfinite(cost)
+    kernel = _compiled_loop() if engine != "python" else None
+    if engine == "compiled" and kernel is None:
+        raise ParameterError("The compiled decimation needs Numba, which is not available "
+                             "(or STYLIZE3D_NUMBA=0).")
+    if kernel is not None:
+        del pos, keep_a
+        out = kernel(V, F, Q, bnd, protect, a[feas].copy(), b[feas].copy(),
+                     cost[feas].copy(), strategy == "midpoint", float(min_normal_dot),
+                     int(target_faces))
+        return _from_kernel(out, V, F, strategy, target_faces)
     zeros = [0] * int(feas.sum())
     heap = list(zip(cost[feas].tolist(), range(int(feas.sum())), a[feas].tolist(),
                     b[feas].tolist(), zeros, zeros, keep_a[feas].tolist(),
