@@ -43,8 +43,15 @@ FIELD_TITLES = {
 }
 #: fields whose colours are not a scale (hues of directions): no bar
 NO_LEGEND = {"target_direction", "capture"}
-#: anti-aliasing samples when idle; none while a job streams (3× cheaper with software OpenGL)
+#: anti-aliasing samples when idle; none while a job streams or the camera moves (3× cheaper
+#: with software OpenGL)
 MULTI_SAMPLES = 4
+#: while the camera moves (a drag, the wheel), a mesh with more triangles than this is drawn as a
+#: stand-in of about LOD_TARGET_FACES triangles (app/lod.py), the full mesh again on release
+LOD_FACES = 50_000
+LOD_TARGET_FACES = 25_000
+#: the wheel has no "release": the camera counts as still after this many ms without a turn
+WHEEL_IDLE_MS = 250
 
 
 def _faces_vtk(F: np.ndarray) -> np.ndarray:
@@ -96,6 +103,20 @@ class _MouseFilter(QObject):
         self.pending = False
 
     def eventFilter(self, obj, event) -> bool:  # noqa: N802 (Qt API)
+        consumed = self._tool_event(event)
+        if not consumed:  # what reaches VTK moves the camera: draw a light stand-in meanwhile
+            t = event.type()
+            if t == QEvent.Type.MouseButtonPress:
+                self.vp.begin_interaction()
+            elif t == QEvent.Type.MouseButtonRelease and event.buttons() == Qt.MouseButton.NoButton:
+                self.vp.end_interaction()
+            elif t == QEvent.Type.Wheel:
+                self.vp.begin_interaction()
+                self.vp._wheel_timer.start(WHEEL_IDLE_MS)
+        return consumed
+
+    def _tool_event(self, event) -> bool:
+        """The active tool's share of the mouse (True: the event is the tool's, not VTK's)."""
         h = self.vp.handler
         t = event.type()
         if h is None:
@@ -195,6 +216,15 @@ class Viewport(QWidget):
         self._picker.PickFromListOn()
         self._mouse_filter = _MouseFilter(self)
         self.plotter.interactor.installEventFilter(self._mouse_filter)
+        # the camera moving (see begin_interaction)
+        self.interacting = False
+        self._proxy = None             # app.lod.Proxy of the shown mesh
+        self._proxy_poly: pv.PolyData | None = None
+        self._proxy_key = None
+        self._streaming = False
+        self._wheel_timer = QTimer(self)
+        self._wheel_timer.setSingleShot(True)
+        self._wheel_timer.timeout.connect(self.end_interaction)
 
     # -- tools and picking -------------------------------------------------------------------
     def set_handler(self, handler: InteractionHandler | None) -> None:
@@ -616,11 +646,80 @@ class Viewport(QWidget):
 
     def set_streaming(self, on: bool) -> None:
         """While a job streams previews: no anti-aliasing (a redraw costs a third)."""
-        samples = 0 if on else MULTI_SAMPLES
+        self._streaming = bool(on)
+        self._set_samples()
+
+    def _set_samples(self) -> None:
+        samples = 0 if (self._streaming or self.interacting) else MULTI_SAMPLES
         rw = self.plotter.ren_win
         if rw is not None and rw.GetMultiSamples() != samples:
             rw.SetMultiSamples(samples)
             self.render()
+
+    # -- the camera moving: a light stand-in --------------------------------------------------
+    def begin_interaction(self) -> None:
+        """The user started turning / panning / zooming: until :meth:`end_interaction` redraws
+        skip anti-aliasing, and a mesh of more than LOD_FACES triangles is drawn as a stand-in
+        of about LOD_TARGET_FACES (its colours averaged), so the view follows the mouse."""
+        if self.interacting:
+            return
+        self.interacting = True
+        self._set_samples()
+        if self.mesh_actor is None or self.poly is None or self.poly.n_cells <= LOD_FACES:
+            return
+        proxy = self._proxy_mesh()
+        self.mesh_actor.mapper.SetInputData(proxy)
+
+    def end_interaction(self) -> None:
+        """The camera is still again: the full mesh, anti-aliased."""
+        self._wheel_timer.stop()
+        if not self.interacting:
+            return
+        self.interacting = False
+        if self.mesh_actor is not None and self.poly is not None:
+            self.mesh_actor.mapper.SetInputData(self.poly)
+        self._set_samples()
+        self.render()
+
+    @property
+    def drawn_triangles(self) -> int:
+        """Triangles of what the mesh actor draws now (the stand-in while the camera moves)."""
+        if self.mesh_actor is None:
+            return 0
+        return int(self.mesh_actor.GetMapper().GetInput().GetNumberOfCells())
+
+    def _proxy_mesh(self) -> pv.PolyData:
+        from app.lod import cluster_proxy
+
+        key = (id(self.poly), id(self._F), len(self._F))
+        if self._proxy is None or self._proxy_key != key:
+            self._proxy = cluster_proxy(np.asarray(self.poly.points), self._F, LOD_TARGET_FACES)
+            self._proxy_key = key
+            self._proxy_poly = pv.PolyData(self._proxy.V, _faces_vtk(self._proxy.F))
+        self._sync_proxy()
+        return self._proxy_poly
+
+    def _sync_proxy(self) -> None:
+        """The stand-in's positions, normals and colour arrays from the shown mesh now."""
+        proxy, poly, out = self._proxy, self.poly, self._proxy_poly
+        if proxy is None or poly is None or out is None:
+            return
+        Vp = proxy.vertex_values(np.asarray(poly.points, dtype=np.float64))
+        out.points = Vp
+        for name in poly.point_data.keys():
+            if name != "Normals":
+                out.point_data[name] = proxy.vertex_values(np.asarray(poly.point_data[name]))
+        for name in poly.cell_data.keys():
+            out.cell_data[name] = proxy.face_values(np.asarray(poly.cell_data[name]))
+        out.point_data["Normals"] = vertex_normals(Vp, proxy.F)
+        out.point_data.active_normals_name = "Normals"
+        active = poly.point_data.active_scalars_name
+        if active is not None and active in out.point_data:
+            out.point_data.active_scalars_name = active
+        active = poly.cell_data.active_scalars_name
+        if active is not None and active in out.cell_data:
+            out.cell_data.active_scalars_name = active
+        out.Modified()
 
     def _ask_paint(self) -> None:
         self._paint_asked = True
@@ -629,6 +728,8 @@ class Viewport(QWidget):
     def _before_paint(self) -> None:
         if self._normals_dirty and self.poly is not None:
             self._normals_dirty = False
+            if self.interacting and self.drawn_triangles != self.poly.n_cells:
+                self._sync_proxy()  # a job streams while the camera moves
             V = np.asarray(self.poly.points)
             self.poly.point_data["Normals"] = vertex_normals(V, self._F)
             self.poly.point_data.active_normals_name = "Normals"
