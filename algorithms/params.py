@@ -42,6 +42,7 @@ def param(
     log_scale: bool = False,
     advanced: bool = False,
     cli_aliases: Sequence[str] = (),
+    slider_range: tuple[float, float] | None = None,
 ) -> Any:
     """A dataclass field carrying the metadata the CLI and the GUI need.
 
@@ -57,10 +58,13 @@ def param(
     log_scale : the GUI slider moves logarithmically (for values spanning decades).
     advanced : hidden behind "Advanced" in the GUI.
     cli_aliases : extra CLI flags for the same field (e.g. ``("--lambda",)`` for ``lam``).
+    slider_range : the part of [minimum, maximum] the GUI slider spans (the useful values), when
+        the allowed range is much wider; the number field still takes any allowed value.
     """
     meta = dict(label=label, tooltip=tooltip, minimum=minimum, maximum=maximum, step=step,
                 decimals=decimals, choices=tuple(choices) if choices else None,
-                log_scale=log_scale, advanced=advanced, cli_aliases=tuple(cli_aliases))
+                log_scale=log_scale, advanced=advanced, cli_aliases=tuple(cli_aliases),
+                slider_range=tuple(slider_range) if slider_range else None)
     return field(default=default, metadata={"stylize3d": meta})
 
 
@@ -81,6 +85,7 @@ class ParamSpec:
     log_scale: bool
     advanced: bool
     cli_aliases: tuple[str, ...] = ()
+    slider_range: tuple[float, float] | None = None
 
     @property
     def flag(self) -> str:

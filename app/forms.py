@@ -194,10 +194,17 @@ class _NumberEditor(QWidget):
         self._sync = False
 
     # slider position <-> value (log-scale when asked and the range is positive)
+    def _slider_bounds(self) -> tuple[float, float]:
+        """What the slider spans: the parameter's slider_range (its useful values), else its
+        whole allowed range."""
+        if self.spec.slider_range:
+            return self.spec.slider_range
+        return self.spec.minimum, self.spec.maximum
+
     def _log_range(self) -> tuple[float, float] | None:
         """(low, high) of a logarithmic slider; a range starting at 0 starts the log scale at one
         step (or 1e-3) and keeps position 0 for the value 0."""
-        lo, hi = self.spec.minimum, self.spec.maximum
+        lo, hi = self._slider_bounds()
         if not self.spec.log_scale or hi <= 0:
             return None
         if lo > 0:
@@ -205,7 +212,7 @@ class _NumberEditor(QWidget):
         return min(self.spec.step or 1e-3, hi / 10.0), hi
 
     def _to_pos(self, v: float) -> int:
-        lo, hi = self.spec.minimum, self.spec.maximum
+        lo, hi = self._slider_bounds()
         lr = self._log_range()
         if lr is not None:
             a, b = lr
@@ -219,7 +226,7 @@ class _NumberEditor(QWidget):
         return int(round(min(max(t, 0.0), 1.0) * SLIDER_STEPS))
 
     def _from_pos(self, pos: int) -> float:
-        lo, hi = self.spec.minimum, self.spec.maximum
+        lo, hi = self._slider_bounds()
         t = pos / SLIDER_STEPS
         lr = self._log_range()
         if lr is not None:

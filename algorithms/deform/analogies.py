@@ -140,9 +140,10 @@ class AnalogyParams:
 
     lam: float = param(
         1.0, label="λ (style strength)", minimum=0.0, maximum=1e5, step=0.1, decimals=3,
-        log_scale=True, cli_aliases=("--lambda",),
+        log_scale=True, cli_aliases=("--lambda",), slider_range=(0.0, 100.0),
         tooltip="How strongly the surface normals are pulled to the style's. 0 leaves the shape "
-                "as it is; 1 is the paper's default; the developable demo uses 1000.")
+                "as it is; 1 is the paper's default; the slider spans 0 to 100, type larger "
+                "values (the developable demo uses 1000).")
     regularizer: str = param(
         "arap", label="Regularizer", choices=REGULARIZERS,
         tooltip="arap: smooth, detail-preserving deformation. farap: face-only ARAP, allows sharp "

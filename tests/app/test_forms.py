@@ -135,3 +135,27 @@ def test_parameters_spanning_many_decades_read_in_scientific_notation(qtbot):
 
     assert not isinstance(form.editors["weight"].spin, _ScientificSpinBox)
     assert isinstance(spin, _ScientificSpinBox)
+
+
+def test_slider_spans_the_useful_range_and_the_field_takes_the_rest(qtbot):
+    from app.forms import ParamsForm
+
+    """Issue 24 item 10: analogies' λ (allowed 0 to 1e5, log slider) jumped from 1 to 102 when
+    the slider was dragged to its middle. Its slider now spans 0 to 100; typing 1000 still
+    works and puts the slider at its end."""
+    from algorithms.deform.analogies import AnalogyParams
+    from app.forms import SLIDER_STEPS
+
+    form = ParamsForm(AnalogyParams)
+    qtbot.addWidget(form)
+    ed = form.editors["lam"]
+    assert ed.slider.value() == ed._to_pos(1.0)
+    assert 0.2 * SLIDER_STEPS < ed.slider.value() < 0.5 * SLIDER_STEPS
+    ed.slider.setValue(SLIDER_STEPS // 2)  # the middle of the slider
+    assert 1.0 < form.params().lam < 5.0
+    ed.slider.setValue(SLIDER_STEPS)
+    assert form.params().lam == pytest.approx(100.0)
+    ed.spin.setValue(1000.0)
+    assert form.params().lam == 1000.0 and ed.slider.value() == SLIDER_STEPS
+    ed.slider.setValue(0)
+    assert form.params().lam == 0.0
