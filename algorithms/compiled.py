@@ -1,19 +1,45 @@
-"""The one switch for the compiled (Numba) kernels of every method.
+"""The one switch for the compiled (Numba) kernels of every method, and their threads.
 
 Kernel modules (``algorithms/deform/kernels.py``, ``algorithms/multigrid/kernels.py``,
-``algorithms/mesh/_selfparam_kernels.py``) import Numba; the methods load them lazily through a
-:class:`KernelModule`, so importing a method never imports Numba, and fall back to NumPy / SciPy /
-PyAMG code when it returns None: Numba missing, the environment variable ``STYLIZE3D_NUMBA=0``
-(also ``false`` / ``no``), or switched off with :meth:`KernelModule.set` (for comparisons).
+``algorithms/render/kernels.py``, ``algorithms/mesh/_selfparam_kernels.py``) import Numba; the
+methods load them lazily through a :class:`KernelModule`, so importing a method never imports
+Numba, and fall back to NumPy / SciPy / PyAMG code when it returns None: Numba missing, the
+environment variable ``STYLIZE3D_NUMBA=0`` (also ``false`` / ``no``), or switched off with
+:meth:`KernelModule.set` (for comparisons).
+
+Threads (issue 25). The heavy kernels exist twice, compiled from the same per-item code: a
+parallel one (``@njit(parallel=True)``, a ``prange`` over fixed-size chunks of items) and a
+serial one (the same chunks in a plain loop). :func:`use_threads` picks between them at each
+call. Every parallel kernel is written so that each output value is computed by one thread, by
+the same operations in the same order, whatever the number of threads: no ``prange``
+reductions and no scatter-adds (sums over items are gathered per output, or per-item partial
+results are added up afterwards in a serial loop). So the parallel and the serial kernel give
+the same bits, for any thread count (tested).
+
+* The thread count is Numba's: ``NUMBA_NUM_THREADS`` (default: the number of cores) or
+  :func:`numba.set_num_threads` (per Python thread). With 1 thread the serial kernels run:
+  ``NUMBA_NUM_THREADS=1`` is the single-thread code of before, without any threading layer.
+* Threading layer: Numba's default choice (``tbb``, then ``omp``, then ``workqueue``). On this
+  project's machines only ``omp`` (GNU OpenMP, bundled with Numba's wheel) and ``workqueue``
+  are there; ``omp`` is used. It may be launched from any Python thread (the app's QThread
+  workers, several at once). GNU OpenMP is not fork-safe: a process forked after the parent
+  launched its threads is killed by Numba at its first parallel launch ("fork() called from a
+  process already using GNU OpenMP"). :func:`use_threads` therefore answers False in such a
+  child, which then runs the serial kernels (the same results). The project's own process pools
+  (batch, isolated computations, training data) use "spawn", where the threads work as usual.
+  ``workqueue`` (chosen when nothing else is there, or with ``NUMBA_THREADING_LAYER``) aborts
+  when two Python threads launch kernels at the same time, so :func:`use_threads` answers True
+  for it on the main thread only (other threads run the serial kernels).
 """
 
 from __future__ import annotations
 
 import importlib
 import os
+import threading
 from types import ModuleType
 
-__all__ = ["numba_wanted", "KernelModule"]
+__all__ = ["numba_wanted", "KernelModule", "use_threads", "thread_count", "threading_layer"]
 
 
 def numba_wanted() -> bool:
@@ -49,3 +75,61 @@ class KernelModule:
         previous = self.get() is not None
         self._enabled = bool(enabled)
         return previous
+
+
+# ------------------------------------------------------------------------------ threads
+_LAYER: str | None = None  # Numba's threading layer, once started
+_FORKED_LAYER: str | None = None  # in a forked child: the layer the parent had started
+
+
+def _after_fork_in_child() -> None:
+    global _FORKED_LAYER
+    import sys
+
+    par = sys.modules.get("numba.np.ufunc.parallel")
+    if par is not None and getattr(par, "_is_initialized", False):
+        _FORKED_LAYER = str(getattr(par, "_threading_layer", None))
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+def thread_count() -> int:
+    """Numba's thread count for the calling Python thread (1 where Numba is missing)."""
+    try:
+        import numba
+    except ImportError:
+        return 1
+    return int(numba.get_num_threads())
+
+
+def threading_layer() -> str:
+    """The name of Numba's threading layer ("omp", "tbb" or "workqueue"), starting it if needed;
+    "none" where Numba is missing."""
+    global _LAYER
+    if _LAYER is None:
+        try:
+            import numba
+        except ImportError:
+            return "none"
+        from numba.np.ufunc import parallel
+
+        parallel._launch_threads()
+        _LAYER = str(numba.threading_layer())
+    return _LAYER
+
+
+def use_threads() -> bool:
+    """True when a kernel called now should run its parallel version: Numba has more than one
+    thread for the calling Python thread, and the threading layer can launch here (not in a
+    process forked after its parent started GNU OpenMP; for ``workqueue``, only on the main
+    thread). The parallel and serial versions give the same bits (module docstring)."""
+    if thread_count() <= 1:
+        return False
+    layer = threading_layer()
+    if layer == "omp" and _FORKED_LAYER == "omp":
+        return False  # forked after the parent started GNU OpenMP: it would kill this process
+    if layer == "workqueue":
+        return threading.current_thread() is threading.main_thread()
+    return True

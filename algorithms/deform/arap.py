@@ -393,6 +393,7 @@ class ArapSystem:
         self.K.sum_duplicates()
         self._KT = self.K.T.tocsr()
         self._blocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._tblocks: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
         # C_i = sum_{t in cell i} w d d^T
         outer = (wd[:, :, None] * d[:, None, :]).reshape(T, 9)
@@ -516,6 +517,18 @@ class ArapSystem:
                             np.ascontiguousarray(val))
         return self._blocks
 
+    def _kt_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The same blocks listed by column, for the gather of :meth:`rhs`: blocks
+        ``tk[tptr[j]:tptr[j+1]]`` have column j (increasing block index), ``kcell[k]`` is the
+        cell of block k; and ``val``."""
+        if self._tblocks is None:
+            ptr, col, val = self._k_blocks()
+            tk = np.argsort(col, kind="stable").astype(np.int64)
+            tptr = np.concatenate([[0], np.cumsum(np.bincount(col, minlength=self.n))])
+            kcell = np.repeat(np.arange(self.n_cells, dtype=np.int64), np.diff(ptr))
+            self._tblocks = (tptr.astype(np.int64), tk, kcell, val)
+        return self._tblocks
+
     def rotations(self, U: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
         """Optimal rotations of the local step.
 
@@ -593,9 +606,9 @@ class ArapSystem:
         kern = compiled_kernels()
         if kern is None:
             return np.asarray(self._KT @ R.transpose(0, 2, 1).reshape(3 * self.n_cells, 3))
-        ptr, col, val = self._k_blocks()
+        tptr, tk, kcell, val = self._kt_blocks()
         b = np.empty((self.n, 3))
-        kern.block_rhs(ptr, col, val, np.ascontiguousarray(R), b)
+        kern.block_rhs(tptr, tk, kcell, val, np.ascontiguousarray(R), b)
         return b
 
     def solve(self, rhs: np.ndarray, fixed_values: np.ndarray | None = None,
@@ -663,13 +676,16 @@ class ArapSystem:
         R = np.asarray(R, dtype=np.float64).reshape(self.n_cells, 3, 3)
         if not exact:
             S = self.covariances(U) if covariances is None else covariances
-            quad_u = 0.5 * float(np.einsum("ij,ij->", U, self.Q @ U))
             kern = compiled_kernels()
             if kern is not None:
+                # Q is symmetric: its CSC arrays are its CSR arrays
+                quad_u = 0.5 * kern.quadratic_form(self.Q.indptr, self.Q.indices, self.Q.data,
+                                                   np.ascontiguousarray(U))
                 quad, lin = kern.arap_energy_terms(np.ascontiguousarray(R),
                                                    self.rest_covariance,
                                                    np.ascontiguousarray(S, dtype=np.float64))
                 return float(0.5 * quad - lin + quad_u)
+            quad_u = 0.5 * float(np.einsum("ij,ij->", U, self.Q @ U))
             e = (0.5 * np.einsum("nij,nij->", R @ self.rest_covariance, R)
                  - np.einsum("nij,nji->", R, S)
                  + quad_u)

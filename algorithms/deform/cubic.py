@@ -903,17 +903,20 @@ class CubicStylizer:
             # the covariances at the new positions: for the energy now, the local step next
             S = system.covariances(U)
             e_arap = max(system.energy(U, R, exact=False, covariances=S), 0.0)
-            if kern is not None:
-                Rn = np.empty((n, 3))
-                if frames is None:
-                    kern.rotate_normals(R, self.normals, Rn)
-                else:
-                    kern.frame_normals(R, self.normals, frames, Rn)
+            if kern is not None and prox.diagonal is not None:
+                e_l1 = float(kern.cube_l1_energy(R, self.normals, frames, prox.diagonal, lam_a))
             else:
-                Rn = np.einsum("kab,kb->ka", R, self.normals)
-                if frames is not None:  # in the local frames
-                    Rn = np.einsum("kba,kb->ka", frames, Rn)
-            e_l1 = float((lam_a * prox.norm(Rn)).sum())
+                if kern is not None:
+                    Rn = np.empty((n, 3))
+                    if frames is None:
+                        kern.rotate_normals(R, self.normals, Rn)
+                    else:
+                        kern.frame_normals(R, self.normals, frames, Rn)
+                else:
+                    Rn = np.einsum("kab,kb->ka", R, self.normals)
+                    if frames is not None:  # in the local frames
+                        Rn = np.einsum("kba,kb->ka", frames, Rn)
+                e_l1 = float((lam_a * prox.norm(Rn)).sum())
             ran = iters[iters > 0]
             metrics = {
                 "energy": e_arap + e_l1,

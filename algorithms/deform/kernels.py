@@ -54,7 +54,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+from ..compiled import use_threads
 
 __all__ = [
     "BLOCK",
@@ -68,6 +70,9 @@ __all__ = [
     "displacement_maxima",
     "block_covariances",
     "block_rhs",
+    "quadratic_form",
+    "cube_l1_energy",
+    "CHUNK",
 ]
 
 JACOBI_TOL = 1e-15
@@ -77,8 +82,17 @@ JACOBI_MAX_SWEEPS = 30
 BLOCK = 128
 """Matrices per Jacobi block (the block's 18 lanes arrays, 18 KiB, stay in the L1 cache)."""
 
+CHUNK = 512
+"""Items (vertices, cells) per work unit of the row-wise kernels; fixed, so the split of the
+work does not depend on the number of threads."""
+
 _TOL2 = JACOBI_TOL * JACOBI_TOL
 _OPTS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
+_PAR = dict(_OPTS, parallel=True)
+
+
+def _chunks(n: int) -> int:
+    return (n + CHUNK - 1) // CHUNK
 
 
 # ------------------------------------------------------------------------------ Procrustes
@@ -226,27 +240,46 @@ def _store(R, i, r):
 
 
 @njit(**_OPTS)
-def _procrustes_indices(S, idx, R, A, V):
-    """R[i] = Procrustes(S[i]) for i in idx (A, V: (9, BLOCK) work arrays)."""
+def _procrustes_block(S, idx, b0, nl, R):
+    """R[i] = Procrustes(S[i]) for the nl indices idx[b0:b0 + nl] (one Jacobi block)."""
+    A = np.empty((9, BLOCK))
+    V = np.empty((9, BLOCK))
+    for l in range(nl):
+        i = idx[b0 + l]
+        _load_lane(A, V, l, S[i, 0, 0], S[i, 0, 1], S[i, 0, 2], S[i, 1, 0], S[i, 1, 1],
+                   S[i, 1, 2], S[i, 2, 0], S[i, 2, 1], S[i, 2, 2])
+    _sweeps_block(A, V, nl)
+    for l in range(nl):
+        _store(R, idx[b0 + l], _finish_lane(A, V, l))
+
+
+@njit(**_PAR)
+def _procrustes_par(S, idx, R):
     m = idx.shape[0]
-    for b0 in range(0, m, BLOCK):
-        nl = min(BLOCK, m - b0)
-        for l in range(nl):
-            i = idx[b0 + l]
-            _load_lane(A, V, l, S[i, 0, 0], S[i, 0, 1], S[i, 0, 2], S[i, 1, 0], S[i, 1, 1],
-                       S[i, 1, 2], S[i, 2, 0], S[i, 2, 1], S[i, 2, 2])
-        _sweeps_block(A, V, nl)
-        for l in range(nl):
-            _store(R, idx[b0 + l], _finish_lane(A, V, l))
+    for b in prange((m + BLOCK - 1) // BLOCK):
+        _procrustes_block(S, idx, b * BLOCK, min(BLOCK, m - b * BLOCK), R)
 
 
 @njit(**_OPTS)
+def _procrustes_ser(S, idx, R):
+    m = idx.shape[0]
+    for b in range((m + BLOCK - 1) // BLOCK):
+        _procrustes_block(S, idx, b * BLOCK, min(BLOCK, m - b * BLOCK), R)
+
+
+@njit(**_OPTS)
+def _procrustes_indices(S, idx, R, par):
+    """R[i] = Procrustes(S[i]) for i in idx, blocks on threads when ``par``."""
+    if par:
+        _procrustes_par(S, idx, R)
+    else:
+        _procrustes_ser(S, idx, R)
+
+
 def procrustes_batch(S, R):
-    """``R[i]`` = the rotation maximizing ``tr(R[i] S[i])``; S, R: (n, 3, 3) float64 (R written)."""
-    n = S.shape[0]
-    A = np.empty((9, BLOCK))
-    V = np.empty((9, BLOCK))
-    _procrustes_indices(S, np.arange(n), R, A, V)
+    """``R[i]`` = the rotation maximizing ``tr(R[i] S[i])``; S, R: (n, 3, 3) float64 (R written).
+    Blocks of matrices run on Numba's threads (the same bits for any thread count)."""
+    _procrustes_indices(S, np.arange(S.shape[0]), R, use_threads())
 
 
 # ------------------------------------------------------------------------------ cubic local step
@@ -261,6 +294,129 @@ def _shrink(v, k):
 
 
 @njit(**_OPTS)
+def _admm_block(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, R, iters, frames,
+                active, b0, nl, done):
+    """One ADMM iteration of the vertices active[b0:b0 + nl]; done[b0 + l] = its stopping test."""
+    A = np.empty((9, BLOCK))
+    V = np.empty((9, BLOCK))
+    d0, d1, d2 = diag[0], diag[1], diag[2]
+    # R-step: Procrustes of S + rho n (z - u)^T for the block's vertices
+    for l in range(nl):
+        i = active[b0 + l]
+        rh = rho[i]
+        w0, w1, w2 = rh * normals[i, 0], rh * normals[i, 1], rh * normals[i, 2]
+        y0, y1, y2 = z[i, 0] - u[i, 0], z[i, 1] - u[i, 1], z[i, 2] - u[i, 2]
+        if frames is not None:  # the target Q_i (z - u) in world coordinates
+            y0, y1, y2 = (frames[i, 0, 0] * y0 + frames[i, 0, 1] * y1
+                          + frames[i, 0, 2] * y2,
+                          frames[i, 1, 0] * y0 + frames[i, 1, 1] * y1
+                          + frames[i, 1, 2] * y2,
+                          frames[i, 2, 0] * y0 + frames[i, 2, 1] * y1
+                          + frames[i, 2, 2] * y2)
+        _load_lane(A, V, l,
+                   S[i, 0, 0] + w0 * y0, S[i, 0, 1] + w0 * y1, S[i, 0, 2] + w0 * y2,
+                   S[i, 1, 0] + w1 * y0, S[i, 1, 1] + w1 * y1, S[i, 1, 2] + w1 * y2,
+                   S[i, 2, 0] + w2 * y0, S[i, 2, 1] + w2 * y1, S[i, 2, 2] + w2 * y2)
+    _sweeps_block(A, V, nl)
+    for l in range(nl):
+        i = active[b0 + l]
+        r = _finish_lane(A, V, l)
+        _store(R, i, r)
+        n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
+        rn0 = r[0] * n0 + r[1] * n1 + r[2] * n2
+        rn1 = r[3] * n0 + r[4] * n1 + r[5] * n2
+        rn2 = r[6] * n0 + r[7] * n1 + r[8] * n2
+        if frames is not None:  # R n in the local frame: Q_i^T R n
+            rn0, rn1, rn2 = (frames[i, 0, 0] * rn0 + frames[i, 1, 0] * rn1
+                             + frames[i, 2, 0] * rn2,
+                             frames[i, 0, 1] * rn0 + frames[i, 1, 1] * rn1
+                             + frames[i, 2, 1] * rn2,
+                             frames[i, 0, 2] * rn0 + frames[i, 1, 2] * rn1
+                             + frames[i, 2, 2] * rn2)
+        z0, z1, z2 = z[i, 0], z[i, 1], z[i, 2]
+        u0, u1, u2 = u[i, 0], u[i, 1], u[i, 2]
+        rh = rho[i]
+        # z-step: shrinkage with thresholds lam a / rho * diag
+        kap = lam_a[i] / rh
+        x0 = _shrink(rn0 + u0, kap * d0)
+        x1 = _shrink(rn1 + u1, kap * d1)
+        x2 = _shrink(rn2 + u2, kap * d2)
+        # u-step and residuals
+        u0, u1, u2 = u0 + rn0 - x0, u1 + rn1 - x1, u2 + rn2 - x2
+        p0, p1, p2 = rn0 - x0, rn1 - x1, rn2 - x2
+        res_p = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+        q0, q1, q2 = x0 - z0, x1 - z1, x2 - z2
+        res_d = rh * math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+        eps_pri = e_abs + eps_rel * max(math.sqrt(rn0 * rn0 + rn1 * rn1 + rn2 * rn2),
+                                        math.sqrt(x0 * x0 + x1 * x1 + x2 * x2))
+        g0, g1, g2 = rh * u0, rh * u1, rh * u2
+        eps_dual = e_abs + eps_rel * math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+        done[b0 + l] = (res_p < eps_pri) and (res_d < eps_dual)
+        if res_p > mu * res_d:
+            rh = rh * tau
+            u0, u1, u2 = u0 / tau, u1 / tau, u2 / tau
+        elif res_d > mu * res_p:
+            rh = rh / tau
+            u0, u1, u2 = u0 * tau, u1 * tau, u2 * tau
+        z[i, 0], z[i, 1], z[i, 2] = x0, x1, x2
+        u[i, 0], u[i, 1], u[i, 2] = u0, u1, u2
+        rho[i] = rh
+        iters[i] += 1
+
+
+@njit(**_PAR)
+def _admm_wave_par(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, R, iters,
+                   frames, active, m, done):
+    for b in prange((m + BLOCK - 1) // BLOCK):
+        _admm_block(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, R, iters,
+                    frames, active, b * BLOCK, min(BLOCK, m - b * BLOCK), done)
+
+
+@njit(**_OPTS)
+def _admm_wave_ser(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, R, iters,
+                   frames, active, m, done):
+    for b in range((m + BLOCK - 1) // BLOCK):
+        _admm_block(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, R, iters,
+                    frames, active, b * BLOCK, min(BLOCK, m - b * BLOCK), done)
+
+
+@njit(**_OPTS)
+def _admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_rel, mu, tau,
+                          max_iter, R, iters, frames, par):
+    n = S.shape[0]
+    plain = np.empty(n, dtype=np.int64)
+    active = np.empty(n, dtype=np.int64)
+    done = np.empty(n, dtype=np.bool_)
+    n_plain = 0
+    n_active = 0
+    for i in range(n):
+        iters[i] = 0
+        if use[i]:
+            active[n_active] = i
+            n_active += 1
+        else:
+            plain[n_plain] = i
+            n_plain += 1
+    _procrustes_indices(S, plain[:n_plain], R, par)
+
+    e_abs = math.sqrt(3.0) * eps_abs
+    for _ in range(max_iter):
+        if n_active == 0:
+            break
+        if par:
+            _admm_wave_par(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, R, iters,
+                           frames, active, n_active, done)
+        else:
+            _admm_wave_ser(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, R, iters,
+                           frames, active, n_active, done)
+        n_next = 0
+        for t in range(n_active):  # keep the vertices that did not stop, in their order
+            if not done[t]:
+                active[n_next] = active[t]
+                n_next += 1
+        n_active = n_next
+
+
 def admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_rel, mu, tau,
                          max_iter, R, iters, frames=None):
     """Cubic stylization's local step for a diagonal style matrix, all vertices.
@@ -276,98 +432,12 @@ def admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_r
     R : (n, 3, 3) output rotations. iters : (n,) int64 output, ADMM iterations per vertex.
     frames : None or (n, 3, 3) rotations, columns = vertex i's cube axes (the L1 term is
         ``||diag Q_i^T R_i n_i||_1``).
-    """
-    n = S.shape[0]
-    A = np.empty((9, BLOCK))
-    V = np.empty((9, BLOCK))
-    plain = np.empty(n, dtype=np.int64)
-    active = np.empty(n, dtype=np.int64)
-    n_plain = 0
-    n_active = 0
-    for i in range(n):
-        iters[i] = 0
-        if use[i]:
-            active[n_active] = i
-            n_active += 1
-        else:
-            plain[n_plain] = i
-            n_plain += 1
-    _procrustes_indices(S, plain[:n_plain], R, A, V)
 
-    e_abs = math.sqrt(3.0) * eps_abs
-    d0, d1, d2 = diag[0], diag[1], diag[2]
-    for _ in range(max_iter):
-        if n_active == 0:
-            break
-        n_next = 0
-        for b0 in range(0, n_active, BLOCK):
-            nl = min(BLOCK, n_active - b0)
-            # R-step: Procrustes of S + rho n (z - u)^T for the block's vertices
-            for l in range(nl):
-                i = active[b0 + l]
-                rh = rho[i]
-                w0, w1, w2 = rh * normals[i, 0], rh * normals[i, 1], rh * normals[i, 2]
-                y0, y1, y2 = z[i, 0] - u[i, 0], z[i, 1] - u[i, 1], z[i, 2] - u[i, 2]
-                if frames is not None:  # the target Q_i (z - u) in world coordinates
-                    y0, y1, y2 = (frames[i, 0, 0] * y0 + frames[i, 0, 1] * y1
-                                  + frames[i, 0, 2] * y2,
-                                  frames[i, 1, 0] * y0 + frames[i, 1, 1] * y1
-                                  + frames[i, 1, 2] * y2,
-                                  frames[i, 2, 0] * y0 + frames[i, 2, 1] * y1
-                                  + frames[i, 2, 2] * y2)
-                _load_lane(A, V, l,
-                           S[i, 0, 0] + w0 * y0, S[i, 0, 1] + w0 * y1, S[i, 0, 2] + w0 * y2,
-                           S[i, 1, 0] + w1 * y0, S[i, 1, 1] + w1 * y1, S[i, 1, 2] + w1 * y2,
-                           S[i, 2, 0] + w2 * y0, S[i, 2, 1] + w2 * y1, S[i, 2, 2] + w2 * y2)
-            _sweeps_block(A, V, nl)
-            for l in range(nl):
-                i = active[b0 + l]
-                r = _finish_lane(A, V, l)
-                _store(R, i, r)
-                n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
-                rn0 = r[0] * n0 + r[1] * n1 + r[2] * n2
-                rn1 = r[3] * n0 + r[4] * n1 + r[5] * n2
-                rn2 = r[6] * n0 + r[7] * n1 + r[8] * n2
-                if frames is not None:  # R n in the local frame: Q_i^T R n
-                    rn0, rn1, rn2 = (frames[i, 0, 0] * rn0 + frames[i, 1, 0] * rn1
-                                     + frames[i, 2, 0] * rn2,
-                                     frames[i, 0, 1] * rn0 + frames[i, 1, 1] * rn1
-                                     + frames[i, 2, 1] * rn2,
-                                     frames[i, 0, 2] * rn0 + frames[i, 1, 2] * rn1
-                                     + frames[i, 2, 2] * rn2)
-                z0, z1, z2 = z[i, 0], z[i, 1], z[i, 2]
-                u0, u1, u2 = u[i, 0], u[i, 1], u[i, 2]
-                rh = rho[i]
-                # z-step: shrinkage with thresholds lam a / rho * diag
-                kap = lam_a[i] / rh
-                x0 = _shrink(rn0 + u0, kap * d0)
-                x1 = _shrink(rn1 + u1, kap * d1)
-                x2 = _shrink(rn2 + u2, kap * d2)
-                # u-step and residuals
-                u0, u1, u2 = u0 + rn0 - x0, u1 + rn1 - x1, u2 + rn2 - x2
-                p0, p1, p2 = rn0 - x0, rn1 - x1, rn2 - x2
-                res_p = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
-                q0, q1, q2 = x0 - z0, x1 - z1, x2 - z2
-                res_d = rh * math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
-                eps_pri = e_abs + eps_rel * max(math.sqrt(rn0 * rn0 + rn1 * rn1 + rn2 * rn2),
-                                                math.sqrt(x0 * x0 + x1 * x1 + x2 * x2))
-                g0, g1, g2 = rh * u0, rh * u1, rh * u2
-                eps_dual = e_abs + eps_rel * math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
-                done = (res_p < eps_pri) and (res_d < eps_dual)
-                if res_p > mu * res_d:
-                    rh = rh * tau
-                    u0, u1, u2 = u0 / tau, u1 / tau, u2 / tau
-                elif res_d > mu * res_p:
-                    rh = rh / tau
-                    u0, u1, u2 = u0 * tau, u1 * tau, u2 * tau
-                z[i, 0], z[i, 1], z[i, 2] = x0, x1, x2
-                u[i, 0], u[i, 1], u[i, 2] = u0, u1, u2
-                rho[i] = rh
-                iters[i] += 1
-                if not done:
-                    active[n_next] = i  # in-place compaction: n_next <= b0 + l
-                    n_next += 1
-        n_active = n_next
+    Each wave's blocks of vertices run on Numba's threads (the same bits for any thread count:
+    a vertex's updates do not depend on its block).
+    """
+    _admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_rel, mu, tau,
+                          max_iter, R, iters, frames, use_threads())
 
 
 # ------------------------------------------------------------------------------ small helpers
@@ -394,29 +464,158 @@ def frame_normals(R, normals, frames, out):
 
 
 @njit(**_OPTS)
-def arap_energy_terms(R, C, S):
-    """``(sum_i tr(R_i C_i R_i^T), sum_i tr(R_i S_i))`` for (n, 3, 3) arrays R, C, S."""
-    quad = 0.0
-    lin = 0.0
-    for i in range(R.shape[0]):
+def _energy_terms_rows(R, C, S, lo, hi, quad, lin):
+    for i in range(lo, hi):
+        q = 0.0
+        li = 0.0
         for a in range(3):
             for b in range(3):
                 rc = R[i, a, 0] * C[i, 0, b] + R[i, a, 1] * C[i, 1, b] + R[i, a, 2] * C[i, 2, b]
-                quad += rc * R[i, a, b]
-                lin += R[i, a, b] * S[i, b, a]
-    return quad, lin
+                q += rc * R[i, a, b]
+                li += R[i, a, b] * S[i, b, a]
+        quad[i] = q
+        lin[i] = li
+
+
+@njit(**_PAR)
+def _energy_terms_par(R, C, S, quad, lin):
+    n = R.shape[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        _energy_terms_rows(R, C, S, c * CHUNK, min(n, (c + 1) * CHUNK), quad, lin)
 
 
 @njit(**_OPTS)
-def displacement_maxima(U_new, U_old, U_rest):
-    """``(max_i |U_new_i - U_old_i|, max_i |U_new_i - U_rest_i|, |bbox diagonal of U_rest|)``
-    for (n, 3) arrays (the first two NaN when any difference is NaN, like NumPy's ``max``)."""
+def _energy_terms_ser(R, C, S, quad, lin):
+    n = R.shape[0]
+    for c in range((n + CHUNK - 1) // CHUNK):
+        _energy_terms_rows(R, C, S, c * CHUNK, min(n, (c + 1) * CHUNK), quad, lin)
+
+
+@njit(**_OPTS)
+def _arap_energy_terms(R, C, S, par):
+    n = R.shape[0]
+    quad = np.empty(n)
+    lin = np.empty(n)
+    if par:
+        _energy_terms_par(R, C, S, quad, lin)
+    else:
+        _energy_terms_ser(R, C, S, quad, lin)
+    tq = 0.0
+    tl = 0.0
+    for i in range(n):  # one order, whatever the thread count
+        tq += quad[i]
+        tl += lin[i]
+    return tq, tl
+
+
+def arap_energy_terms(R, C, S):
+    """``(sum_i tr(R_i C_i R_i^T), sum_i tr(R_i S_i))`` for (n, 3, 3) arrays R, C, S (per-cell
+    terms on threads, added up in cell order)."""
+    return _arap_energy_terms(R, C, S, use_threads())
+
+
+@njit(**_OPTS)
+def _quadratic_rows(indptr, indices, data, U, lo, hi, out):
+    for i in range(lo, hi):
+        u0, u1, u2 = U[i, 0], U[i, 1], U[i, 2]
+        acc = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            acc += data[k] * (u0 * U[j, 0] + u1 * U[j, 1] + u2 * U[j, 2])
+        out[i] = acc
+
+
+@njit(**_PAR)
+def _quadratic_par(indptr, indices, data, U, out):
+    n = U.shape[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        _quadratic_rows(indptr, indices, data, U, c * CHUNK, min(n, (c + 1) * CHUNK), out)
+
+
+@njit(**_OPTS)
+def _quadratic_ser(indptr, indices, data, U, out):
+    n = U.shape[0]
+    for c in range((n + CHUNK - 1) // CHUNK):
+        _quadratic_rows(indptr, indices, data, U, c * CHUNK, min(n, (c + 1) * CHUNK), out)
+
+
+@njit(**_OPTS)
+def _quadratic_form(indptr, indices, data, U, par):
+    out = np.empty(U.shape[0])
+    if par:
+        _quadratic_par(indptr, indices, data, U, out)
+    else:
+        _quadratic_ser(indptr, indices, data, U, out)
+    t = 0.0
+    for i in range(out.shape[0]):
+        t += out[i]
+    return t
+
+
+def quadratic_form(indptr, indices, data, U):
+    """``tr(U^T A U)`` for A in CSR (``indptr``, ``indices``, ``data``) and (n, 3) U (per-row
+    terms on threads, added up in row order)."""
+    return _quadratic_form(indptr, indices, data, U, use_threads())
+
+
+@njit(**_OPTS)
+def _cube_l1_rows(R, normals, frames, diag, lam_a, lo, hi, out):
+    d0, d1, d2 = diag[0], diag[1], diag[2]
+    for i in range(lo, hi):
+        n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
+        r0 = R[i, 0, 0] * n0 + R[i, 0, 1] * n1 + R[i, 0, 2] * n2
+        r1 = R[i, 1, 0] * n0 + R[i, 1, 1] * n1 + R[i, 1, 2] * n2
+        r2 = R[i, 2, 0] * n0 + R[i, 2, 1] * n1 + R[i, 2, 2] * n2
+        if frames is not None:
+            r0, r1, r2 = (frames[i, 0, 0] * r0 + frames[i, 1, 0] * r1 + frames[i, 2, 0] * r2,
+                          frames[i, 0, 1] * r0 + frames[i, 1, 1] * r1 + frames[i, 2, 1] * r2,
+                          frames[i, 0, 2] * r0 + frames[i, 1, 2] * r1 + frames[i, 2, 2] * r2)
+        out[i] = lam_a[i] * (abs(r0 * d0) + abs(r1 * d1) + abs(r2 * d2))
+
+
+@njit(**_PAR)
+def _cube_l1_par(R, normals, frames, diag, lam_a, out):
+    n = R.shape[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        _cube_l1_rows(R, normals, frames, diag, lam_a, c * CHUNK, min(n, (c + 1) * CHUNK), out)
+
+
+@njit(**_OPTS)
+def _cube_l1_ser(R, normals, frames, diag, lam_a, out):
+    n = R.shape[0]
+    for c in range((n + CHUNK - 1) // CHUNK):
+        _cube_l1_rows(R, normals, frames, diag, lam_a, c * CHUNK, min(n, (c + 1) * CHUNK), out)
+
+
+@njit(**_OPTS)
+def _cube_l1_energy(R, normals, frames, diag, lam_a, par):
+    out = np.empty(R.shape[0])
+    if par:
+        _cube_l1_par(R, normals, frames, diag, lam_a, out)
+    else:
+        _cube_l1_ser(R, normals, frames, diag, lam_a, out)
+    t = 0.0
+    for i in range(out.shape[0]):
+        t += out[i]
+    return t
+
+
+def cube_l1_energy(R, normals, frames, diag, lam_a):
+    """``sum_i lam_a[i] ||diag * (Q_i^T) R_i n_i||_1`` (cubic stylization's L1 term for a
+    diagonal style; ``frames`` None or (n, 3, 3) Q_i); per-vertex terms on threads, added up in
+    vertex order."""
+    return _cube_l1_energy(R, normals, frames, diag, lam_a, use_threads())
+
+
+@njit(**_OPTS)
+def _displacement_rows(U_new, U_old, U_rest, lo, hi, out):
+    """out[0..8] = max step^2, max total^2, NaN seen, bbox of U_rest over rows lo..hi."""
     step2 = 0.0
     total2 = 0.0
     nan = False
     lo0 = lo1 = lo2 = math.inf
     hi0 = hi1 = hi2 = -math.inf
-    for i in range(U_new.shape[0]):
+    for i in range(lo, hi):
         a0 = U_new[i, 0] - U_old[i, 0]
         a1 = U_new[i, 1] - U_old[i, 1]
         a2 = U_new[i, 2] - U_old[i, 2]
@@ -431,8 +630,45 @@ def displacement_maxima(U_new, U_old, U_rest):
         r0, r1, r2 = U_rest[i, 0], U_rest[i, 1], U_rest[i, 2]
         lo0, lo1, lo2 = min(lo0, r0), min(lo1, r1), min(lo2, r2)
         hi0, hi1, hi2 = max(hi0, r0), max(hi1, r1), max(hi2, r2)
+    out[0], out[1], out[2] = step2, total2, 1.0 if nan else 0.0
+    out[3], out[4], out[5], out[6], out[7], out[8] = lo0, lo1, lo2, hi0, hi1, hi2
+
+
+@njit(**_PAR)
+def _displacement_par(U_new, U_old, U_rest, parts):
+    n = U_new.shape[0]
+    for c in prange(parts.shape[0]):
+        _displacement_rows(U_new, U_old, U_rest, c * CHUNK, min(n, (c + 1) * CHUNK), parts[c])
+
+
+@njit(**_OPTS)
+def _displacement_ser(U_new, U_old, U_rest, parts):
+    n = U_new.shape[0]
+    for c in range(parts.shape[0]):
+        _displacement_rows(U_new, U_old, U_rest, c * CHUNK, min(n, (c + 1) * CHUNK), parts[c])
+
+
+@njit(**_OPTS)
+def _displacement_maxima(U_new, U_old, U_rest, par):
+    n = U_new.shape[0]
+    parts = np.empty(((n + CHUNK - 1) // CHUNK, 9))
+    if par:
+        _displacement_par(U_new, U_old, U_rest, parts)
+    else:
+        _displacement_ser(U_new, U_old, U_rest, parts)
+    step2 = 0.0
+    total2 = 0.0
+    nan = False
+    lo0 = lo1 = lo2 = math.inf
+    hi0 = hi1 = hi2 = -math.inf
+    for c in range(parts.shape[0]):  # maxima and minima: exact, in any order
+        step2 = max(step2, parts[c, 0])
+        total2 = max(total2, parts[c, 1])
+        nan |= parts[c, 2] != 0.0
+        lo0, lo1, lo2 = min(lo0, parts[c, 3]), min(lo1, parts[c, 4]), min(lo2, parts[c, 5])
+        hi0, hi1, hi2 = max(hi0, parts[c, 6]), max(hi1, parts[c, 7]), max(hi2, parts[c, 8])
     diag = 0.0
-    if U_new.shape[0] > 0:
+    if n > 0:
         e0, e1, e2 = hi0 - lo0, hi1 - lo1, hi2 - lo2
         diag = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
     if nan:
@@ -440,14 +676,15 @@ def displacement_maxima(U_new, U_old, U_rest):
     return math.sqrt(step2), math.sqrt(total2), diag
 
 
-@njit(**_OPTS)
-def block_covariances(ptr, col, val, U, S):
-    """``S[i, a, b] = sum_{k in ptr[i]:ptr[i+1]} val[k, a] U[col[k], b]`` (the product K U).
+def displacement_maxima(U_new, U_old, U_rest):
+    """``(max_i |U_new_i - U_old_i|, max_i |U_new_i - U_rest_i|, |bbox diagonal of U_rest|)``
+    for (n, 3) arrays (the first two NaN when any difference is NaN, like NumPy's ``max``)."""
+    return _displacement_maxima(U_new, U_old, U_rest, use_threads())
 
-    ``(ptr, col, val)`` is K stored by 3x1 blocks: block k of vertex i holds
-    ``K[3 i + a, col[k]] = val[k, a]``. S: (n, 3, 3) output.
-    """
-    for i in range(ptr.shape[0] - 1):
+
+@njit(**_OPTS)
+def _covariance_rows(ptr, col, val, U, S, lo, hi):
+    for i in range(lo, hi):
         s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
         for k in range(ptr[i], ptr[i + 1]):
             j = col[k]
@@ -467,23 +704,67 @@ def block_covariances(ptr, col, val, U, S):
         S[i, 2, 0], S[i, 2, 1], S[i, 2, 2] = s20, s21, s22
 
 
-@njit(**_OPTS)
-def block_rhs(ptr, col, val, R, b):
-    """``b[j] = sum_i sum_{k: col[k] = j} R[i] val[k]`` (the product K^T [R_1^T; ...]).
+@njit(**_PAR)
+def _covariances_par(ptr, col, val, U, S):
+    n = ptr.shape[0] - 1
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        _covariance_rows(ptr, col, val, U, S, c * CHUNK, min(n, (c + 1) * CHUNK))
 
-    Same block storage as :func:`block_covariances`; b: (n, 3) output (overwritten).
+
+@njit(**_OPTS)
+def _covariances_ser(ptr, col, val, U, S):
+    n = ptr.shape[0] - 1
+    for c in range((n + CHUNK - 1) // CHUNK):
+        _covariance_rows(ptr, col, val, U, S, c * CHUNK, min(n, (c + 1) * CHUNK))
+
+
+def block_covariances(ptr, col, val, U, S):
+    """``S[i, a, b] = sum_{k in ptr[i]:ptr[i+1]} val[k, a] U[col[k], b]`` (the product K U).
+
+    ``(ptr, col, val)`` is K stored by 3x1 blocks: block k of vertex i holds
+    ``K[3 i + a, col[k]] = val[k, a]``. S: (n, 3, 3) output. Chunks of cells on threads.
     """
-    for j in range(b.shape[0]):
-        b[j, 0] = 0.0
-        b[j, 1] = 0.0
-        b[j, 2] = 0.0
-    for i in range(ptr.shape[0] - 1):
-        r00, r01, r02 = R[i, 0, 0], R[i, 0, 1], R[i, 0, 2]
-        r10, r11, r12 = R[i, 1, 0], R[i, 1, 1], R[i, 1, 2]
-        r20, r21, r22 = R[i, 2, 0], R[i, 2, 1], R[i, 2, 2]
-        for k in range(ptr[i], ptr[i + 1]):
-            j = col[k]
+    (_covariances_par if use_threads() else _covariances_ser)(ptr, col, val, U, S)
+
+
+@njit(**_OPTS)
+def _rhs_rows(tptr, tk, kcell, val, R, b, lo, hi):
+    for j in range(lo, hi):
+        b0 = 0.0
+        b1 = 0.0
+        b2 = 0.0
+        for t in range(tptr[j], tptr[j + 1]):
+            k = tk[t]
+            i = kcell[k]
             k0, k1, k2 = val[k, 0], val[k, 1], val[k, 2]
-            b[j, 0] += r00 * k0 + r01 * k1 + r02 * k2
-            b[j, 1] += r10 * k0 + r11 * k1 + r12 * k2
-            b[j, 2] += r20 * k0 + r21 * k1 + r22 * k2
+            b0 += R[i, 0, 0] * k0 + R[i, 0, 1] * k1 + R[i, 0, 2] * k2
+            b1 += R[i, 1, 0] * k0 + R[i, 1, 1] * k1 + R[i, 1, 2] * k2
+            b2 += R[i, 2, 0] * k0 + R[i, 2, 1] * k1 + R[i, 2, 2] * k2
+        b[j, 0] = b0
+        b[j, 1] = b1
+        b[j, 2] = b2
+
+
+@njit(**_PAR)
+def _rhs_par(tptr, tk, kcell, val, R, b):
+    n = tptr.shape[0] - 1
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        _rhs_rows(tptr, tk, kcell, val, R, b, c * CHUNK, min(n, (c + 1) * CHUNK))
+
+
+@njit(**_OPTS)
+def _rhs_ser(tptr, tk, kcell, val, R, b):
+    n = tptr.shape[0] - 1
+    for c in range((n + CHUNK - 1) // CHUNK):
+        _rhs_rows(tptr, tk, kcell, val, R, b, c * CHUNK, min(n, (c + 1) * CHUNK))
+
+
+def block_rhs(tptr, tk, kcell, val, R, b):
+    """``b[j] = sum_{k: col[k] = j} R[kcell[k]] val[k]`` (the product K^T [R_1^T; ...]).
+
+    A gather per vertex ``j`` (no scatter-add, so vertices can run on threads without races):
+    ``tk[tptr[j]:tptr[j+1]]`` lists the blocks k of :func:`block_covariances`'s storage whose
+    column is j, in increasing k (so in increasing cell, the order of a serial scatter over the
+    cells: the same sums, term by term), ``kcell[k]`` is block k's cell. b: (n, 3) output.
+    """
+    (_rhs_par if use_threads() else _rhs_ser)(tptr, tk, kcell, val, R, b)
