@@ -19,36 +19,72 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import importlib
 import os
 import sys
 from pathlib import Path
 
 from algorithms.errors import Stylize3DError
-from app.cli import adversary, batch, deform, mesh_tools, paparazzi, smooth, spectral, study, subdivision
-from app.cli.adversary import cmd_adversary
-from app.cli.common import (INTERNAL_ERROR_EXIT, add_params_arguments, method_params,
-                            params_from_args, read_valid, say, settings, silence_stdout,
-                            write_crash_log)
-from app.cli.deform import cmd_analogy, cmd_cubic
-from app.cli.mesh_tools import cmd_clean, cmd_info
-from app.cli.paparazzi import cmd_paparazzi
-from app.cli.smooth import cmd_multigrid_info, cmd_smooth
-from app.cli.spectral import cmd_coarsen
-from app.cli.study import cmd_study
-from app.cli.subdivision import cmd_subdivide, cmd_subdivide_eval, cmd_subdivide_train
+from app.cli.common import INTERNAL_ERROR_EXIT, say, silence_stdout, write_crash_log
 
-#: the modules that add sub-commands, in the order of ``stylize3d --help``
-MODULES = (mesh_tools, smooth, deform, study, spectral, paparazzi, adversary, subdivision, batch)
-SUBCOMMANDS: tuple[str, ...] = tuple(c for m in MODULES for c in m.COMMANDS)
+#: the modules that add sub-commands (``app/cli/<name>.py``), in the order of
+#: ``stylize3d --help``, with the sub-commands each adds (its ``COMMANDS``; a test keeps the
+#: two in step). A sub-command imports only its own module (start-up time: ``stylize3d info``
+#: must not import what ``paparazzi`` needs).
+COMMAND_MODULES: dict[str, tuple[str, ...]] = {
+    "mesh_tools": ("info", "clean"),
+    "smooth": ("smooth", "multigrid-info"),
+    "deform": ("cubic", "analogy"),
+    "study": ("study",),
+    "spectral": ("coarsen",),
+    "paparazzi": ("paparazzi",),
+    "adversary": ("adversary",),
+    "subdivision": ("subdivide", "subdivide-train", "subdivide-eval"),
+    "batch": ("batch",),
+}
+SUBCOMMANDS: tuple[str, ...] = tuple(c for cs in COMMAND_MODULES.values() for c in cs)
+_MODULE_OF = {c: m for m, cs in COMMAND_MODULES.items() for c in cs}
 
-def build_parser() -> argparse.ArgumentParser:
+#: names re-exported lazily (PEP 562): ``app.cli.cmd_cubic`` imports :mod:`app.cli.deform`
+_LAZY = {
+    "cmd_adversary": "adversary", "cmd_analogy": "deform", "cmd_cubic": "deform",
+    "cmd_clean": "mesh_tools", "cmd_info": "mesh_tools", "cmd_paparazzi": "paparazzi",
+    "cmd_multigrid_info": "smooth", "cmd_smooth": "smooth", "cmd_coarsen": "spectral",
+    "cmd_study": "study", "cmd_subdivide": "subdivision", "cmd_subdivide_eval": "subdivision",
+    "cmd_subdivide_train": "subdivision",
+    "add_params_arguments": "common", "method_params": "common", "params_from_args": "common",
+    "read_valid": "common", "settings": "common",
+}
+
+
+def command_module(command: str):
+    """The module ``app.cli.<name>`` that adds sub-command ``command`` (imported now)."""
+    return importlib.import_module(f"app.cli.{_MODULE_OF[command]}")
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f"app.cli.{_LAZY[name]}"), name)
+        globals()[name] = value
+        return value
+    if name == "MODULES":  # every sub-command module, imported (for --help and tests)
+        return tuple(importlib.import_module(f"app.cli.{m}") for m in COMMAND_MODULES)
+    if name in COMMAND_MODULES:  # app.cli.deform etc. as attributes, as plain imports gave
+        return importlib.import_module(f"app.cli.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``stylize3d`` parser: every sub-command, or only those of ``command``'s module (the
+    only module imported then; how :func:`main` parses a command line)."""
     p = argparse.ArgumentParser(
         prog="stylize3d",
         description="Stylize3D: stylize and process 3D surface meshes. With no sub-command, "
                     "opens the app (optionally on MESH).")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
-    for module in MODULES:
-        module.add_parsers(sub)
+    names = COMMAND_MODULES if command is None else (_MODULE_OF[command],)
+    for name in names:
+        importlib.import_module(f"app.cli.{name}").add_parsers(sub)
     return p
 
 
@@ -73,7 +109,7 @@ def main(argv: list[str]) -> int:
     if argv and not argv[0].startswith("-") and argv[0] not in SUBCOMMANDS:
         say(unknown_command(argv[0]) or f"stylize3d: unknown command '{argv[0]}'.")
         return 2
-    parser = build_parser()
+    parser = build_parser(argv[0] if argv and argv[0] in SUBCOMMANDS else None)
     try:
         args = parser.parse_args(argv)
     except SystemExit as e:  # argparse already printed a usage message
@@ -149,8 +185,9 @@ def gui_main(argv: list[str]) -> int:
     return run_app(args.mesh, screenshot=args.screenshot, study=study)
 
 
-__all__ = ["INTERNAL_ERROR_EXIT", "MODULES", "SUBCOMMANDS", "add_params_arguments",
+__all__ = ["COMMAND_MODULES", "INTERNAL_ERROR_EXIT", "SUBCOMMANDS", "add_params_arguments",
            "build_parser", "cmd_adversary", "cmd_analogy", "cmd_clean", "cmd_coarsen",
+           "command_module",
            "cmd_cubic", "cmd_info", "cmd_multigrid_info", "cmd_paparazzi", "cmd_smooth",
            "cmd_study", "cmd_subdivide", "cmd_subdivide_eval", "cmd_subdivide_train",
            "gui_main", "main", "method_params", "params_from_args", "read_valid", "settings",
