@@ -33,14 +33,22 @@ refuses meshes with boundary).
 scale invariant (thesis §4.7): it was trained on coarse meshes of 150-300 vertices, so in its
 normalized frame it has only seen edges of about one length (``reference_edge``: the mean edge
 length of its training meshes, in the file's ``info`` or, for older files, the values measured
-below). A dense mesh (fandisk's 7,229 vertices) normalized by its overall size has edges ~5x
-shorter, and the network's displacements -- learned at the training edge length -- come out as
-dimples of about one edge all over flat and smooth parts. So when the input's mean edge length
-(in the normalized frame) is more than :data:`SCALE_TOLERANCE` times off the reference, the
-input is scaled (about its centre) so that its mean edge length *is* the reference, and the
-result scaled back; a message says so (``SubdividedStep.note``). Inputs within the tolerance are
-left exactly as the formulation scales them (so the author's outputs and the Table 4.2 protocol,
-meshes of 350-450 vertices, are unchanged). ``adapt_scale=False`` turns the guard off.
+below) and flaps bent as much as a 150-300-vertex mesh's. A dense mesh (fandisk's 7,229
+vertices) normalized by its overall size has edges ~5x shorter, and the network's displacements
+-- learned at the training edge length -- come out as dimples of about one edge all over flat
+and smooth parts (fandisk, 2 levels: 32 degrees RMS off its flat sides; Loop: 0.01). Scaling the
+mesh so its mean edge length is the training one cuts that ~10x, but not to Loop's level (the
+flaps are the right size but far flatter than any the network saw), so:
+
+* a mesh within :data:`SCALE_TOLERANCE` of the training edge length is used as the formulation
+  scales it (the author's outputs and the Table 4.2 protocol, 350-450 vertices, unchanged);
+* a coarser one is scaled so its mean edge length is the training one;
+* a denser one gets Loop subdivision instead (``dense="loop"``, the default), with a message
+  saying so and suggesting 'Coarsen first' to a vertex count the network was trained for; or,
+  on request, the network scaled (``"scale"``) or as is (``"off"``).
+
+Every such decision is said in ``SubdividedStep.note`` (empty when nothing was done);
+``adapt_scale=False`` turns the guard off.
 
 **Progress and Stop**: :func:`neural_subdivision_iter` works in chunks of about
 :data:`CHUNK_FLAPS` half-flaps and yields a progress step after each (``"Level 1 of 2: ..."``
@@ -65,7 +73,8 @@ from .weights_file import NotATorchFile, read_torch_file
 __all__ = ["Network", "load_network", "WeightsError", "shipped_weights_path", "network_from_state", "neural_subdivision_iter",
            "neural_subdivide_np", "SubdividedStep", "scale_plan", "mean_edge_length",
            "FORMULATIONS", "SCALE_TOLERANCE", "CHUNK_FLAPS", "OUR_FORMAT",
-           "SHIPPED_REFERENCE_EDGE", "AUTHOR_REFERENCE_EDGE"]
+           "SHIPPED_REFERENCE_EDGE", "AUTHOR_REFERENCE_EDGE", "ScalePlan",
+           "DENSE_CHOICES"]
 
 OUR_FORMAT = "stylize3d-neural-subdivision"
 FORMULATIONS = ("stylize3d", "author")
@@ -413,25 +422,69 @@ def mean_edge_length(V: np.ndarray, F: np.ndarray, edges: np.ndarray | None = No
     return float(np.linalg.norm(V[i] - V[j], axis=1).mean())
 
 
+@dataclass
+class ScalePlan:
+    """How the network sees a mesh: ``(V - centre) * scale``, or not at all (``fallback``:
+    Loop subdivision instead); ``note`` says what was done ('' when nothing); ``ratio`` is the
+    mesh's mean edge length over the training meshes' (in the normalized frame; nan unknown)."""
+
+    centre: np.ndarray
+    scale: float
+    note: str = ""
+    fallback: bool = False
+    ratio: float = float("nan")
+
+
+#: what to do with a mesh denser than the network's training meshes (see scale_plan)
+DENSE_CHOICES = ("loop", "scale", "off")
+
+
 def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = True, *,
-               edges: np.ndarray | None = None) -> tuple[np.ndarray, float, str]:
-    """(centre, scale, note): the network sees ``(V - centre) * scale``.
+               dense: str = "loop", edges: np.ndarray | None = None) -> ScalePlan:
+    """How the network sees ``V`` (see the module docstring).
 
     The formulation's normalization; then, with ``adapt`` and a known reference edge length,
-    an extra factor bringing the mean edge length to the reference when it is more than
-    :data:`SCALE_TOLERANCE` times off (``note`` says so; empty otherwise)."""
+    when the mean edge length is more than :data:`SCALE_TOLERANCE` times off the reference:
+
+    * edges longer (a coarser mesh than trained): scale so that it is the reference;
+    * edges shorter (a denser mesh): ``dense="loop"`` (default): don't use the network, Loop
+      subdivision instead; ``"scale"``: scale to the reference like a coarse mesh (the network
+      then sees flaps of the right size but far flatter than any it was trained on: at 2
+      levels ~10x smaller dimples than without on fandisk and the blob, measured, but not
+      none, and still ~10x Loop's bending energy); ``"off"``: as is.
+    """
+    if dense not in DENSE_CHOICES:
+        raise ParameterError(f"Unknown choice {dense!r} for meshes denser than the network's "
+                             f"training meshes: use one of {', '.join(DENSE_CHOICES)}.")
     c, s = network.normalization(V)
     if not adapt or not network.reference_edge:
-        return c, s, ""
+        return ScalePlan(c, s)
     ell = mean_edge_length(V, F, edges) * s
     ratio = ell / network.reference_edge
     if not np.isfinite(ratio) or ratio <= 0 or 1 / SCALE_TOLERANCE <= ratio <= SCALE_TOLERANCE:
-        return c, s, ""
-    how = (f"{1 / ratio:.1f}x shorter" if ratio < 1 else f"{ratio:.1f}x longer")
-    note = (f"This mesh's edges are {how} than those the network was trained on (coarse meshes "
-            f"of 150-300 vertices), so it was scaled to match before subdividing and scaled "
-            f"back after.")
-    return c, s / ratio, note
+        return ScalePlan(c, s, ratio=ratio)
+    trained = "the coarse meshes (150-300 vertices) the network was trained on"
+    if ratio > 1:
+        return ScalePlan(c, s / ratio, f"This mesh's edges are {ratio:.1f}x longer than those of "
+                                       f"{trained}, so it was scaled to match before "
+                                       f"subdividing and scaled back after.", ratio=ratio)
+    # vertices for 'Coarsen first': edge length ~ 1 / sqrt(vertices), x 1.5 as QSlim keeps
+    # vertices where the detail is (its mean edge is longer than a uniform mesh's), within
+    # the training meshes' range and the Table 4.2 protocol's
+    advice = int(np.clip(round(1.5 * len(V) * ratio * ratio, -1), 150, 450))
+    how = f"its edges are {1 / ratio:.1f}x shorter than those of {trained}"
+    if dense == "off":
+        return ScalePlan(c, s, ratio=ratio)
+    if dense == "scale":
+        return ScalePlan(c, s / ratio, f"This mesh is denser than the network was trained for "
+                                       f"({how}), so it was scaled to match; it may still show "
+                                       f"slight dimples. 'Coarsen first' to about {advice} "
+                                       f"vertices lets the network work as trained.",
+                         ratio=ratio)
+    return ScalePlan(c, s, f"This mesh is denser than the network was trained for ({how}); the "
+                           f"network would leave dimples, so Loop subdivision was used. Set "
+                           f"'Coarsen first' to about {advice} vertices to see the network "
+                           f"rebuild the detail.", fallback=True, ratio=ratio)
 
 
 def _argsort_int(key: np.ndarray) -> np.ndarray:
@@ -618,6 +671,7 @@ class SubdividedStep(Step):
 
     F: np.ndarray | None = None
     note: str = ""
+    fallback: bool = False  # Loop subdivision was used instead of the network
 
 
 def _check_levels(levels) -> int:
@@ -635,7 +689,7 @@ def _check_levels(levels) -> int:
 
 
 def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale: bool = True,
-                            chunk: int | None = None) -> Iterator[Step]:
+                            dense: str = "loop", chunk: int | None = None) -> Iterator[Step]:
     """Subdivide with ``network``, in steps: progress steps (``iteration`` per mille of the
     work, ``total`` 1000, ``V`` the input unchanged, ``message`` "Level 1 of 2: ...") after
     every chunk of half-flaps, then one :class:`SubdividedStep` with the result (input vertices
@@ -663,7 +717,21 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
     level = _Level(F, len(V))
     for _ in level.build():
         yield progress(f"Level 1 of {lv}: reading the mesh")
-    c, s, note = scale_plan(network, V, F, adapt_scale, edges=level.E)
+    plan = scale_plan(network, V, F, adapt_scale, dense=dense, edges=level.E)
+    c, s, note = plan.centre, plan.scale, plan.note
+    if plan.fallback:
+        from .baselines import subdivide_baseline
+
+        Vl, Fl = V, F
+        for k in range(lv):
+            yield Step(int(1000 * k / lv), 1000, V_in, {},
+                       f"Level {k + 1} of {lv}: Loop subdivision (the mesh is denser than the "
+                       f"network was trained for)")
+            Vl, Fl = subdivide_baseline(Vl, Fl, 1, "loop")
+        yield SubdividedStep(1000, 1000, np.asarray(Vl, dtype=np.float64), {},
+                             f"{len(Fl):,} triangles", F=np.asarray(Fl, dtype=np.int64),
+                             note=note, fallback=True)
+        return
     X = ((V - c) * s).astype(np.float32)
     acc = np.empty((len(X), FEATURES), np.float32)
     D = level.laplace(X)
@@ -705,10 +773,11 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
                          note=note)
 
 
-def neural_subdivide_np(V, F, levels: int, network: Network, *, adapt_scale: bool = True
-                        ) -> tuple[np.ndarray, np.ndarray, str]:
+def neural_subdivide_np(V, F, levels: int, network: Network, *, adapt_scale: bool = True,
+                        dense: str = "loop") -> tuple[np.ndarray, np.ndarray, str]:
     """:func:`neural_subdivision_iter` run to the end: (V_sub, F_sub, note)."""
     last = None
-    for last in neural_subdivision_iter(V, F, levels, network, adapt_scale=adapt_scale):
+    for last in neural_subdivision_iter(V, F, levels, network, adapt_scale=adapt_scale,
+                                        dense=dense):
         pass
     return last.V, last.F, last.note

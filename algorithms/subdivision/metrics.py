@@ -18,6 +18,23 @@ digit-for-digit (different shapes and decimations).
 :func:`evaluate_protocol` is the Table 4.2 protocol: QSlim (the project's
 :func:`algorithms.mesh.decimate.decimate`) each mesh to a random vertex count in 350-450,
 subdivide 2 levels with each method, measure against the original.
+
+**Roughness** (issue 22: "never rougher than Loop"), two measures of a subdivided mesh against
+another method's subdivision of the same input:
+
+* :func:`planar_normal_deviation` -- on the *planar regions* of the input (coarse triangles whose
+  neighbourhood, two rings of vertices, is flat within 0.5 degrees): the area-weighted RMS angle
+  between the subdivided triangles' normals and their coarse triangle's normal, in degrees.
+  Loop and butterfly keep such regions exactly planar (their stencils reach no further than two
+  rings, and an affine combination of coplanar points is in the plane), so they score ~0; a
+  dimple of any depth scores above. It is blind to sharp features (they are not planar), which
+  an interpolating scheme rightly keeps.
+* :func:`bending_energy` -- the discrete-shells bending energy ``sum_e 3 theta_e^2 |e|^2 /
+  (A_1 + A_2)`` (Grinspun et al. 2003; ``theta_e`` the angle between the two face normals):
+  scale invariant, and under refinement it tends to the integral of squared curvature, so
+  dimples (curvature at the scale of an edge) raise it. For smooth shapes (the blob): a rougher
+  surface has more of it. It also rises with kept sharp features, so it compares methods fairly
+  only on smooth inputs.
 """
 
 from __future__ import annotations
@@ -28,7 +45,76 @@ import numpy as np
 
 from ..errors import ParameterError
 
-__all__ = ["sample_surface", "surface_distances", "evaluate_protocol", "coarsen_to_vertices"]
+__all__ = ["sample_surface", "surface_distances", "evaluate_protocol", "coarsen_to_vertices",
+           "bending_energy", "planar_faces", "planar_normal_deviation"]
+
+
+def _face_normals(V, F):
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    a = np.linalg.norm(n, axis=1)
+    return n / np.maximum(a, 1e-300)[:, None], 0.5 * a
+
+
+def _interior_edges(F, n):
+    """(face a, face b, vertex i, vertex j) of every interior edge, once."""
+    from .topology import half_flaps
+
+    hf = half_flaps(np.asarray(F, dtype=np.int64), n)
+    keep = (hf.twin_face >= 0) & (hf.ijkl[:, 0] < hf.ijkl[:, 1])
+    return hf.face[keep], hf.twin_face[keep], hf.ijkl[keep, 0], hf.ijkl[keep, 1]
+
+
+def bending_energy(V, F) -> float:
+    """Discrete-shells bending energy ``sum_e 3 theta_e^2 |e|^2 / (A_1 + A_2)`` over the
+    interior edges (module docstring); dimensionless."""
+    V = np.asarray(V, dtype=np.float64)
+    N, A = _face_normals(V, np.asarray(F, dtype=np.int64))
+    fa, fb, i, j = _interior_edges(F, len(V))
+    theta = np.arccos(np.clip((N[fa] * N[fb]).sum(axis=1), -1.0, 1.0))
+    e2 = ((V[i] - V[j]) ** 2).sum(axis=1)
+    return float((3.0 * theta ** 2 * e2 / np.maximum(A[fa] + A[fb], 1e-300)).sum())
+
+
+def planar_faces(V, F, tolerance_degrees: float = 0.5, rings: int = 2) -> np.ndarray:
+    """(m,) bool: triangles whose neighbourhood is planar -- no edge within ``rings`` vertex
+    rings of them bends by more than ``tolerance_degrees``."""
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    N, _ = _face_normals(V, F)
+    fa, fb, _, _ = _interior_edges(F, len(V))
+    bent = (N[fa] * N[fb]).sum(axis=1) < np.cos(np.radians(tolerance_degrees))
+    bad = np.zeros(len(F), dtype=bool)
+    bad[fa[bent]] = True
+    bad[fb[bent]] = True
+    from .topology import half_flaps
+
+    boundary = half_flaps(F, len(V)).twin_face < 0  # a boundary is not a planar interior
+    bad[np.repeat(np.arange(len(F)), 3)[boundary]] = True
+    for _ in range(rings):
+        near = np.zeros(len(V), dtype=bool)
+        near[F[bad].reshape(-1)] = True
+        bad = near[F].any(axis=1)
+    return ~bad
+
+
+def planar_normal_deviation(V0, F0, V, F, levels: int, planar: np.ndarray | None = None
+                            ) -> float:
+    """Area-weighted RMS angle (degrees) between the triangles of a subdivision ``(V, F)`` of
+    ``(V0, F0)`` (``levels`` 1-to-4 splits in the order of
+    :func:`~algorithms.subdivision.topology.refine`: triangle ``t`` lies in coarse triangle
+    ``t // 4**levels``) and their coarse triangle, over the planar coarse triangles
+    (:func:`planar_faces`, or ``planar``). NaN when there are none."""
+    V0 = np.asarray(V0, dtype=np.float64)
+    F0 = np.asarray(F0, dtype=np.int64)
+    planar = planar_faces(V0, F0) if planar is None else planar
+    N0, _ = _face_normals(V0, F0)
+    N, A = _face_normals(np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64))
+    parent = np.arange(len(N)) // (4 ** int(levels))
+    sel = planar[parent]
+    if not sel.any():
+        return float("nan")
+    c = np.clip((N[sel] * N0[parent[sel]]).sum(axis=1), -1.0, 1.0)
+    return float(np.degrees(np.sqrt(np.average(np.arccos(c) ** 2, weights=A[sel]))))
 
 
 def sample_surface(V, F, count: int, seed: int = 0) -> np.ndarray:

@@ -74,6 +74,14 @@ class SubdivideParams:
                                tooltip="0: off. Otherwise QSlim the mesh to about this many "
                                        "vertices first (e.g. 400), so you can watch the method "
                                        "rebuild the detail.")
+    dense_input: str = param("loop", label="Mesh denser than trained", choices=("loop", "scale",
+                                                                              "off"),
+                             advanced=True,
+                             tooltip="The network was trained on coarse meshes (150-300 "
+                                     "vertices) and leaves dimples on much denser ones. loop: "
+                                     "use Loop subdivision there (a message says so); scale: "
+                                     "run the network scaled to its training edge length "
+                                     "(far fewer dimples, not none); off: run it as is.")
 
 
 def _torch():
@@ -457,8 +465,8 @@ class SubdivisionNet:
         self.module.load_state_dict(state)
 
 
-def neural_subdivide(V, F, levels: int = 2, weights=None, *, adapt_scale: bool = True
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def neural_subdivide(V, F, levels: int = 2, weights=None, *, adapt_scale: bool = True,
+                     dense: str = "loop") -> tuple[np.ndarray, np.ndarray]:
     """Subdivide a triangle mesh with the neural subdivision network (NumPy inference,
     :mod:`.inference`; no PyTorch unless ``weights`` is a :class:`SubdivisionNet`).
 
@@ -470,8 +478,10 @@ def neural_subdivide(V, F, levels: int = 2, weights=None, *, adapt_scale: bool =
     weights : an :class:`~algorithms.subdivision.inference.Network`, a
         :class:`SubdivisionNet`, a path to a weights file (ours or the thesis author's), or None
         (the shipped weights).
-    adapt_scale : scale inputs far outside the training edge length to it
-        (:func:`~algorithms.subdivision.inference.scale_plan`).
+    adapt_scale : keep the network within its training edge length
+        (:func:`~algorithms.subdivision.inference.scale_plan`);
+    dense : for a mesh denser than the training meshes: "loop" (Loop subdivision instead),
+        "scale" (the network, scaled) or "off" (the network as is).
 
     Returns
     -------
@@ -488,7 +498,8 @@ def neural_subdivide(V, F, levels: int = 2, weights=None, *, adapt_scale: bool =
                                  or SHIPPED_REFERENCE_EDGE)
     else:
         net = load_network(weights)
-    V_sub, F_sub, _ = neural_subdivide_np(V, F, levels, net, adapt_scale=adapt_scale)
+    V_sub, F_sub, _ = neural_subdivide_np(V, F, levels, net, adapt_scale=adapt_scale,
+                                          dense=dense)
     return V_sub, F_sub
 
 

@@ -34,10 +34,13 @@ def _neural_or_baseline(method: str, weights: str | None):
     from algorithms.subdivision.baselines import subdivide_baseline
 
     if method == "neural":
-        from algorithms.subdivision.model import load_weights, neural_subdivide
+        from algorithms.subdivision.model import neural_subdivide
 
-        net, _ = load_weights(None if weights in (None, "shipped") else weights)
-        return lambda V, F, levels: neural_subdivide(V, F, levels, net)
+        from algorithms.subdivision.inference import load_network
+
+        net = load_network(None if weights in (None, "shipped") else weights)
+        # the protocol measures the network itself: never Loop in its place
+        return lambda V, F, levels: neural_subdivide(V, F, levels, net, dense="scale")
     return lambda V, F, levels: subdivide_baseline(V, F, levels, method)
 
 
@@ -285,6 +288,10 @@ def add_parsers(sub) -> None:
     s.add_argument("--levels", type=int, help="1 to 3 levels. Default: 2.")
     s.add_argument("--method", choices=("neural", "loop", "butterfly", "midpoint"),
                    help="Default: neural (with the shipped weights).")
+    s.add_argument("--dense-input", choices=("loop", "scale", "off"),
+                   help="neural, on a mesh denser than the network's training meshes: loop "
+                        "(use Loop subdivision, said on stderr), scale (run the network scaled "
+                        "to its training edge length), off (as is). Default: loop.")
     s.add_argument("--coarsen-first", type=int, metavar="N",
                    help="QSlim the mesh to about N vertices first, as the Subdivision panel "
                         "does (0: off). Default: 0.")

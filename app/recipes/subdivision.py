@@ -180,7 +180,8 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
         from algorithms.subdivision.inference import SubdividedStep, neural_subdivision_iter
 
         last = None
-        for step in neural_subdivision_iter(V, F, levels, net):
+        for step in neural_subdivision_iter(V, F, levels, net,
+                                            dense=getattr(params, "dense_input", "loop")):
             if isinstance(step, SubdividedStep):
                 last = step
             else:

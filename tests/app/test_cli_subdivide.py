@@ -101,8 +101,8 @@ def test_subdivide_runs_without_torch(tmp_path):
     assert r.returncode == 0, r.stderr
     assert r.stdout.split()[-2:] == ["NO-TORCH", "0"]
     assert len(read_mesh(out).F) == 16 * 1602
-    # the scale guard said what it did (hand_lowres is denser than the training meshes)
-    assert "scaled to match" in r.stderr
+    # the density guard said what it did (hand_lowres is denser than the training meshes)
+    assert "Loop subdivision was used" in r.stderr
 
 
 @pytest.mark.skipif(not (REF / "author_network" / "netparams.dat").is_file(),

@@ -98,7 +98,7 @@ def test_neural_shipped_with_coarsen_first_streams_progress(spot):
 def test_weights_options(spot, trained, tmp_path):
     from algorithms.subdivision.model import load_weights, neural_subdivide, save_weights
 
-    p = {"method": "neural", "levels": 1}
+    p = {"method": "neural", "levels": 1, "dense_input": "off"}  # the network, whatever
     shipped = run("subdivide", spot, p, {}).state
     # a weights file as a blob (the trained weights here, written to a file)
     net = rs.load_network(trained.outcome["weights"])
@@ -108,7 +108,7 @@ def test_weights_options(spot, trained, tmp_path):
     assert is_blob_ref(ref) and ref.endswith("/mine.pt")
     path.unlink()  # the run does not need the file any more
     by_file = run("subdivide", spot, p, {"weights": "file", "weights_file": ref}).state
-    V, F = neural_subdivide(spot.V, spot.F, 1, blob_path(ref))
+    V, F = neural_subdivide(spot.V, spot.F, 1, blob_path(ref), dense="off")
     assert by_file.V.tobytes() == V.tobytes() and np.array_equal(by_file.F, F)
     assert not np.array_equal(by_file.V, shipped.V)
     # the other choice's weights are not used; a choice without weights is the shipped one;
@@ -266,7 +266,7 @@ def test_stop_after_the_first_step_does_little_work(monkeypatch):
     monkeypatch.setattr(inference._Module, "hidden", counting)
     monkeypatch.setattr(inference, "CHUNK_FLAPS", 3000)
     recipe = get_recipe("Subdivision")
-    params = recipe.make_params({"method": "neural", "levels": 2})
+    params = recipe.make_params({"method": "neural", "levels": 2, "dense_input": "scale"})
     threads = threading.active_count()
     gen = recipe.steps(state, params, {}, {})
     first = next(gen)

@@ -164,16 +164,40 @@ def test_same_numbers_as_the_pytorch_path(name):
 def test_scale_guard_says_what_it_did():
     net = load_network(None)
     m = read_mesh(DATA / "hand_lowres.obj")
-    c, s, note = scale_plan(net, m.V, m.F)
-    c0, s0, none = scale_plan(net, m.V, m.F, adapt=False)
-    ratio = mean_edge_length(m.V, m.F) * s0 / net.reference_edge
-    assert none == "" and ratio < 1 / SCALE_TOLERANCE  # a dense mesh for this network
-    assert "shorter than those the network was trained on" in note
-    assert np.isclose(mean_edge_length(m.V, m.F) * s, net.reference_edge)
-    # a mesh in range is left as its formulation scales it
-    V2 = m.V * 7.0
-    F2 = m.F
-    assert scale_plan(net, V2, F2)[1] == pytest.approx(s / 7.0)
+    ell = mean_edge_length(m.V, m.F)
+    off = scale_plan(net, m.V, m.F, adapt=False)
+    assert off.note == "" and not off.fallback
+    ratio = ell * off.scale / net.reference_edge
+    assert ratio < 1 / SCALE_TOLERANCE  # a dense mesh for this network
+    # denser than trained: Loop instead (default), or scaled to the training edge length
+    loop = scale_plan(net, m.V, m.F)
+    assert loop.fallback and "Loop subdivision was used" in loop.note
+    assert loop.ratio == pytest.approx(ratio)
+    advice = int(loop.note.split("to about ")[1].split()[0])
+    from algorithms.subdivision.metrics import coarsen_to_vertices
+
+    Va, Fa = coarsen_to_vertices(m.V, m.F, advice)  # the advice brings it into range
+    assert scale_plan(net, Va, Fa).note == ""
+    scaled = scale_plan(net, m.V, m.F, dense="scale")
+    assert not scaled.fallback and "scaled to match" in scaled.note
+    assert np.isclose(ell * scaled.scale, net.reference_edge)
+    # a coarser mesh than trained is scaled; one in range is left as its formulation scales it
+    Vc, Fc = coarsen_to_vertices(m.V, m.F, 40)
+    coarse = scale_plan(net, Vc, Fc)
+    assert not coarse.fallback and "longer" in coarse.note
+    assert np.isclose(mean_edge_length(Vc, Fc) * coarse.scale, net.reference_edge)
+    Vi, Fi = Va, Fa
+    inside = scale_plan(net, Vi * 7.0, Fi)
+    assert inside.note == "" and inside.scale == pytest.approx(
+        scale_plan(net, Vi, Fi, adapt=False).scale / 7.0)
+    # Loop really is what the default returns there, with the note
+    from algorithms.subdivision.baselines import subdivide_baseline
+
+    V, F, note = neural_subdivide_np(m.V, m.F, 2, net)
+    VL, FL = subdivide_baseline(m.V, m.F, 2, "loop")
+    assert note == loop.note and np.array_equal(V, VL) and np.array_equal(F, FL)
+    with pytest.raises(Exception, match="Unknown choice"):
+        scale_plan(net, m.V, m.F, dense="maybe")
 
 
 def test_steps_are_small_and_stoppable():
@@ -181,7 +205,7 @@ def test_steps_are_small_and_stoppable():
     the first step leaves the rest of the work undone."""
     m = read_mesh(DATA / "hand_lowres.obj")
     net = load_network(None)
-    steps = list(neural_subdivision_iter(m.V, m.F, 2, net, chunk=2000))
+    steps = list(neural_subdivision_iter(m.V, m.F, 2, net, chunk=2000, dense="scale"))
     last = steps[-1]
     assert isinstance(last, SubdividedStep) and len(last.F) == 16 * len(m.F)
     progress = steps[:-1]
@@ -191,7 +215,7 @@ def test_steps_are_small_and_stoppable():
     assert [s.iteration for s in progress] == sorted(s.iteration for s in progress)
     assert all(s.message.startswith(("Level 1 of 2", "Level 2 of 2")) for s in progress)
     assert not any("Iteration" in s.message for s in steps)
-    gen = neural_subdivision_iter(m.V, m.F, 2, net, chunk=2000)
+    gen = neural_subdivision_iter(m.V, m.F, 2, net, chunk=2000, dense="scale")
     first = next(gen)
     gen.close()
     assert first.iteration < 100 and first.message.startswith("Level 1 of 2")
