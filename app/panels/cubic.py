@@ -29,6 +29,7 @@ from app.forms import ParamsForm
 from app.commands import StateCommand
 from app.gaussmap import GaussMapPainter
 from app.panels.base import MethodPanel
+from app.widgets import CollapsibleSection
 from app.tools import BrushSettings, FieldBrush, HandleTool, StampBrush
 
 # the painted fields and the run itself are the Qt-free recipe's (app/recipes/cubic.py)
@@ -70,30 +71,6 @@ class CubicPanel(MethodPanel):
     # -- widgets -------------------------------------------------------------------------------
     def _build_tools(self) -> None:
         lay: QVBoxLayout = self.body_layout
-        self.progressive_box = QGroupBox("Progressive meshes (for big meshes)")
-        self.progressive_box.setCheckable(True)
-        self.progressive_box.setChecked(False)
-        self.progressive_box.setToolTip(
-            "Stylize a simplified copy and put the details back (thesis Alg. 4): seconds instead "
-            "of minutes on meshes with millions of triangles. The simplification is computed "
-            "once and reused while you change λ. Fewer coarse triangles make it less cubic at "
-            "the same λ.")
-        pl = QVBoxLayout(self.progressive_box)
-        self.progressive_form = ParamsForm(ProgressiveParams)
-        pl.addWidget(self.progressive_form)
-        self.progressive_box.toggled.connect(lambda _on: self._on_params_changed(None))
-        self.progressive_form.changed.connect(self._on_params_changed)
-        lay.insertWidget(lay.indexOf(self.form) + 1, self.progressive_box)
-        self.multigrid_box = QCheckBox("Multigrid global step (full resolution, big meshes)")
-        self.multigrid_box.setToolTip(
-            "Solve each global step with surface multigrid V-cycles instead of a sparse "
-            "factorization (thesis ch. 8): the full-resolution mesh is stylized, with less memory "
-            "and no factorization. Builds a hierarchy once per mesh. Not combined with "
-            "progressive meshes.")
-        self.multigrid_box.toggled.connect(self._on_multigrid_toggled)
-        self.progressive_box.toggled.connect(
-            lambda on: on and self.multigrid_box.setChecked(False))
-        lay.insertWidget(lay.indexOf(self.progressive_box) + 1, self.multigrid_box)
         box = QGroupBox("Tools")
         v = QVBoxLayout(box)
         self.tool_group = QButtonGroup(self)
@@ -164,7 +141,45 @@ class CubicPanel(MethodPanel):
                                      label="λ", settings=self.brush_settings)
         self.gauss.setMinimumHeight(220)
         v.addWidget(self.gauss)
-        lay.insertWidget(lay.count() - 1, box)
+        # right under the parameters: the painting tools are what the description points to,
+        # and must be in sight at 1024×700 without scrolling past big-mesh options
+        self.tools_box = box
+        lay.insertWidget(lay.indexOf(self.form) + 1, box)
+        self.big_section = CollapsibleSection("Big meshes (progressive, multigrid)")
+        self.big_section.setToolTip("Two ways to stylize meshes of hundreds of thousands of "
+                                    "triangles quickly; progressive meshes turn on by themselves "
+                                    "for very big meshes.")
+        big_lay = QVBoxLayout(self.big_section.body)
+        big_lay.setContentsMargins(12, 0, 0, 0)
+        self.progressive_box = QGroupBox("Progressive meshes (for big meshes)")
+        self.progressive_box.setCheckable(True)
+        self.progressive_box.setChecked(False)
+        self.progressive_box.setToolTip(
+            "Stylize a simplified copy and put the details back (thesis Alg. 4): seconds instead "
+            "of minutes on meshes with millions of triangles. The simplification is computed "
+            "once and reused while you change λ. Fewer coarse triangles make it less cubic at "
+            "the same λ.")
+        pl = QVBoxLayout(self.progressive_box)
+        self.progressive_form = ParamsForm(ProgressiveParams)
+        pl.addWidget(self.progressive_form)
+        self.progressive_box.toggled.connect(lambda _on: self._on_params_changed(None))
+        self.progressive_form.changed.connect(self._on_params_changed)
+        big_lay.addWidget(self.progressive_box)
+        self.multigrid_box = QCheckBox("Multigrid global step (full resolution, big meshes)")
+        self.multigrid_box.setToolTip(
+            "Solve each global step with surface multigrid V-cycles instead of a sparse "
+            "factorization (thesis ch. 8): the full-resolution mesh is stylized, with less memory "
+            "and no factorization. Builds a hierarchy once per mesh. Not combined with "
+            "progressive meshes.")
+        self.multigrid_box.toggled.connect(self._on_multigrid_toggled)
+        self.progressive_box.toggled.connect(
+            lambda on: on and self.multigrid_box.setChecked(False))
+        big_lay.addWidget(self.multigrid_box)
+        # folded below the tools (rarely needed); it opens itself when either is on (a big mesh
+        # opened, a project restored)
+        for w in (self.progressive_box, self.multigrid_box):
+            w.toggled.connect(lambda on: on and self.big_section.setChecked(True))
+        lay.insertWidget(lay.indexOf(self.tools_box) + 1, self.big_section)
         self.tool_buttons["camera"].setChecked(True)
         self.plane_axis.currentIndexChanged.connect(lambda _i: self._on_params_changed(None))
         self._frame_angles = (0.0, 0.0, 0.0)

@@ -208,3 +208,22 @@ def test_a_stroke_starting_off_the_model_paints_and_leaves_the_camera(window, di
     drag(qtbot, window, [(4, 4), (30, 6), (60, 8)])
     assert window.undo_stack.count() == n
     assert (tuple(cam.position), tuple(cam.focal_point), tuple(cam.up)) == pose
+
+
+def test_painting_tools_are_in_sight_at_1024x700(window, qtbot):
+    """Issue 24 item 10: at 1024×700 Cubic's tools were below the fold (under the big-mesh
+    options). They come right after the parameters; the big-mesh options fold away and open
+    themselves when one is turned on."""
+    assert window.open_path(SAMPLES / "blob.obj")
+    window.resize(1024, 700)
+    panel = window.panels["Cubic"]
+    panel.raise_()
+    qtbot.waitUntil(panel.is_shown)
+    qtbot.wait(50)
+    for key in ("lambda", "fix", "handle"):
+        b = panel.tool_buttons[key]
+        assert not b.visibleRegion().isEmpty(), f"{key} is off-screen"
+    assert not panel.big_section.isChecked() and not panel.progressive_box.isVisible()
+    panel.multigrid_box.setChecked(True)
+    assert panel.big_section.isChecked() and panel.multigrid_box.isVisible()
+    panel.multigrid_box.setChecked(False)
