@@ -197,6 +197,9 @@ class AffineSplits:
     decimation : the recorded collapses.
     tikhonov : dimensionless Tikhonov weight (eigenvalues of ``Q Q^T`` below ``tikhonov * s_max``
         are lifted to it; module docstring).
+    engine : "auto" (the compiled sequential replay when Numba is available) or "numpy" (the
+        batched replay in waves of independent splits); both give the same positions to
+        round-off (tested).
 
     Attributes
     ----------
@@ -204,13 +207,18 @@ class AffineSplits:
         ``~p_n - ~p_c`` for the kept and the removed endpoint.
     regularized : (K,) bool, splits whose ring was flat enough for the Tikhonov term to act (their
         similarity prior is computed online).
-    wave : (K,) int64, the batch (1-based) in which each split runs.
+    wave : (K,) int64, the batch (1-based) in which each split runs in the NumPy replay
+        (computed on first use).
     n_waves : int.
     """
 
-    def __init__(self, decimation: Decimation, tikhonov: float = 1e-6):
+    def __init__(self, decimation: Decimation, tikhonov: float = 1e-6, *,
+                 engine: str = "auto"):
         if not (tikhonov >= 0 and np.isfinite(tikhonov)):
             raise ParameterError("The Tikhonov weight must be a finite number >= 0.")
+        if engine not in ("auto", "numpy"):
+            raise ParameterError(f"Unknown replay engine {engine!r}; choose auto or numpy.")
+        self.engine = engine
         dec = decimation
         self.decimation = dec
         self.tikhonov = float(tikhonov)
@@ -252,12 +260,38 @@ class AffineSplits:
         self._reg_index[reg_ids] = np.arange(len(reg_ids))
         self._reg_g = G[reg_ids]  # (nr, 3, 2)
         self._reg_q = [q[ptr[k]:ptr[k + 1]] for k in reg_ids]
-        # schedule
-        self.wave = _waves(dec, ring, ptr, prod, cprod)
-        self.n_waves = int(self.wave.max()) if K else 0
-        order = np.argsort(self.wave, kind="stable")
+        self._reg_q_flat = (np.concatenate(self._reg_q) if len(reg_ids)
+                            else np.zeros((0, 3)))
+        self._reg_q_ptr = np.concatenate(
+            [[0], np.cumsum([len(x) for x in self._reg_q])]).astype(np.int64)
+        self._prod, self._cprod = prod, cprod
+        self._wave = None  # the wave schedule, built on first use (NumPy replay only)
+
+    @property
+    def wave(self) -> np.ndarray:
+        """(K,) int64, the batch (1-based) in which each split runs in the NumPy replay."""
+        self._schedule()
+        return self._wave
+
+    @property
+    def n_waves(self) -> int:
+        """Number of batches of the NumPy replay."""
+        self._schedule()
+        return self._n_waves
+
+    def _schedule(self) -> None:
+        """The waves of independent splits and the per-wave arrays of the NumPy replay (the
+        compiled replay does not need them)."""
+        if self._wave is not None:
+            return
+        dec, K = self.decimation, self.K
+        ptr, ring = dec.ring_ptr, dec.ring
+        cnt = np.diff(ptr)
+        self._wave = _waves(dec, ring, ptr, self._prod, self._cprod)
+        self._n_waves = int(self._wave.max()) if K else 0
+        order = np.argsort(self._wave, kind="stable")
         self._order = order
-        bounds = np.searchsorted(self.wave[order], np.arange(1, self.n_waves + 2))
+        bounds = np.searchsorted(self._wave[order], np.arange(1, self._n_waves + 2))
         self._wave_bounds = bounds
         # ring entries regrouped by wave
         seg_len = cnt[order]
@@ -273,7 +307,7 @@ class AffineSplits:
         self._removed = dec.removed[order]
         # per wave: the regularized splits (position in the wave), their entries and prior data
         rs_local, re_rel, rq, rg, rs_ptr, re_ptr = [], [], [], [], [0], [0]
-        for w in range(self.n_waves):
+        for w in range(self._n_waves):
             s0, s1 = bounds[w], bounds[w + 1]
             loc = np.flatnonzero(self.regularized[order[s0:s1]])
             for t in loc:
@@ -314,9 +348,15 @@ class AffineSplits:
                                  f"{Pc.shape}.")
         P = np.empty((dec.n_fine, 3))
         P[dec.coarse_to_fine] = Pc
+        kernel = _compiled_replay() if self.engine != "numpy" else None
+        if kernel is not None:
+            return kernel(P, dec.kept, dec.removed, dec.ring_ptr, dec.ring, self.weights,
+                          self._reg_index, self._reg_q_flat, self._reg_q_ptr,
+                          np.ascontiguousarray(self._reg_g))
+        self._schedule()
         b, ep = self._wave_bounds, self._ent_ptr
         kept, removed, ev, ew = self._kept, self._removed, self._ent_vertex, self._ent_w
-        for w in range(self.n_waves):
+        for w in range(self._n_waves):
             s0, s1 = b[w], b[w + 1]
             e0, e1 = ep[s0], ep[s1]
             c = kept[s0:s1]
@@ -361,6 +401,20 @@ class AffineSplits:
             return pk, pr
 
         return dec.replay(coarse_positions, fn)[0]
+
+
+def _compiled_replay():
+    """The compiled replay (:mod:`algorithms.deform.progressive_kernel`), or None when Numba is
+    missing or ``STYLIZE3D_NUMBA=0``."""
+    import os
+
+    if os.environ.get("STYLIZE3D_NUMBA", "1") == "0":
+        return None
+    try:
+        from .progressive_kernel import replay_splits
+    except ImportError:
+        return None
+    return replay_splits
 
 
 def _regularized_solve(M: np.ndarray, D: np.ndarray, tikhonov: float):

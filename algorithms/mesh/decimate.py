@@ -344,6 +344,10 @@ class Decimation:
         """(n_fine,) int64: the coarse vertex every input vertex was (eventually) merged into."""
         lab = self.fine_to_coarse
         kept, removed = self.kept, self.removed
+        if _compiled_loop() is not None:
+            from .decimate_kernel import propagate_clusters
+
+            return propagate_clusters(lab, kept, removed)
         for k in range(len(self) - 1, -1, -1):
             lab[removed[k]] = lab[kept[k]]
         return lab

@@ -722,3 +722,11 @@ def collapse_loop(V, F, Q0, bnd0, protect, init_u, init_v, init_cost, midpoint, 
             r_cost[:K], rf_cnt[:K], rf_ids[:n_rf], rf_tri[:3 * n_rf], cf_cnt[:K],
             cf_ids[:n_cf], cf_corner[:n_cf], ring_cnt[:K], ring_all[:n_ring], rk_cnt[:K],
             rk_all[:n_rk], rr_cnt[:K], rr_all[:n_rr])
+
+
+@njit(**_OPTS)
+def propagate_clusters(lab, kept, removed):
+    """``lab[removed[k]] = lab[kept[k]]`` for k = K-1 .. 0 (:meth:`Decimation.clusters`)."""
+    for k in range(len(kept) - 1, -1, -1):
+        lab[removed[k]] = lab[kept[k]]
+    return lab
