@@ -82,6 +82,7 @@ from scipy.sparse.linalg import eigsh
 from ..errors import ParameterError
 from ..params import param
 from ..optim import nadam_step
+from ..compiled import KernelModule
 
 __all__ = ["CoarsenParams", "CoarsenStep", "Clustering", "edge_distances", "kmedoids_clustering",
            "cluster_sparsity", "null_space", "project_constraint", "energy_and_gradient",
@@ -175,6 +176,9 @@ class CoarsenStep:
     K: sp.csr_matrix | None = None
     P: sp.csr_matrix | None = None
     timings: dict[str, float] = field(default_factory=dict)
+    #: which stage the step belongs to: "eigenvectors", "clustering", "optimizing",
+    #: "balancing" or "comparing" (the progress shown to the user names it)
+    stage: str = "optimizing"
 
 
 # --------------------------------------------------------------------------------------------
@@ -289,15 +293,17 @@ def _counting_shift_invert(L, M, sigma: float, k: int, progress):
     except RuntimeError as exc:   # "Factor is exactly singular": eigsh's own message path
         raise ValueError(str(exc)) from None
     ncv = min(n, max(2 * k + 1, 20))
-    expected = ncv + (ncv - k) // 2
+    expected = [ncv + (ncv - k) // 2]
     count = [0]
 
     def solve(x):
         count[0] += 1
         c = count[0]
+        if c > expected[0]:   # one more implicit restart than expected: say so, never "200 of 150"
+            expected[0] += max(1, (ncv - k) // 2)
         if c == 1 or c % 5 == 0:
-            progress(0.9 * min(1.0, c / expected) ** 2,
-                     f"Lanczos step {c} of about {expected}")
+            progress(0.9 * min(1.0, c / expected[0]) ** 2,
+                     f"Lanczos step {c} of about {expected[0]}")
         return lu.solve(np.asarray(x, dtype=np.float64).reshape(n))
 
     return LinearOperator((n, n), matvec=solve, dtype=np.float64)
@@ -549,6 +555,156 @@ def energy_and_gradient(G: sp.csr_matrix, L: sp.csr_matrix, A: np.ndarray, B: np
     return E, g, Lt
 
 
+_KERNELS = KernelModule("algorithms.spectral.kernels")
+
+
+def _dot(x: np.ndarray, y: np.ndarray) -> float:
+    """x . y without BLAS (see :mod:`algorithms.spectral.kernels`: OpenBLAS's threads on a busy
+    machine made one dot product of 215k numbers cost up to 23 ms)."""
+    return float(np.add.reduce(x * y))
+
+
+class _Energy:
+    """The energy E_k and its gradient for one fixed pattern of G, evaluated on G's stored
+    values only (``gdata``, aligned with the pattern's CSR data); the same quantities as
+    :func:`energy_and_gradient`, reorganized for speed (issue 25).
+
+    The patterns of ``Y = L G`` (n x m) and ``L~ = G^T Y`` (m x m) are fixed by the pattern of
+    G, so they are computed once; each evaluation then only fills in their values (sparse
+    products on known patterns, :func:`algorithms.spectral.kernels.spgemm_fixed`: about
+    ``nnz(L) r + n r^2`` multiply-adds with r ~ 7 clusters per row of G), and all the work
+    on the k eigenvectors happens at the coarse size m: ``W = M~^-1 L~ B - A`` and
+    ``Z = W2 B^T + B W2^T`` (m x m, one matrix product), then the gradient on the pattern
+    ``g_ij = (Y Z)_ij`` (App. 7.6.1: dE/dG = Y Z). ``W2 = W`` for the thesis energy, or
+    ``W2 = W diag(w)`` for column weights ``w`` (the balanced energy of
+    :func:`_balance_stage`, whose columns of A and B are scaled by ``sqrt(w)``: its gradient is
+    this one with W2). Earlier, each evaluation formed ``L G`` and ``G^T L G`` with SciPy's
+    general sparse products and the gradient from n x k products: 30k -> 500, k 100 took
+    ~160 ms per evaluation here, against ~15 ms now (benchmarks/spectral.py --kernels).
+    For m > 4000 (an m x m Z above 128 MB) the gradient is taken as
+    ``(Y W2)_i . B_j + (Y B)_i . W2_j`` instead. Without Numba everything runs in SciPy.
+    The constraint G P Phi0 = Phi0 with one null vector (every Laplacian on one or several
+    parts, see :func:`coarsen_iter`) is projected on the stored values directly; with several,
+    through :func:`project_constraint`.
+    """
+
+    Z_LIMIT = 4000
+
+    def __init__(self, G: sp.csr_matrix, L: sp.csr_matrix, A: np.ndarray, B: np.ndarray,
+                 mt: np.ndarray, B0: np.ndarray, Phi0: np.ndarray):
+        G = sp.csr_matrix(G, copy=True)
+        G.sort_indices()
+        self.shape = G.shape
+        n, m = G.shape
+        i64 = np.int64
+        self.indptr = G.indptr.astype(i64)
+        self.indices = G.indices.astype(i64)
+        self.rows = np.repeat(np.arange(n), np.diff(self.indptr))
+        Lc = sp.csr_matrix(L, dtype=np.float64)
+        Lc.sort_indices()
+        self.L = Lc
+        self.A = np.ascontiguousarray(A, dtype=np.float64)
+        self.B = np.ascontiguousarray(B, dtype=np.float64)
+        self.mt = np.asarray(mt, dtype=np.float64)
+        self.B0 = B0
+        self.Phi0 = Phi0
+        self.kernels = _KERNELS.get()
+        if self.kernels is not None:
+            # G^T in CSR: a fixed permutation of G's stored values
+            self.t_order = np.argsort(self.indices, kind="stable")
+            self.t_indptr = np.r_[0, np.cumsum(np.bincount(self.indices, minlength=m))].astype(
+                i64)
+            self.t_indices = self.rows[self.t_order]
+            self.L_indptr, self.L_indices = Lc.indptr.astype(i64), Lc.indices.astype(i64)
+            self.L_data = np.ascontiguousarray(Lc.data)
+            ones = lambda X: sp.csr_matrix((np.ones(X.nnz), X.indices, X.indptr),  # noqa: E731
+                                           shape=X.shape)
+            Go = ones(G)
+            Yp = (ones(Lc) @ Go).tocsr()          # no cancellation: all ones
+            Yp.sort_indices()
+            Tp = (Go.T @ ones(Yp)).tocsr()
+            Tp.sort_indices()
+            self.Y_indptr, self.Y_indices = Yp.indptr.astype(i64), Yp.indices.astype(i64)
+            self.T_indptr, self.T_indices = Tp.indptr.astype(i64), Tp.indices.astype(i64)
+        if B0.shape[1] == 1:
+            self._b = B0[:, 0][self.indices]
+            gram = np.bincount(self.rows, weights=self._b ** 2, minlength=n)
+            gram[gram == 0] = 1.0
+            self._gram = gram
+            self._phi0 = np.asarray(Phi0[:, 0], dtype=np.float64)
+        self.evaluations = 0
+
+    def _G(self, gdata) -> sp.csr_matrix:
+        return sp.csr_matrix((gdata, self.indices, self.indptr), shape=self.shape)
+
+    # -- energy ---------------------------------------------------------------------------
+    def __call__(self, gdata, weights=None, gradient: bool = True):
+        """``(E, E_w, grad)``: the thesis energy, the energy with column weights ``weights``
+        (None: E_w = E) and the gradient of E_w on the pattern (None without ``gradient``)."""
+        self.evaluations += 1
+        kn = self.kernels
+        n, m = self.shape
+        gdata = np.ascontiguousarray(gdata, dtype=np.float64)
+        if kn is not None:
+            yd = kn.spgemm_fixed(self.L_indptr, self.L_indices, self.L_data, self.indptr,
+                                 self.indices, gdata, self.Y_indptr, self.Y_indices, m)
+            td = kn.spgemm_fixed(self.t_indptr, self.t_indices, gdata[self.t_order],
+                                 self.Y_indptr, self.Y_indices, yd, self.T_indptr,
+                                 self.T_indices, m)
+            LtB = kn.csr_dense(self.T_indptr, self.T_indices, td, self.B)
+        else:
+            G = self._G(gdata)
+            Y = (self.L @ G).tocsr()
+            LtB = np.asarray((G.T @ Y) @ self.B)
+        W = LtB / self.mt[:, None] - self.A
+        mW2 = self.mt[:, None] * W * W
+        E = 0.5 * float(np.add.reduce(mW2, axis=None))
+        if weights is None:
+            Ew, W2 = E, W
+        else:
+            Ew = 0.5 * float(np.add.reduce(mW2 * weights, axis=None))
+            W2 = W * weights
+        if not gradient:
+            return E, Ew, None
+        if kn is not None and m <= self.Z_LIMIT:
+            Zt = W2 @ self.B.T
+            g = kn.pattern_rowdot(self.indptr, self.indices, self.Y_indptr, self.Y_indices,
+                                  yd, Zt + Zt.T)
+        elif kn is not None:
+            YW = kn.csr_dense(self.Y_indptr, self.Y_indices, yd, W2)
+            YB = kn.csr_dense(self.Y_indptr, self.Y_indices, yd, self.B)
+            g = kn.pattern_dots(self.indptr, self.indices, YW, self.B, YB, W2)
+        else:
+            YW, YB = np.asarray(Y @ W2), np.asarray(Y @ self.B)
+            g = np.empty(len(self.rows))
+            chunk = 200_000
+            for s in range(0, len(g), chunk):
+                r, c = self.rows[s:s + chunk], self.indices[s:s + chunk]
+                g[s:s + chunk] = (np.einsum("zk,zk->z", YW[r], self.B[c])
+                                  + np.einsum("zk,zk->z", YB[r], W2[c]))
+        return E, Ew, g
+
+    def coarse_operator(self, gdata) -> sp.csr_matrix:
+        """L~ = G^T L G (symmetrized), m x m CSR."""
+        G = self._G(gdata)
+        Lt = (G.T @ (self.L @ G)).tocsr()
+        return ((Lt + Lt.T) * 0.5).tocsr()
+
+    # -- constraint -----------------------------------------------------------------------
+    def project(self, gdata, tangent: bool = False) -> np.ndarray:
+        """The closest values (same pattern) with G B0 = Phi0 (``tangent``: G B0 = 0), see
+        :func:`project_constraint`."""
+        if self.B0.shape[1] != 1:
+            G = sp.csr_matrix((np.array(gdata, dtype=float), self.indices, self.indptr),
+                              shape=self.shape)
+            target = np.zeros_like(self.Phi0) if tangent else self.Phi0
+            return project_constraint(G, self.B0, target).data
+        resid = np.bincount(self.rows, weights=gdata * self._b, minlength=self.shape[0])
+        if not tangent:
+            resid -= self._phi0
+        return gdata - (resid / self._gram)[self.rows] * self._b
+
+
 def _cluster_blocks(G: sp.csr_matrix, labels: np.ndarray):
     """Per cluster: (member rows R, shared columns J, positions in G.data (|R| x |J|)), or None
     when the rows of a cluster do not share one column pattern."""
@@ -591,23 +747,23 @@ def lbfgs_iter(fun, x0: np.ndarray, maxiter: int, *, memory: int = 10, ftol: flo
         q = g.copy()
         alphas = []
         for s_, y_ in zip(reversed(S), reversed(Y)):
-            a = (s_ @ q) / (y_ @ s_)
+            a = _dot(s_, q) / _dot(y_, s_)
             alphas.append(a)
             q -= a * y_
         if S:
-            q *= (S[-1] @ Y[-1]) / (Y[-1] @ Y[-1])
+            q *= _dot(S[-1], Y[-1]) / _dot(Y[-1], Y[-1])
         else:
-            q /= max(np.linalg.norm(g), 1e-300)     # first step: unit length
+            q /= max(np.sqrt(_dot(g, g)), 1e-300)     # first step: unit length
         for (s_, y_), a in zip(zip(S, Y), reversed(alphas)):
-            b = (y_ @ q) / (y_ @ s_)
+            b = _dot(y_, q) / _dot(y_, s_)
             q += (a - b) * s_
         d = -q
-        slope = g @ d
+        slope = _dot(g, d)
         if not slope < 0:                           # not a descent direction: restart
             S.clear()
             Y.clear()
-            d = -g / max(np.linalg.norm(g), 1e-300)
-            slope = g @ d
+            d = -g / max(np.sqrt(_dot(g, g)), 1e-300)
+            slope = _dot(g, d)
             if not slope < 0:
                 return
         t = 1.0
@@ -622,7 +778,7 @@ def lbfgs_iter(fun, x0: np.ndarray, maxiter: int, *, memory: int = 10, ftol: flo
         else:
             return                                  # no decrease found: at a minimum
         s_, y_ = xn - x, gn - g
-        if s_ @ y_ > 1e-10 * np.linalg.norm(s_) * np.linalg.norm(y_):
+        if _dot(s_, y_) > 1e-10 * np.sqrt(_dot(s_, s_) * _dot(y_, y_)):
             S.append(s_)
             Y.append(y_)
             if len(S) > memory:
@@ -707,11 +863,12 @@ def coarsen_iter(L, M, m: int | None = None, k: int | None = None,
         raise ParameterError(f"unknown initial G '{params.initial_G}'; use 'constant' or "
                              "'smoothed'.")
     G = project_constraint(G, B0, Phi0)
-    blocks = _cluster_blocks(G, clustering.labels)
-    E, grad, Lt = energy_and_gradient(G, L, A, B, mt, blocks=blocks)
+    ev = _Energy(G, L, A, B, mt, B0, Phi0)
+    gdata = G.data.copy()
+    E, _, grad = ev(gdata)
     E0 = E
     gscale = 1.0 / E0 if E0 > 0 else 1.0
-    best_E, best_G, best_Lt = E, G.copy(), Lt
+    best_E, best_g = E, gdata.copy()
     yield CoarsenStep(0, params.max_iterations, E, {"energy": E, "relative_energy": 1.0},
                       "initial (piecewise constant)")
     # already exact (e.g. every part small enough to keep all its nodes): nothing to optimize;
@@ -720,8 +877,8 @@ def coarsen_iter(L, M, m: int | None = None, k: int | None = None,
     max_it = params.max_iterations if E0 > 1e-14 * scaleA else 0
     lr = float(params.learning_rate)
     b1, b2, eps = 0.9, 0.9, 1e-8
-    mom = np.zeros(G.nnz)
-    vel = np.zeros(G.nnz)
+    mom = np.zeros(gdata.size)
+    vel = np.zeros(gdata.size)
     stall = 0
     decays = 0
     it = 0
@@ -731,11 +888,10 @@ def coarsen_iter(L, M, m: int | None = None, k: int | None = None,
         # negligible on small or large meshes alike
         gs = grad * gscale
         step = nadam_step(gs, mom, vel, it, lr, b1, b2, eps)  # updates mom, vel in place
-        G.data -= step
-        G = project_constraint(G, B0, Phi0)
-        E, grad, Lt = energy_and_gradient(G, L, A, B, mt, blocks=blocks)
+        gdata = ev.project(gdata - step)
+        E, _, grad = ev(gdata)
         if E < best_E:
-            best_E, best_G, best_Lt = E, G.copy(), Lt
+            best_E, best_g = E, gdata.copy()
             stall = 0
         else:
             stall += 1
@@ -755,26 +911,39 @@ def coarsen_iter(L, M, m: int | None = None, k: int | None = None,
     nadam_its = it
     if params.balance_iterations > 0 and max_it > 0:
         t = time.perf_counter()
-        evals = [0]
-        best_G, best_Lt, best_E, polished = yield from _balance_stage(
-            best_G, L, A, B, mt, lam, B0, Phi0, blocks, params, nadam_its, best_E, evals)
+        evals0 = ev.evaluations
+        best_g, best_E, polished = yield from _balance_stage(ev, best_g, lam, params,
+                                                             nadam_its, best_E)
         timings["balancing"] = time.perf_counter() - t
         timings["balancing_iterations"] = float(polished)
-        timings["balancing_evaluations"] = float(evals[0])
+        timings["balancing_evaluations"] = float(ev.evaluations - evals0)
         it = nadam_its + polished
     Mt = sp.diags(mt).tocsr()
+    best_G = sp.csr_matrix((best_g, ev.indices.copy(), ev.indptr.copy()), shape=ev.shape)
+    best_Lt = ev.coarse_operator(best_g)
     yield CoarsenStep(it, params.max_iterations, best_E,
                       {"energy": best_E, "relative_energy": best_E / E0 if E0 else 0.0},
                       f"done after {it} iterations: energy {best_E:.4g} "
                       f"({best_E / E0 if E0 else 0:.3g} of the initial)",
-                      done=True, L=best_Lt.tocsr(), M=Mt, G=best_G, K=K, P=P, timings=timings)
+                      done=True, L=best_Lt, M=Mt, G=best_G, K=K, P=P, timings=timings)
 
 
-def _balance_stage(G, L, A, B, mt, lam, B0, Phi0, blocks, params, it0, E_thesis,
-                   params_evals=None):
+def balance_weights(lam, balance: float) -> np.ndarray:
+    """Column weights of the balanced energy: ``(lam_max / lam_i)^balance`` for the non-zero
+    eigenvalues, 1 for the zero ones (see :func:`_balance_stage`)."""
+    lam = np.asarray(lam, float)
+    w = np.ones(len(lam))
+    scale = max(np.abs(lam).max(), 1e-300) if len(lam) else 1.0
+    nonzero = np.abs(lam) > 1e-8 * scale
+    if balance > 0 and nonzero.any():
+        w[nonzero] = (lam[nonzero].max() / lam[nonzero]) ** float(balance)
+    return w
+
+
+def _balance_stage(ev: "_Energy", gdata, lam, params, it0, E_thesis):
     """Stage 2 (beyond the thesis): L-BFGS on the eigenvalue-balanced energy from the NADAM
     result; yields a CoarsenStep per iteration (energy = the thesis energy, for the plot) and
-    returns (G, L~, thesis energy, iterations).
+    returns (G's values, thesis energy, iterations).
 
     The thesis energy counts the residual of eigenvector i, which is about
     |lam~_i - lam_i| ||P phi_i||, in absolute terms, so eigenvector i weighs like lam_i^2 and the
@@ -788,54 +957,37 @@ def _balance_stage(G, L, A, B, mt, lam, B0, Phi0, blocks, params, it0, E_thesis,
     w = 1 (C diag, mean eigenvalue error; thesis -> balanced): armadillo 0.75, 0.166 -> 0.99,
     0.007; camelhead 0.79, 0.099 -> 0.86, 0.026; fertility 0.87, 0.058 -> 0.91, 0.017; wingnut
     0.65, 0.086 -> 0.75, 0.037.
+
+    Scaling the columns of A and B by sqrt(w) scales the columns of W = M~^-1 L~ B - A the same
+    way, so one evaluation (:class:`_Energy` with column weights w) gives both the balanced
+    energy with its gradient and the thesis energy.
     """
-    params_evals = params_evals if params_evals is not None else [0]
-    w = float(params.balance)
-    lam = np.asarray(lam, float)
-    scale = max(np.abs(lam).max(), 1e-300)
-    nonzero = np.abs(lam) > 1e-8 * scale
-    sc = np.ones(len(lam))
-    if w > 0 and nonzero.any():
-        ref = lam[nonzero].max()
-        sc[nonzero] = (ref / lam[nonzero]) ** (w / 2)
-    Aw, Bw = A * sc, B * sc
-    G = G.copy()
-    E0w = energy_and_gradient(G, L, Aw, Bw, mt, gradient=False, blocks=blocks)[0]
+    wts = balance_weights(lam, float(params.balance))
+    gdata = np.array(gdata, dtype=float)
+    E0w = ev(gdata, wts, gradient=False)[1]
     if not E0w > 0:
-        return G, energy_and_gradient(G, L, A, B, mt, gradient=False)[2], E_thesis, 0
-    zero = np.zeros_like(Phi0)
+        return gdata, E_thesis, 0
     last = {}
 
     def fun(x):
-        last["evaluations"] = last.get("evaluations", 0) + 1
-        G.data = x
-        E, g, Lt = energy_and_gradient(G, L, Aw, Bw, mt, blocks=blocks)
-        Gg = G.copy()
-        Gg.data = g
-        gt = project_constraint(Gg, B0, zero).data      # tangent to G P Phi0 = Phi0
-        last["Lt"] = Lt
-        return E / E0w, gt / E0w
+        E, Ew, g = ev(x, wts)
+        last["E"] = E
+        return Ew / E0w, ev.project(g, tangent=True) / E0w   # tangent to G P Phi0 = Phi0
 
-    def project(x):
-        G.data = x
-        return project_constraint(G, B0, Phi0).data.copy()
-
-    x0 = G.data.copy()
-    best = (np.inf, x0, None)
+    best = None
     n_it = 0
-    for n_it, f, x in lbfgs_iter(fun, x0, params.balance_iterations, project=project):
-        Lt = last["Lt"]
-        E_t = 0.5 * float(np.sum(mt[:, None] * ((Lt @ B) / mt[:, None] - A) ** 2))
-        best = (f, x.copy(), Lt, E_t)
+    for n_it, f, x in lbfgs_iter(fun, gdata, params.balance_iterations,
+                                 project=ev.project):
+        E_t = last["E"]
+        best = (x.copy(), E_t)
         yield CoarsenStep(it0 + n_it, None, E_t,
-                          {"energy": E_t, "balanced_energy": f},
+                          {"energy": E_t, "balanced_energy": f,
+                           "balancing_iteration": float(n_it)},
                           f"balancing {n_it}: thesis energy {E_t:.4g}, balanced "
-                          f"{f:.3g} of its start")
-    params_evals[0] = last.get("evaluations", 0)
-    if best[2] is None:
-        return G, energy_and_gradient(G, L, A, B, mt, gradient=False)[2], E_thesis, 0
-    G.data = best[1]
-    return G, best[2], best[3], n_it
+                          f"{f:.3g} of its start", stage="balancing")
+    if best is None:
+        return gdata, E_thesis, 0
+    return best[0], best[1], n_it
 
 
 def coarsen(L, M, m: int | None = None, k: int | None = None,

@@ -17,6 +17,7 @@ from .operators import build_operator
 
 __all__ = ["MethodResult", "Comparison", "compare_coarsenings", "compare_coarsenings_iter"]
 
+_SHORT = {"qslim": "QSlim", "amg": "AMG"}
 _TITLES = {"qslim": "QSlim (simplify and rediscretize)", "amg": "AMG (smoothed aggregation)"}
 
 
@@ -104,11 +105,13 @@ def compare_coarsenings_iter(V, F, operator: str = "cotangent", m: int = 500,
     ke = min(k + nnull, n - 1)
     if eig_progress:
         box: dict = {}
-        yield CoarsenStep(0, 1000, float("nan"), message="Eigenvectors of the fine operator")
+        yield CoarsenStep(0, 1000, float("nan"), message="Eigenvectors of the fine operator",
+                          stage="eigenvectors")
         for st in with_progress(lambda progress: generalized_eigs(L, M, ke, progress=progress),
                                 V, box):
             yield CoarsenStep(st.iteration, st.total, float("nan"),
-                              message=f"Eigenvectors of the fine operator: {st.message}")
+                              message=f"Eigenvectors of the fine operator: {st.message}",
+                              stage="eigenvectors")
         eigs = box["value"]
     else:
         eigs = generalized_eigs(L, M, ke)
@@ -117,10 +120,16 @@ def compare_coarsenings_iter(V, F, operator: str = "cotangent", m: int = 500,
     if "ours" in methods:
         t = time.perf_counter()
         last = None
+        if eig_progress:   # the (short) combinatorial stage, named
+            yield CoarsenStep(0, None, float("nan"), message="Clustering the vertices",
+                              stage="clustering")
         for last in _iter(L, M, m, k, replace(params, p=p, q=q), eigs):
             yield last
         secs = time.perf_counter() - t
         timings.update({f"ours_{a}": b for a, b in last.timings.items()})
+        if eig_progress:
+            yield CoarsenStep(0, None, float("nan"), message="Scoring ours",
+                              stage="comparing")
         met = spectral_metrics(L, M, last.L, last.M, last.P, k, fine_eigs=eigs)
         out["ours"] = MethodResult("ours", last.L, last.M, last.P, met.as_dict(), secs,
                                    {"G": last.G, "K": last.K, "energy": last.energy}, met)
@@ -128,6 +137,9 @@ def compare_coarsenings_iter(V, F, operator: str = "cotangent", m: int = 500,
     for name in ("qslim", "amg"):
         if name not in methods:
             continue
+        if eig_progress:
+            yield CoarsenStep(0, None, float("nan"), message=f"Comparing with {_SHORT[name]}",
+                              stage="comparing")
         try:
             if name == "qslim":
                 r = qslim_baseline(V, F, m, operator,

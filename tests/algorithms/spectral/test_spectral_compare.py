@@ -174,7 +174,10 @@ def test_eigenvector_stage_reports_real_progress_and_can_be_cancelled():
         if not np.isnan(st.energy):
             break
     gen.close()
-    stage = [s for s in first if np.isnan(s.energy)]
+    stage = [s for s in first if np.isnan(s.energy) and s.stage == "eigenvectors"]
+    # then the clustering is announced (issue 24: one progress names every stage)
+    assert [s.stage for s in first if np.isnan(s.energy)][len(stage):] == ["clustering"]
+    assert first[-1].stage == "optimizing"
     # the stage is announced at once; Lanczos steps follow when it lasts longer than a poll
     assert stage and all(s.total == 1000 for s in stage)
     assert all(s.message.startswith("Eigenvectors of the fine operator") for s in stage)
