@@ -214,7 +214,7 @@ class Network:
         unknown, no scale guard).
     info : what the file says about its training (plain values).
     name : a short description for messages.
-    state : the layers as read, {name: array} (for comparisons and saving).
+    arrays : the layers as read, {name: array} (for comparisons and saving).
     """
 
     formulation: str
@@ -222,7 +222,14 @@ class Network:
     reference_edge: float | None
     info: dict = field(default_factory=dict)
     name: str = "network"
-    state: dict = field(default_factory=dict)
+    arrays: dict = field(default_factory=dict)
+
+    def state(self) -> dict:
+        """The layers as PyTorch tensors (imports torch: for training, saving and comparing with
+        a ``SubdivisionNet.state()``; inference never calls it)."""
+        import torch
+
+        return {k: torch.from_numpy(np.array(v)) for k, v in self.arrays.items()}
 
     @property
     def uses_differential_coordinates(self) -> bool:

@@ -566,7 +566,7 @@ def save_weights(path, net, info: dict | None = None) -> None:
         if net.formulation != "stylize3d":
             raise WeightsError("Only networks of Stylize3D's formulation can be saved as "
                                "Stylize3D weights (this one is the thesis author's).")
-        state = {k: torch.from_numpy(np.array(v)) for k, v in net.state.items()}
+        state = net.state()
         if net.reference_edge:  # the scale guard's reference goes with the weights
             info = {"mean_edge_length": float(net.reference_edge), **(info or {})}
     else:

@@ -200,9 +200,9 @@ def test_stopping_keeps_the_best_weights_so_far(spot):
     assert out["epochs"] == 2 and len(out["losses"]) == 2
     # the same as a whole 2-epoch run (the first epochs do not depend on the total)
     whole = run("subdivide-train", spot, {**TINY, "epochs": 2}, LOCAL)
-    a = rs.load_network(out["weights"]).state
-    b = rs.load_network(whole.outcome["weights"]).state
-    assert all(np.array_equal(v, b[k]) for k, v in a.items())
+    a = rs.load_network(out["weights"]).state()
+    b = rs.load_network(whole.outcome["weights"]).state()
+    assert all(torch.equal(v, b[k]) for k, v in a.items())
     assert out["losses"].tobytes() == whole.outcome["losses"].tobytes()
     # stopped while making the data: no outcome
     gen = recipe.steps(spot, params, LOCAL, {})
