@@ -428,7 +428,8 @@ class Viewport(QWidget):
                    cmap: str = "viridis", clim: tuple[float, float] | None = None,
                    categorical: bool = False) -> None:
         """Colour the mesh by a scalar field (None: plain colour): one value per vertex, or one
-        per triangle (then each triangle is drawn in one colour). ``categorical`` per-vertex
+        per triangle (then each triangle is drawn in one colour); or by colours: ``values`` of
+        shape (n or m, 3), 0-255 RGB, drawn as they are. ``categorical`` per-vertex
         labels blend colours across a triangle instead of running through the colour map."""
         if self.poly is None or self.mesh_actor is None:
             return
@@ -437,7 +438,26 @@ class Viewport(QWidget):
             mapper.scalar_visibility = False
             self._field_name = None
             self._set_legend(None)
+        elif np.ndim(values) == 2 and np.shape(values)[1] == 3:
+            # colours (0-255 RGB per vertex or per triangle), drawn as they are: no colour map
+            rgb = np.clip(np.rint(np.asarray(values, dtype=np.float64)), 0, 255).astype(np.uint8)
+            if len(rgb) == self.poly.n_points:
+                self.poly.point_data[name] = rgb
+                self.poly.point_data.active_scalars_name = name
+                mapper.SetScalarModeToUsePointData()
+            elif len(rgb) == self.poly.n_cells:
+                self.poly.cell_data[name] = rgb
+                self.poly.cell_data.active_scalars_name = name
+                mapper.SetScalarModeToUseCellData()
+            else:
+                raise ValueError(f"colours need {self.poly.n_points} vertex or "
+                                 f"{self.poly.n_cells} triangle rows, got {len(rgb)}")
+            mapper.SetColorModeToDirectScalars()
+            mapper.scalar_visibility = True
+            self._field_name = name
+            self._set_legend(None)
         else:
+            mapper.SetColorModeToDefault()
             values = np.asarray(values, dtype=np.float64)
             if categorical and len(values) == self.poly.n_points and self._F is not None \
                     and len(self._F):

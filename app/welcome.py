@@ -41,13 +41,30 @@ def thumbnail(mesh: Path) -> QIcon:
     """A picture of ``mesh`` (cached PNG, made once with an off-screen render)."""
     cache = Path(QStandardPaths.writableLocation(
         QStandardPaths.StandardLocation.CacheLocation) or Path.home() / ".cache") / "thumbnails"
-    png = cache / f"{mesh.stem}-{int(mesh.stat().st_mtime)}.png"
+    png = cache / f"{mesh.stem}-{int(mesh.stat().st_mtime)}-c.png"  # -c: in its colours
     if not png.exists():
         try:
             _render_thumbnail(mesh, png)
         except Exception:  # no off-screen OpenGL: a button without a picture still works
             return QIcon()
     return QIcon(str(png))
+
+
+def _file_colors(mesh: Path, n: int, m: int):
+    """(n, 3) uint8 vertex colours stored in the file (face colours spread to vertices), or
+    None."""
+    import numpy as np
+
+    from algorithms.errors import Stylize3DError
+    from algorithms.render.sh import read_mesh_colors
+
+    try:
+        got = read_mesh_colors(mesh, n, m)
+    except Stylize3DError:
+        return None
+    if got is None or got[0] != "vertex":
+        return None
+    return np.clip(np.rint(255.0 * got[1]), 0, 255).astype(np.uint8)
 
 
 def _render_thumbnail(mesh: Path, png: Path) -> None:
@@ -62,8 +79,13 @@ def _render_thumbnail(mesh: Path, png: Path) -> None:
     p = pv.Plotter(off_screen=True, window_size=THUMB_SIZE)
     try:
         p.set_background(BACKGROUND_BOTTOM, top=BACKGROUND_TOP)
-        p.add_mesh(pv.PolyData(data.V, faces), color=MESH_COLOR, smooth_shading=True,
-                   specular=0.25)
+        poly = pv.PolyData(data.V, faces)
+        colors = _file_colors(mesh, len(data.V), len(data.F))
+        if colors is None:
+            p.add_mesh(poly, color=MESH_COLOR, smooth_shading=True, specular=0.25)
+        else:  # a coloured sample (the orange) is shown in its colours
+            poly.point_data["rgb"] = colors
+            p.add_mesh(poly, scalars="rgb", rgb=True, smooth_shading=True, specular=0.25)
         p.view_vector(HOME_VIEW_DIRECTION, viewup=(0.0, 1.0, 0.0))
         p.reset_camera()
         p.camera.zoom(1.2)

@@ -56,6 +56,7 @@ SH_ROWS = (("l=0", "ambient", "the same light from every direction"),
 SLIDER_SCALE = 100          # slider units per coefficient unit (0.01 resolution)
 SLIDER_LIMIT = 2.0          # coefficients from -2 to 2
 IMAGE_SIZE = 224            # pixels of the shown image (the classifier's input)
+FILE_COLORS_FIELD = "file_colors"  # the opened file's colours on the 3D view
 CUSTOM = "Custom"
 DEFAULT_CLASSIFIER_NAME = "EfficientNet-lite0 (ImageNet, default)"
 
@@ -365,6 +366,7 @@ class AdversarialPanel(MethodPanel):
         self.file_colors_box.setToolTip("Use the colours stored in the mesh file instead.")
         self.file_colors_box.setVisible(False)
         self.file_colors_box.toggled.connect(lambda _on: self.schedule_preview())
+        self.file_colors_box.toggled.connect(lambda _on: self._show_file_colors())
         self.file_colors_box.toggled.connect(lambda on: self.color_button.setEnabled(not on))
         row.addWidget(QLabel("Surface colour"))
         row.addWidget(self.color_button, 1)
@@ -553,6 +555,17 @@ class AdversarialPanel(MethodPanel):
         self.file_colors_box.setChecked(has)
         self.file_colors_box.blockSignals(False)
         self.color_button.setEnabled(not has)
+        self._show_file_colors()
+
+    def _show_file_colors(self) -> None:
+        """The file's colours on the 3D view while they colour the shape and this panel is in
+        front (what the classifier sees is what the user sees); off otherwise."""
+        vp = self.window_.viewport
+        state = self.window_.document.state
+        if self.is_shown() and self._face_colors_ref(state) is not None:
+            vp.show_field(FILE_COLORS_FIELD, 255.0 * np.asarray(self._file_colors))
+        elif getattr(vp, "_field_name", None) == FILE_COLORS_FIELD:
+            vp.show_field(None)
 
     def _colors_key_of_doc(self):
         st = self.window_.document.state
@@ -756,8 +769,14 @@ class AdversarialPanel(MethodPanel):
         self.top5_view.set_entries(entries)
 
     def refresh_view(self) -> None:
+        self._show_file_colors()
         if self._preview_stale or self.probs is None:
             self.schedule_preview()
+
+    def hide_view(self) -> None:
+        vp = self.window_.viewport
+        if getattr(vp, "_field_name", None) == FILE_COLORS_FIELD:
+            vp.show_field(None)
 
     def _on_doc(self, what: str) -> None:
         if what == "mesh":  # another object: the last one's attack results do not apply

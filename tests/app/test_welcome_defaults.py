@@ -86,3 +86,25 @@ def test_smooth_says_when_a_run_barely_changed_the_shape(window, dialogs, qtbot)
     qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: "Done" in panel.status_label.text(), timeout=60000)
     assert "changed little" not in panel.status_label.text()
+
+
+def test_the_orange_suggestion_shows_its_colours_and_is_classified_an_orange(window, dialogs,
+                                                                           qtbot):
+    from app.panels.adversarial import FILE_COLORS_FIELD
+
+    window.actions_by_name["welcome"].trigger()
+    dlg = window.welcome_dialog
+    qtbot.waitExposed(dlg)
+    qtbot.mouseClick(dlg.sample_buttons["Adversarial lighting"], Qt.MouseButton.LeftButton)
+    panel = window.panels["Adversarial lighting"]
+    qtbot.waitUntil(panel.is_shown)
+    qtbot.waitUntil(lambda: panel.probs is not None, timeout=180000)
+    assert panel.file_colors_box.isChecked()
+    vp = window.viewport
+    assert vp._field_name == FILE_COLORS_FIELD  # the 3D view shows the file's colours too
+    rgb = np.asarray(vp.poly.cell_data[FILE_COLORS_FIELD], dtype=float)
+    r, g, b = np.median(rgb, axis=0)
+    assert r > 200 and 80 < g < 160 and b < 60  # orange
+    assert panel.top5_view.entries[0][0] == "orange"
+    window.panels["Cubic"].raise_()
+    qtbot.waitUntil(lambda: vp._field_name is None)
