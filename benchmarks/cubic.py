@@ -28,8 +28,16 @@ overhead) and with two regions (frames turned 45 degrees about y where y > media
 problem, so a different ADMM iteration count, shown as inner its/vertex), and the ratios to the
 run without frames. ``--no-frames`` skips it.
 
+Threads (issue 25): the last section runs bumpy20k in child processes with
+NUMBA_NUM_THREADS=1 and =2 (alternating rounds, benchmarks/_threads.py) and prints, per kernel,
+the medians and the ratio 2/1: a whole run (ms per iteration, the thesis's stopping rule), the
+local step (ADMM, the warm state of the run's 10th iteration), covariances K U, right-hand side
+K^T R, the prefactored solve (CHOLMOD through cholespy: one thread whatever NUMBA_NUM_THREADS
+says), and the energy / L1 / displacement terms. ``--no-threads`` skips it; ``--rounds`` sets
+the rounds.
+
 Usage: .venv/bin/python benchmarks/cubic.py [--lam 0.2] [--repeat 3] [--no-numpy] [--no-frames]
-       [--frames-iterations 30] [mesh names...]
+       [--frames-iterations 30] [--no-threads] [--rounds 3] [mesh names...]
 """
 
 from __future__ import annotations
@@ -46,6 +54,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from _threads import child_report, threads_section  # noqa: E402
 from _timing import median_seconds, mesh_path  # noqa: E402
 
 import igl  # noqa: E402
@@ -142,6 +151,50 @@ def frames_line(params: CubicParams, iterations: int, repeat: int) -> str:
             f"{'kernel' if compiled_kernels() is not None else 'NumPy'} path): " + "; ".join(parts))
 
 
+def threads_child(repeat: int) -> None:
+    """Child of the threads section: time bumpy20k's kernels with this process's threads."""
+    params = CubicParams()
+    V, F = load("bumpy20k")
+    st = CubicStylizer(V, F)
+    system, known, Vn = st.system, st.known, st.V_normalized
+    kern = compiled_kernels()
+    steps = list(st.steps(params))  # compiles / loads the kernels
+    n_it = len(steps)
+    times = {"whole run, ms per iteration":
+             1e3 * median_seconds(lambda: list(st.steps(params)), repeat) / n_it}
+    # a mid-run state: the local step's warm ADMM state after 10 iterations
+    prox = st.style_prox(params)
+    lam_a = params.lam * st.areas
+    state = AdmmState.initial(st.n, params.rho0)
+    U = Vn.copy()
+    U[system.constrained] = known[system.constrained]
+    for _ in range(10):
+        R, _ = admm_local_step(system.covariances(U), st.normals, lam_a, prox, state, params)
+        U = system.solve(system.rhs(R), known)
+    S = system.covariances(U)
+    z, u, rho = state.z.copy(), state.u.copy(), state.rho.copy()
+
+    def local():
+        state.z[:], state.u[:], state.rho[:] = z, u, rho
+        admm_local_step(S, st.normals, lam_a, prox, state, params)
+
+    b = system.rhs(R)
+    reps = max(20, 10 * repeat)
+    times["local step (ADMM)"] = 1e3 * median_seconds(local, reps)
+    times["covariances K U"] = 1e3 * median_seconds(lambda: system.covariances(U), reps)
+    times["right-hand side K^T R"] = 1e3 * median_seconds(lambda: system.rhs(R), reps)
+    times["solve (cholespy)"] = 1e3 * median_seconds(lambda: system.solve(b, known), reps)
+    times["ARAP energy terms"] = 1e3 * median_seconds(
+        lambda: system.energy(U, R, exact=False, covariances=S), reps)
+    if kern is not None:
+        times["L1 term"] = 1e3 * median_seconds(
+            lambda: kern.cube_l1_energy(R, st.normals, None, prox.diagonal, lam_a), reps)
+    Uo = U + 1e-3
+    times["relative displacement"] = 1e3 * median_seconds(
+        lambda: relative_displacement(U, Uo, Vn), reps)
+    child_report(times)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("meshes", nargs="*", default=DEFAULT)
@@ -151,7 +204,13 @@ def main() -> None:
     ap.add_argument("--no-frames", action="store_true", help="skip the local-frames line")
     ap.add_argument("--frames-iterations", type=int, default=30,
                     help="outer iterations of the local-frames runs (default 30)")
+    ap.add_argument("--no-threads", action="store_true", help="skip the threads section")
+    ap.add_argument("--rounds", type=int, default=3, help="rounds of the threads section")
+    ap.add_argument("--threads-child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.threads_child:
+        threads_child(args.repeat)
+        return
     params = CubicParams(lam=args.lam)
 
     t0 = time.perf_counter()
@@ -207,6 +266,9 @@ def main() -> None:
               f"{numpy_ms:>12.2f}{1e3 * per_peer:>10.2f}{per_ours / per_peer:>7.2f}")
     if not args.no_frames:
         print(frames_line(params, args.frames_iterations, args.repeat))
+    if not args.no_threads:
+        threads_section(__file__, "cubic", ["--repeat", str(args.repeat)], rounds=args.rounds,
+                        title=f"cubic stylization on bumpy20k, lambda {params.lam}")
 
 
 if __name__ == "__main__":
