@@ -790,6 +790,48 @@ def _tristrips_to_triangles(flat: np.ndarray) -> tuple[np.ndarray, int]:
     return F[~degenerate], int(degenerate.sum())
 
 
+def ply_colors(data: bytes) -> tuple[str, np.ndarray] | None:
+    """The colours of a PLY file's bytes (ASCII or binary): ``("vertex", (n, 3))`` from the
+    vertex element's red / green / blue, else ``("face", (m, 3))`` from the face element's,
+    one row per triangle as :func:`read_mesh` triangulates (a polygon's colour repeated for
+    each of its triangles); values in [0, 1] (0-255 integers scaled). None when it has none
+    or cannot be parsed."""
+    try:
+        fmt, elements, start = _ply_header(data)
+        results: dict[str, dict] = {}
+        if fmt == "ascii":
+            tokens = np.array(data[start:].decode("ascii", errors="replace").split())
+            pos = 0
+            for el in elements:
+                res, pos = _ply_ascii_element(tokens, pos, el)
+                results.setdefault(el.name, res)
+        else:
+            endian = "<" if fmt == "binary_little_endian" else ">"
+            pos = start
+            for el in elements:
+                res, pos = _ply_binary_element(data, pos, el, endian)
+                results.setdefault(el.name, res)
+    except (_ParseError, ValueError):
+        return None
+    types = {(e.name, p.name): p.dtype for e in elements for p in e.props}
+    for name in ("vertex", "face"):
+        el = results.get(name)
+        if el is None or not all(c in el and not isinstance(el[c], tuple)
+                                 for c in ("red", "green", "blue")):
+            continue
+        C = np.column_stack([np.asarray(el[c], dtype=np.float64) for c in ("red", "green", "blue")])
+        if types.get((name, "red"), "f")[0] in "iu" or C.max(initial=0.0) > 1.0:
+            C = C / 255.0
+        if name == "face":
+            key = next((k for k in ("vertex_indices", "vertex_index") if k in el), None)
+            if key is None or not isinstance(el[key], tuple):
+                return None
+            counts = np.asarray(el[key][1], dtype=np.int64)
+            C = np.repeat(C, np.maximum(counts - 2, 0), axis=0)
+        return name, np.clip(C, 0.0, 1.0)
+    return None
+
+
 def _parse_ply(data: bytes) -> tuple[np.ndarray, np.ndarray, list[str]]:
     fmt, elements, start = _ply_header(data)
     names = [e.name for e in elements]

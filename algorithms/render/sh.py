@@ -551,8 +551,9 @@ def face_albedo(F, albedo, *, channels: int = 3) -> np.ndarray:
 
 def read_mesh_colors(path, n_vertices: int, n_faces: int):
     """Colours stored in a mesh file, in [0, 1]: ``("vertex", (n, 3))``, ``("face", (m, 3))`` or
-    None when the file has none. Reads OBJ ``v x y z r g b`` lines and ASCII PLY ``red green
-    blue`` vertex / face properties (0-255 integers or 0-1 floats); other files give None."""
+    None when the file has none. Reads OBJ ``v x y z r g b`` lines and the ``red green blue``
+    vertex / face properties of ASCII and binary PLY (0-255 integers or 0-1 floats; binary is
+    what the app's Export Coloured Mesh writes); other files give None."""
     p = Path(path)
     ext = p.suffix.lower()
     try:
@@ -574,50 +575,13 @@ def read_mesh_colors(path, n_vertices: int, n_faces: int):
             C = C / 255.0
         return ("vertex", np.clip(C, 0.0, 1.0))
     if ext == ".ply":
-        if not text.startswith(b"ply"):
+        from algorithms.mesh.io import ply_colors
+
+        got = ply_colors(text)
+        if got is None:
             return None
-        head_end = text.find(b"end_header")
-        if head_end < 0:
-            return None
-        header = text[:head_end].decode("ascii", "replace").splitlines()
-        if not any(h.strip().startswith("format ascii") for h in header):
-            return None
-        elements, cur = [], None
-        for h in header:
-            t = h.split()
-            if t[:1] == ["element"]:
-                cur = [t[1], int(t[2]), []]
-                elements.append(cur)
-            elif t[:1] == ["property"] and cur is not None:
-                cur[2].append(("list", t[-1]) if t[1] == "list" else (t[2], t[1]))
-        body = text[head_end:].split(b"\n", 1)[1].decode("ascii", "replace").splitlines()
-        row = 0
-        for name, count, props in elements:
-            names = [q[0] for q in props]
-            want = all(c in names for c in ("red", "green", "blue"))
-            has_list = any(q[0] == "list" for q in props)
-            rows = body[row:row + count]
-            row += count
-            if not want or has_list and name != "face" or name not in ("vertex", "face"):
-                continue
-            idx = [names.index(c) for c in ("red", "green", "blue")]
-            vals = []
-            for r in rows:
-                t = r.split()
-                if has_list:          # face: list first, then the scalars
-                    nlist = int(t[0])
-                    scal = t[1 + nlist:]
-                    sn = [q for q in names if q != "list"]
-                    vals.append([float(scal[sn.index(c)]) for c in ("red", "green", "blue")])
-                else:
-                    vals.append([float(t[i]) for i in idx])
-            C = np.asarray(vals, dtype=np.float64)
-            if C.max(initial=0) > 1.0 or props[idx[0]][1] in ("uchar", "uint8"):
-                C = C / 255.0
-            expected = n_vertices if name == "vertex" else n_faces
-            if len(C) == expected:
-                return (name, np.clip(C, 0.0, 1.0))
-        return None
+        kind, C = got
+        return got if len(C) == (n_vertices if kind == "vertex" else n_faces) else None
     return None
 
 

@@ -736,3 +736,35 @@ def test_vertex_colours_refused_plainly(tmp_path):
     with pytest.raises(MeshWriteError, match=r"\[0, 1\]"):
         write_mesh(tmp_path / "c.ply", V, F, vertex_colors=np.full((len(V), 3), 2.0))
     assert not (tmp_path / "c.ply").exists()
+
+
+def test_ply_colours_are_read_from_binary_and_ascii_files(tmp_path):
+    """The app writes coloured meshes as binary PLY; their colours were read from ASCII PLY
+    only (the Adversarial panel saw a grey shape)."""
+    from algorithms.mesh.io import ply_colors
+    from algorithms.render.sh import read_mesh_colors
+
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    C = np.array([[1.0, 0.5, 0.0], [0.0, 1.0, 0.2], [0.2, 0.2, 0.2], [1.0, 1.0, 1.0]])
+    p = tmp_path / "c.ply"
+    write_mesh(p, V, F, vertex_colors=C)
+    assert p.read_bytes().startswith(b"ply\nformat binary")
+    kind, got = read_mesh_colors(p, 4, 2)
+    assert kind == "vertex"
+    np.testing.assert_allclose(got, C, atol=1 / 255)
+    # ASCII, colours on the faces of a quad and a triangle: one row per triangle
+    text = ("ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+            "property float z\nelement face 2\nproperty list uchar int vertex_indices\n"
+            "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n"
+            "0 0 0\n1 0 0\n1 1 0\n0 1 0\n2 2 0\n4 0 1 2 3 255 0 0\n3 1 4 2 0 0 255\n")
+    q = tmp_path / "f.ply"
+    q.write_text(text)
+    mesh = read_mesh(q)
+    assert len(mesh.F) == 3
+    kind, got = read_mesh_colors(q, 5, 3)
+    assert kind == "face"
+    np.testing.assert_allclose(got, [[1, 0, 0], [1, 0, 0], [0, 0, 1]])
+    assert ply_colors(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n"
+                      b"end_header\n") is None  # no colours, truncated: None, no exception
+    assert ply_colors(b"garbage") is None
