@@ -7,15 +7,28 @@ is ``@njit(cache=True)``, IEEE arithmetic (no ``fastmath``), one thread.
 
 Right-hand sides are always 2-D ``(n, d)`` C-contiguous arrays (a scalar system is ``d = 1``);
 the sweep updates all ``d`` columns of a row together (the row is read once).
+
+Threads (issue 25): :func:`multicolor_sweeps` (the multi-colour smoother) updates the rows of
+one colour in chunks of ``CHUNK`` rows on Numba's threads. Rows of one colour do not touch each
+other, so each row's update reads the same values whatever thread runs it and whatever the
+number of threads: the same bits as the serial loop (a twin compiled without ``parallel``, run
+when :func:`algorithms.compiled.use_threads` says so). Lexicographic and block Gauss-Seidel are
+sequential by nature and stay on one thread.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+from ..compiled import use_threads
 
 __all__ = ["gauss_seidel_sweeps", "greedy_coloring", "merge_strong_pairs",
-           "block_gauss_seidel_sweeps"]
+           "block_gauss_seidel_sweeps", "multicolor_sweeps", "CHUNK"]
+
+CHUNK = 256
+"""Rows per work unit of :func:`multicolor_sweeps` (fixed: the split does not depend on the
+number of threads)."""
 
 
 @njit(cache=True, nogil=True)
@@ -157,3 +170,68 @@ def block_gauss_seidel_sweeps(indptr, indices, data, bptr, bverts, iptr, inv, x,
                     for e in range(m):
                         acc += inv[o + a * m + e] * r[e, q]
                     x[i, q] += acc
+
+
+@njit(cache=True, nogil=True)
+def _color_rows(indptr, indices, data, inv, rows, lo, hi, x, b):
+    """``x_i += (b_i - A_i: x) * inv_i`` for the rows ``rows[lo:hi]`` (one colour)."""
+    d = b.shape[1]
+    if d == 1:
+        for t in range(lo, hi):
+            i = rows[t]
+            s = 0.0
+            for k in range(indptr[i], indptr[i + 1]):
+                s += data[k] * x[indices[k], 0]
+            x[i, 0] += (b[i, 0] - s) * inv[i]
+        return
+    acc = np.empty(d)
+    for t in range(lo, hi):
+        i = rows[t]
+        for c in range(d):
+            acc[c] = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            a = data[k]
+            for c in range(d):
+                acc[c] += a * x[j, c]
+        for c in range(d):
+            x[i, c] += (b[i, c] - acc[c]) * inv[i]
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _color_par(indptr, indices, data, inv, rows, lo, hi, x, b):
+    for q in prange((hi - lo + CHUNK - 1) // CHUNK):
+        _color_rows(indptr, indices, data, inv, rows, lo + q * CHUNK,
+                    min(hi, lo + (q + 1) * CHUNK), x, b)
+
+
+@njit(cache=True, nogil=True)
+def _color_ser(indptr, indices, data, inv, rows, lo, hi, x, b):
+    for q in range((hi - lo + CHUNK - 1) // CHUNK):
+        _color_rows(indptr, indices, data, inv, rows, lo + q * CHUNK,
+                    min(hi, lo + (q + 1) * CHUNK), x, b)
+
+
+@njit(cache=True, nogil=True)
+def _multicolor_sweeps(indptr, indices, data, inv, cptr, rows, x, b, sweeps, backward, par):
+    nc = cptr.shape[0] - 1
+    for s in range(sweeps):
+        for t in range(nc):
+            c = nc - 1 - t if backward else t
+            if par and cptr[c + 1] - cptr[c] > CHUNK:
+                _color_par(indptr, indices, data, inv, rows, cptr[c], cptr[c + 1], x, b)
+            else:
+                _color_ser(indptr, indices, data, inv, rows, cptr[c], cptr[c + 1], x, b)
+
+
+def multicolor_sweeps(indptr, indices, data, inv, cptr, rows, x, b, sweeps, backward):
+    """In place: multi-colour Gauss-Seidel sweeps on ``A x = b`` (A in CSR).
+
+    Colour ``c`` holds the rows ``rows[cptr[c]:cptr[c+1]]``; colours go in ascending (or,
+    ``backward``, descending) order and each row of a colour gets
+    ``x_i += (b_i - sum_j a_ij x_j) * inv_i`` (``inv_i = 1 / a_ii``, 0 for a zero diagonal).
+    ``x``, ``b``: (n, d) float64. A colour's rows run on Numba's threads (same bits for any
+    thread count: the rows of a colour do not touch each other).
+    """
+    _multicolor_sweeps(indptr, indices, data, inv, cptr, rows, x, b, int(sweeps),
+                       bool(backward), use_threads())
