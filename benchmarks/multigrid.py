@@ -21,8 +21,16 @@ times: armadillo gives ~58k, 233k, 933k vertices), normalized to a unit bounding
   convergence   Poisson (-L + 1e-3 M) x = M r, residual reduction per V-cycle over 10 cycles,
                 ours vs PyAMG RS and SA with their defaults (thesis Fig. 8.3).
 
+Threads (issue 25): the last section times, on the base mesh after one Loop subdivision, in
+child processes with NUMBA_NUM_THREADS=1 and =2 (alternating rounds, benchmarks/_threads.py):
+2 + 2 multi-colour Gauss-Seidel sweeps (one and three right-hand sides; a colour's rows on the
+threads), the same with the default block Gauss-Seidel (sequential: one thread whatever the
+setting, for reference) and a Poisson solve to rtol 1e-8 with the multi-colour smoother;
+ratio = 2 threads / 1 thread. ``--no-threads`` skips it, ``--rounds`` sets the rounds.
+
 Usage: .venv/bin/python benchmarks/multigrid.py [--sizes 1,2,3] [--mesh armadillo.obj]
        [--prolongation intrinsic|closest_point] [--alphas 2] [--rtol 1e-5] [--no-amg]
+       [--no-threads] [--rounds 3]
 BLAS threads are set to 1 before NumPy loads (override with OMP_NUM_THREADS): on this shared
 2-core machine a threaded BLAS dot product of 58k numbers took ~8 ms instead of ~0.01 ms, which
 slowed every iterative solver (PyAMG's norms included). The multigrid itself is single-threaded.
@@ -45,7 +53,8 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
-from _timing import mesh_path  # noqa: E402
+from _threads import child_report, threads_section  # noqa: E402
+from _timing import median_seconds, mesh_path  # noqa: E402
 
 from algorithms.linalg import SPDSolver, cholmod_available  # noqa: E402
 from algorithms.mesh import read_mesh  # noqa: E402
@@ -107,6 +116,40 @@ def factor_per_cycle(res):
     return (res[-1] / res[0]) ** (1.0 / (len(res) - 1))
 
 
+def threads_child(mesh: str, prolongation: str) -> None:
+    """Child of the threads section: the smoothers and a V-cycle solve with this process's
+    Numba threads."""
+    from algorithms.multigrid.relaxation import BlockGaussSeidel, MultiColorGaussSeidel
+
+    base = read_mesh(mesh_path(mesh))
+    V, F = loop_subdivide(base.V, base.F, 1)
+    V = normalize_unit_box(V)[0]
+    n = len(V)
+    A = (cotangent_laplacian_psd(V, F) + 1e-3 * mass_matrix(V, F)).tocsr()
+    rng = np.random.default_rng(0)
+    times = {}
+    mc = MultiColorGaussSeidel(A)
+    bgs = BlockGaussSeidel(A)
+    for d in (1, 3):
+        b = rng.standard_normal((n, d))
+        x0 = rng.standard_normal((n, d))
+        for name, sm in ((f"multicolor 2+2 sweeps, d={d}", mc),
+                         (f"block GS 2+2 sweeps, d={d} (serial)", bgs)):
+            def run(sm=sm, b=b, x0=x0):
+                x = x0.copy()
+                sm.relax(x, b, 2)
+                sm.relax(x, b, 2, backward=True)
+            run()
+            times[name] = 1e3 * median_seconds(run, 15)
+    mg = surface_multigrid(V, F, prolongation=prolongation)
+    solver = mg.solver(A, smoother="multicolor")
+    rhs = mass_matrix(V, F) @ rng.standard_normal(n)
+    solver.solve(rhs, rtol=1e-8, maxiter=100)
+    times[f"V-cycle solve rtol 1e-8, multicolor ({n} V)"] = 1e3 * median_seconds(
+        lambda: solver.solve(rhs, rtol=1e-8, maxiter=100), 5)
+    child_report(times)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--sizes", default="1,2,3",
@@ -118,7 +161,13 @@ def main() -> None:
     ap.add_argument("--no-amg", action="store_true", help="skip the PyAMG peers")
     ap.add_argument("--no-direct-above", type=int, default=10**9,
                     help="skip CHOLMOD on meshes with more vertices than this")
+    ap.add_argument("--no-threads", action="store_true", help="skip the threads section")
+    ap.add_argument("--rounds", type=int, default=3, help="rounds of the threads section")
+    ap.add_argument("--threads-child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.threads_child:
+        threads_child(args.mesh, args.prolongation)
+        return
     sys.stdout.reconfigure(line_buffering=True)
     path = mesh_path(args.mesh)
     if not path.exists():
@@ -214,6 +263,11 @@ def main() -> None:
                             row += (f"  | to err {ERR:.0e}: {t_k:.3f} s {k} it, "
                                     f"chol/mg {peers['chol'] / t_k:.1f}")
                     print(row)
+    if not args.no_threads:
+        print()
+        threads_section(__file__, "multigrid", ["--mesh", args.mesh, "--prolongation",
+                                                args.prolongation], rounds=args.rounds,
+                        title=f"{args.mesh} after one Loop subdivision")
 
 
 if __name__ == "__main__":
