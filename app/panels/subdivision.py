@@ -214,6 +214,15 @@ class SubdivisionPanel(MethodPanel):
     def _training_failed(self, *_):
         self._training = None
 
+    def _on_finished(self, step) -> None:
+        super()._on_finished(step)
+        note = getattr(step, "note", "")
+        if note and self.window_.last_job_name == self.title:
+            # what the network did with this input (scaled to its training edge length, or
+            # Loop with the advice to coarsen first): said where the user looks
+            self.status_label.setText(f"{self.status_label.text()} {note}")
+            self.window_.report(f"Subdivision: {note}")
+
     def save_weights(self, path: str) -> None:
         from algorithms.subdivision.model import save_weights
 

@@ -247,3 +247,14 @@ def test_stopping_training_while_making_data_says_nothing_was_trained(window, di
                     timeout=10000)
     assert "shipped weights" in panel.status_label.text()
     assert panel.trained_net is None
+
+
+def test_default_run_on_a_dense_mesh_says_what_the_network_did(window, dialogs, qtbot):
+    """Issue 22/24: the network is not applied far outside the edge lengths it was trained on
+    (it left dimples); the panel says what was done instead and how to see the network work."""
+    panel = open_panel(window)  # the blob: 3,232 vertices, denser than the training meshes
+    with qtbot.waitSignal(window.job_committed, timeout=180000):
+        panel.run_button.click()
+    qtbot.waitUntil(lambda: "Done" in panel.status_label.text(), timeout=10000)
+    text = panel.status_label.text()
+    assert "Loop subdivision was used" in text and "Coarsen first" in text
