@@ -234,12 +234,14 @@ def build_tables(cases: list[dict], levels: list[int], methods: list[str],
         cells = []
         for lev in levels:
             co, cp = by.get((o, lev)), by.get((p, lev))
-            if co is None or cp is None:
+            bad = [(who, c) for who, c in (("ours", co), ("peer", cp))
+                   if c is not None and c["status"] != "ok"]
+            if bad:
+                cells.append(", ".join(
+                    f"{who} {'timed out' if c['status'] == 'timeout' else 'failed'}"
+                    for who, c in bad))
+            elif co is None or cp is None:
                 cells.append("not run")
-            elif co["status"] != "ok" or cp["status"] != "ok":
-                bad = co if co["status"] != "ok" else cp
-                who = "ours" if bad is co else "peer"
-                cells.append(f"{who} {'timed out' if bad['status'] == 'timeout' else 'failed'}")
             else:
                 a, b = co["measures"].get(MAIN[o]), cp["measures"].get(MAIN[p])
                 cells.append("-" if not a or not b else f"{a / b:.2f}")
@@ -516,21 +518,38 @@ def case_loop_igl(load, a) -> dict:
                 info=f"input {len(V):,} vertices -> {len(out[0]):,}; median of {a.repeat}")
 
 
-def _views(V, F, a):
-    """(V scaled, offset surface set-up seconds, cameras, image gradients, shading)."""
+def _views(V, F, a, cache: Path | None = None):
+    """(V scaled, set-up seconds, cameras, image gradients, shading). The cameras are written to
+    ``cache`` (ours) or read from it (the peer, when ours ran first: then it does not build the
+    offset surface again, and its set-up is None)."""
     import numpy as np
 
     from algorithms.mesh.operators import normalize_unit_box
     from algorithms.paparazzi import offset_surface, sample_camera
-    from algorithms.render import LambertianShading
+    from algorithms.render import Camera, LambertianShading
 
     V = normalize_unit_box(V)[0] * 2
+    Gs = [np.random.default_rng(i).standard_normal((128, 128, 3)) for i in range(a.views)]
+    saved = None if cache is None else cache / f"cameras_{len(V)}_{a.views}.npz"
+    if saved is not None and saved.exists() and not a.paparazzi_write:
+        d = np.load(saved)
+        near = [None if np.isnan(x) else float(x) for x in d["near"]]
+        cams = [Camera(position=d["position"][i], direction=d["direction"][i], up=d["up"][i],
+                       projection=str(d["projection"]), width=float(d["width"]),
+                       fov=float(d["fov"]), resolution=128, near=near[i])
+                for i in range(a.views)]
+        return V, None, cams, Gs, LambertianShading()
     t0 = time.perf_counter()
     off = offset_surface(V, F, 0.1)
     rng = np.random.default_rng(0)
     cams = [sample_camera(off, rng, resolution=128) for _ in range(a.views)]
     t_setup = time.perf_counter() - t0
-    Gs = [np.random.default_rng(i).standard_normal((128, 128, 3)) for i in range(a.views)]
+    if saved is not None and a.paparazzi_write:
+        np.savez(saved, position=np.array([c.position for c in cams]),
+                 direction=np.array([c.direction for c in cams]),
+                 up=np.array([c.up for c in cams]), projection=cams[0].projection,
+                 width=cams[0].width, fov=cams[0].fov,
+                 near=np.array([np.nan if c.near is None else c.near for c in cams]))
     return V, t_setup, cams, Gs, LambertianShading()
 
 
@@ -560,15 +579,21 @@ def case_render(load, a) -> dict:
     _warm_render(False)
     base = _maxrss_mb()
     V, F = load()
-    V, t_setup, cams, Gs, sh = _views(V, F, a)
-    ts = []
+    a.paparazzi_write = True
+    V, t_setup, cams, Gs, sh = _views(V, F, a, a.cache_dir)
+    ts, seen = [], []
     for cam, G in zip(cams, Gs):
         t = time.perf_counter()
-        image_vjp(V, F, render(V, F, cam, sh), G)
+        r = render(V, F, cam, sh)
+        image_vjp(V, F, r, G)
         ts.append(time.perf_counter() - t)
+        seen.append(len(r.faces))
+    if min(seen) == 0:
+        raise RuntimeError("a view saw no face: the timing would not be a rendering's")
     return dict(base_mb=base, n=len(V),
                 measures={"per iteration": statistics.median(ts), "set-up": t_setup},
-                info=f"128^2, median over {a.views} views; set-up = offset surface + cameras")
+                info=f"128^2, median over {a.views} views ({int(statistics.median(seen)):,} of "
+                     f"{len(F):,} faces seen, median); set-up = offset surface + cameras")
 
 
 def case_torch(load, a) -> dict:
@@ -583,7 +608,8 @@ def case_torch(load, a) -> dict:
     _warm_render(True)
     base = _maxrss_mb()
     V, F = load()
-    V, _, cams, Gs, sh = _views(V, F, a)
+    a.paparazzi_write = False
+    V, t_off, cams, Gs, sh = _views(V, F, a, a.cache_dir)
     ts = []
     for cam, G in zip(cams, Gs):
         t = time.perf_counter()
@@ -591,7 +617,8 @@ def case_torch(load, a) -> dict:
         ts.append(time.perf_counter() - t)
     return dict(base_mb=base, n=len(V), measures={"per iteration": statistics.median(ts)},
                 info=f"128^2, median over {a.views} views; torch {torch.__version__}, 1 thread, "
-                     f"float64")
+                     f"float64; cameras " + ("from the render case" if t_off is None else
+                                             "sampled again (no render case ran)"))
 
 
 CASE_FUNCTIONS = {
@@ -609,6 +636,7 @@ def run_case_child(name: str, level: int, cache: Path, a) -> None:
     mesh = ("coarse" if level == 0 else f"L{level - 1}") if name in ("neural", "loop_igl") \
         else f"L{level}"
     t0 = time.perf_counter()
+    a.cache_dir = cache
     out = CASE_FUNCTIONS[name](lambda: _load(cache, mesh), a)
     out.update(case=name, level=level, status="ok", peak_mb=_maxrss_mb(),
                seconds_child=time.perf_counter() - t0)
@@ -663,7 +691,7 @@ def _child_env(name: str) -> dict:
 def run_case(name: str, level: int, cache: Path, a) -> dict:
     cmd = [sys.executable, str(Path(__file__).resolve()), "--case", name, str(level),
            "--cache", str(cache), "--iterations", str(a.iterations), "--views", str(a.views),
-           "--repeat", str(a.repeat)]
+           "--repeat", str(a.repeat if a.n0 * 4 ** level < 10**5 else 1)]
     t0 = time.perf_counter()
     try:
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=a.timeout,
@@ -692,8 +720,8 @@ def document(cases, levels, methods, a, meta: dict, finished: bool) -> list[str]
              f"seconds are inflated by other processes; ours / peer of one size ran one after "
              f"the other)",
              f"- meshes: {BASE_MESH} (tests/data) and its Loop subdivisions; iterations "
-             f"{a.iterations} (cubic, analogies, ARAP), views {a.views} (Paparazzi), repeats "
-             f"{a.repeat} below 10^5 vertices else 1; per-case timeout {a.timeout:.0f} s; every "
+             f"{a.iterations} (cubic, analogies, ARAP), views {a.views} (Paparazzi); median of "
+             f"{a.repeat} runs below 10^5 vertices, one run above; per-case timeout {a.timeout:.0f} s; every "
              f"case in its own process",
              ""]
     if not finished:
@@ -725,11 +753,7 @@ def main(argv=None) -> int:
     a.views = a.views or (3 if a.quick else 5)
     if a.case:
         name, level = a.case[0], int(a.case[1])
-        if a.repeat is None:
-            a.repeat = 3
-        n0 = 14587 * 4 ** level
-        if n0 >= 10**5:
-            a.repeat = 1
+        a.repeat = a.repeat or 1
         run_case_child(name, level, Path(a.cache), a)
         return 0
 
@@ -739,7 +763,7 @@ def main(argv=None) -> int:
         ap.error(f"unknown method(s) {', '.join(bad)}; choose from {', '.join(METHODS)}")
     if a.repeat is None:
         a.repeat = 1 if a.quick else 3
-    n0 = _count_vertices(ROOT / "tests" / "data" / BASE_MESH)
+    n0 = a.n0 = _count_vertices(ROOT / "tests" / "data" / BASE_MESH)
     targets = [1e4] if a.quick else [float(s) for s in a.sizes.split(",") if s.strip()]
     levels = sorted({level_for_size(t, n0) for t in targets})
     meta = dict(command="python benchmarks/scale.py" + (" " if argv or sys.argv[1:] else "")
