@@ -25,8 +25,13 @@ number of iterations (the stopping rule off):
 
 Target (issue): >= 50 it/s at ~20k vertices for every regularizer.
 
+Threads (issue 25): the last section runs bumpy20k in child processes with NUMBA_NUM_THREADS=1
+and =2 (alternating rounds, benchmarks/_threads.py): ms per iteration of each regularizer (fixed
+targets), and its kernels (Procrustes of all cells, scaled Procrustes for acap, covariances,
+right-hand side); ratio = 2 threads / 1 thread. ``--no-threads`` skips it.
+
 Usage: .venv/bin/python benchmarks/analogies.py [--iterations 60] [--repeat 3] [--no-numpy]
-       [mesh names...]
+       [--no-threads] [--rounds 3] [mesh names...]
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from _threads import child_report, threads_section  # noqa: E402
 from _timing import median_seconds, mesh_path  # noqa: E402
 
 import igl  # noqa: E402
@@ -129,13 +135,48 @@ def igl_ms_per_iteration(V, F, regularizer: str, iterations: int, repeat: int) -
     return 1e3 * median_seconds(lambda: igl.arap_solve(bc, data, U0), repeat) / iterations
 
 
+def threads_child(iterations: int, repeat: int) -> None:
+    """Child of the threads section: bumpy20k's runs and kernels with this process's threads."""
+    V, F = load("bumpy20k")
+    times = {}
+    for reg in REGULARIZERS:
+        sa = ShapeAnalogy(V, F, CUBE)
+        p = AnalogyParams(regularizer=reg, max_iterations=iterations, rel_displacement_tol=0.0)
+        list(sa.steps(p))
+        times[f"{reg} run, ms per iteration"] = 1e3 * median_seconds(
+            lambda: list(sa.steps(p)), repeat) / iterations
+    sa = ShapeAnalogy(V, F, CUBE)
+    for cells in ("spokes_and_rims", "faces"):
+        system = sa.system(cells)
+        U = sa.V + 1e-3 * np.random.default_rng(0).standard_normal(sa.V.shape)
+        S = system.covariances(U)
+        R = procrustes_rotations(S)
+        tag = "vertex" if cells == "spokes_and_rims" else "face"
+        times[f"Procrustes, {tag} cells"] = 1e3 * median_seconds(
+            lambda: procrustes_rotations(S), 20)
+        if cells == "spokes_and_rims":
+            times["scaled Procrustes (acap)"] = 1e3 * median_seconds(
+                lambda: system.scaled_rotations(U, covariances=S), 20)
+        times[f"covariances, {tag} cells"] = 1e3 * median_seconds(
+            lambda: system.covariances(U), 20)
+        times[f"right-hand side, {tag} cells"] = 1e3 * median_seconds(
+            lambda: system.rhs(R), 20)
+    child_report(times)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("meshes", nargs="*", default=DEFAULT)
     ap.add_argument("--iterations", type=int, default=60)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-numpy", action="store_true")
+    ap.add_argument("--no-threads", action="store_true", help="skip the threads section")
+    ap.add_argument("--rounds", type=int, default=3, help="rounds of the threads section")
+    ap.add_argument("--threads-child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.threads_child:
+        threads_child(args.iterations, args.repeat)
+        return
 
     t0 = time.perf_counter()
     kern = compiled_kernels()
@@ -198,6 +239,10 @@ def main() -> None:
         worst = min(summary, key=lambda r: r[3])
         print(f"slowest: {worst[0]} {worst[1]} ({'dynamic' if worst[2] else 'fixed'}) "
               f"{worst[3]:.1f} it/s; target >= 50 it/s at ~20k vertices")
+    if not args.no_threads:
+        threads_section(__file__, "analogies", ["--iterations", str(args.iterations),
+                                                "--repeat", str(args.repeat)],
+                        rounds=args.rounds, title="shape analogies on bumpy20k, cube style")
 
 
 if __name__ == "__main__":
