@@ -205,8 +205,10 @@ def build_tables(cases: list[dict], levels: list[int], methods: list[str],
         return c.get("n") if c else None
 
     def size_label(lev):
-        ns = sorted({c["n"] for c in cases if c["level"] == lev and c.get("n")
-                     and c["case"] not in ("neural", "loop_igl")})
+        at = [c for c in cases if c["level"] == lev and c.get("n")]
+        # the mesh's own count; subdivision's outputs only when nothing else ran at this level
+        ns = sorted({c["n"] for c in at if c["case"] not in ("neural", "loop_igl")}) or \
+            sorted({c["n"] for c in at})
         return fmt_n(ns[0]) if ns else f"level {lev}"
 
     sizes = [size_label(lev) for lev in levels]
