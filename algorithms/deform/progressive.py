@@ -126,6 +126,9 @@ from .cubic import CubicParams, CubicStylizer
 
 __all__ = [
     "AUTO_PROGRESSIVE_FACES",
+    "LAM_EXPONENT",
+    "choose_progressive",
+    "coarse_lambda_factor",
     "ProgressiveParams",
     "AffineSplits",
     "AffineProgressiveMesh",
@@ -134,6 +137,18 @@ __all__ = [
     "progressive_cubic_iter",
     "progressive_cubic",
 ]
+
+
+#: Default exponent of the coarse λ correction (module docstring, "Resolution"): the coarse λ is
+#: ``λ (m_fine / m_coarse) ** LAM_EXPONENT``.
+LAM_EXPONENT = 0.25
+
+
+def coarse_lambda_factor(n_faces: int, n_coarse_faces: int, exponent: float) -> float:
+    """The factor of λ on the coarse mesh: ``(n_faces / n_coarse_faces) ** exponent``."""
+    if exponent == 0 or n_coarse_faces <= 0 or n_faces <= n_coarse_faces:
+        return 1.0
+    return float((n_faces / n_coarse_faces) ** exponent)
 
 
 @dataclass(frozen=True)
@@ -156,6 +171,13 @@ class ProgressiveParams:
         tooltip="Regularization of the affine fit at each vertex split, relative to the size of "
                 "the vertex's neighbourhood. Only matters where the neighbourhood is flat; "
                 "there the fit follows the neighbourhood's rotation and scale.")
+    lam_exponent: float = param(
+        LAM_EXPONENT, label="λ resolution correction", minimum=0.0, maximum=1.0, step=0.05,
+        decimals=3, advanced=True,
+        tooltip="The coarse copy is stiffer than the full mesh: at the same λ it comes out less "
+                "cubic. Its λ is multiplied by (triangles / coarse triangles) to this power so "
+                "that the result is about as cubic as stylizing every triangle. 0: the paper's "
+                "plain λ (less cubic, keeps more detail).")
     preview_every: int = param(
         10, label="Preview every", minimum=0, maximum=100000, step=1,
         tooltip="Show the full-resolution shape every this many coarse iterations while "
@@ -527,8 +549,33 @@ def _constraint_vertices(n: int, fixed, handles, coord_constraints):
 
 
 #: Above this many triangles the app and the CLI stylize through affine progressive meshes unless
-#: told not to (a direct cubic iteration at 300k triangles costs ~1 s; progressive: 20k coarse).
-AUTO_PROGRESSIVE_FACES = 300_000
+#: told not to. Decided from measurements (``benchmarks/progressive.py``, module docstring
+#: "Speed"): the whole progressive run (pre-processing + coarse solve + replay, one λ) is faster
+#: than stylizing every triangle from about PROGRESSIVE_BREAK_EVEN triangles on; the threshold
+#: keeps a factor of 2 of margin so that the automatic choice is never the slower one.
+PROGRESSIVE_BREAK_EVEN = 50_000
+AUTO_PROGRESSIVE_FACES = 2 * PROGRESSIVE_BREAK_EVEN
+
+
+def choose_progressive(n_faces: int, target_faces: int | None = None) -> tuple[bool, str]:
+    """Whether a mesh of ``n_faces`` triangles is stylized through progressive meshes by
+    default, and why (a sentence for the user).
+
+    The rule (measured, see :data:`AUTO_PROGRESSIVE_FACES`): progressive above
+    ``AUTO_PROGRESSIVE_FACES`` triangles, where it is faster than working on every triangle
+    even for a single λ; below, every triangle directly.
+    """
+    m = ProgressiveParams().target_faces if target_faces is None else int(target_faces)
+    if n_faces > AUTO_PROGRESSIVE_FACES:
+        return True, (f"this mesh has {n_faces:,} triangles, more than "
+                      f"{AUTO_PROGRESSIVE_FACES:,}: from there on, stylizing a {m:,}-triangle "
+                      f"copy and putting the details back (affine progressive meshes) is "
+                      f"faster than working on every triangle (measured break-even about "
+                      f"{PROGRESSIVE_BREAK_EVEN:,} triangles)")
+    return False, (f"this mesh has {n_faces:,} triangles, not more than "
+                   f"{AUTO_PROGRESSIVE_FACES:,}: working on every triangle directly is "
+                   f"fast enough (progressive meshes pay off above about "
+                   f"{PROGRESSIVE_BREAK_EVEN:,}; the automatic switch keeps a margin)")
 
 
 class AffineProgressiveMesh:
@@ -695,8 +742,24 @@ class ProgressiveCubic(AffineProgressiveMesh):
         self.timings["stylizer"] = time.perf_counter() - t2
         self.timings["total"] += self.timings["stylizer"]
 
+    def lam_factor(self, lam_exponent: float = LAM_EXPONENT) -> float:
+        """The factor of λ on the coarse mesh (:func:`coarse_lambda_factor`)."""
+        return coarse_lambda_factor(len(self.F), self.n_coarse_faces, lam_exponent)
+
+    def _coarse_lam(self, params: CubicParams, lam_per_vertex, lam_exponent: float):
+        """Per-coarse-vertex λ (or None: ``params.lam`` as it is)."""
+        if not (lam_exponent >= 0 and np.isfinite(lam_exponent)):
+            raise ParameterError("The λ resolution correction must be a number >= 0.")
+        factor = self.lam_factor(lam_exponent)
+        if lam_per_vertex is None:
+            if factor == 1.0:
+                return None
+            return np.full(len(self.decimation.V), float(params.lam) * factor)
+        return self.coarse_lambda(lam_per_vertex) * factor
+
     def steps(self, params: CubicParams = CubicParams(), *, lam_per_vertex=None, lam_axes=None,
-              rotation=None, style_matrix=None, preview_every: int = 10) -> Iterator[Step]:
+              rotation=None, style_matrix=None, preview_every: int = 10,
+              lam_exponent: float = LAM_EXPONENT) -> Iterator[Step]:
         """Stylize the coarse mesh and replay the splits, as Steps (module docstring).
 
         Parameters
@@ -706,6 +769,9 @@ class ProgressiveCubic(AffineProgressiveMesh):
         lam_axes, rotation, style_matrix : as :meth:`CubicStylizer.steps`.
         preview_every : int, yield a full-resolution preview every this many coarse iterations
             (0: only the final Step).
+        lam_exponent : float, λ (and painted λ) on the coarse mesh is multiplied by
+            ``(triangles / coarse triangles) ** lam_exponent`` (module docstring,
+            "Resolution"; 0: the thesis's plain λ).
 
         Yields
         ------
@@ -717,21 +783,22 @@ class ProgressiveCubic(AffineProgressiveMesh):
         preview_every = int(preview_every)
         if preview_every < 0:
             raise ParameterError("'Preview every' must be 0 or a positive number of iterations.")
-        lam_c = None if lam_per_vertex is None else self.coarse_lambda(lam_per_vertex)
+        lam_c = self._coarse_lam(params, lam_per_vertex, lam_exponent)
         yield from self.prolonged_steps(
             self.stylizer.steps(params, lam_per_vertex=lam_c, lam_axes=lam_axes,
                                 rotation=rotation, style_matrix=style_matrix), preview_every)
 
     def stylize(self, params: CubicParams = CubicParams(), *, lam_per_vertex=None,
                 lam_axes=None, rotation=None, style_matrix=None,
-                callback: Callable[[Step], None] | None = None) -> np.ndarray:
+                callback: Callable[[Step], None] | None = None,
+                lam_exponent: float = LAM_EXPONENT) -> np.ndarray:
         """Run :meth:`steps` to the end (no previews) and return the (n, 3) stylized positions.
 
         ``callback(step)`` receives every coarse iteration's Step (coarse positions,
         ``V`` (nc, 3)) and then the final full-resolution Step.
         """
         validate_params(params)
-        lam_c = None if lam_per_vertex is None else self.coarse_lambda(lam_per_vertex)
+        lam_c = self._coarse_lam(params, lam_per_vertex, lam_exponent)
         last = run_to_end(self.stylizer.steps(params, lam_per_vertex=lam_c, lam_axes=lam_axes,
                                               rotation=rotation, style_matrix=style_matrix),
                           callback)
@@ -778,7 +845,8 @@ def progressive_cubic_iter(V, F, params: CubicParams = CubicParams(),
                metrics={"preprocess_seconds": pc.timings["total"]}, message=msg)
     yield from pc.steps(params, lam_per_vertex=lam_per_vertex, lam_axes=lam_axes,
                         rotation=rotation, style_matrix=style_matrix,
-                        preview_every=progressive.preview_every)
+                        preview_every=progressive.preview_every,
+                        lam_exponent=progressive.lam_exponent)
 
 
 def progressive_cubic(V, F, params: CubicParams = CubicParams(),

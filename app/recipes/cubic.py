@@ -100,7 +100,7 @@ def cubic_steps(state, params, options: dict | None = None, cache: dict | None =
         raise ParameterError("Painted local cube frames do not work with progressive meshes "
                              "yet: switch progressive meshes off, or clear the frames.")
     return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation,
-                        preview_every=prog.preview_every)
+                        preview_every=prog.preview_every, lam_exponent=prog.lam_exponent)
 
 
 def _cubic_params():
