@@ -276,6 +276,8 @@ def build_tables(cases: list[dict], levels: list[int], methods: list[str],
             notes.append(f"- {LABEL.get(c['case'], c['case'])}, level {c['level']}: failed: "
                          f"{c.get('error', '?')}")
     details = [f"- {LABEL.get(c['case'], c['case'])} at {fmt_n(c['n'])}: {c['info']}"
+               + (f" [whole process {c['wall']:.1f} s; load average after it {c['load']}]"
+                  if "wall" in c and "load" in c else "")
                for c in cases if c["status"] == "ok" and c.get("info")]
     if notes:
         lines += ["", "Cases that did not finish:", "", *notes]
@@ -461,7 +463,8 @@ def case_multigrid(load, a) -> dict:
     return dict(base_mb=base, n=len(V),
                 measures={"hierarchy": t_h, "Galerkin set-up": t_g, "solve": t_s},
                 info=f"Dirichlet, alpha {ALPHA:g}, rtol {RTOL:g}: {info['cycles']} "
-                     f"V-cycle-PCG iterations; levels {levels}; solve median of {a.repeat}")
+                     f"V-cycle-PCG iterations; levels {levels}; solve median of {a.repeat}, "
+                     f"hierarchy and set-up one run each")
 
 
 def case_cholmod(load, a) -> dict:
@@ -768,8 +771,13 @@ def main(argv=None) -> int:
     n0 = a.n0 = _count_vertices(ROOT / "tests" / "data" / BASE_MESH)
     targets = [1e4] if a.quick else [float(s) for s in a.sizes.split(",") if s.strip()]
     levels = sorted({level_for_size(t, n0) for t in targets})
-    meta = dict(command="python benchmarks/scale.py" + (" " if argv or sys.argv[1:] else "")
-                + shlex.join(sys.argv[1:] if argv is None else argv),
+    exe = Path(sys.executable)
+    try:
+        exe_text = str(exe.relative_to(ROOT))
+    except ValueError:
+        exe_text = str(exe)
+    args_text = shlex.join(sys.argv[1:] if argv is None else argv)
+    meta = dict(command=f"{exe_text} benchmarks/scale.py" + (f" {args_text}" if args_text else ""),
                 start=datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M"),
                 machine=machine(), load_before=_load_text())
     print(f"scale table: {', '.join(methods)} at levels {levels} of {BASE_MESH} ({n0:,} "
@@ -808,6 +816,7 @@ def main(argv=None) -> int:
                         continue
                     done.add(name)
                     c = run_case(name, lev, cache, a)
+                    c["load"] = _load_text()
                     cases.append(c)
                     if c["status"] == "ok":
                         what = ", ".join(f"{k} {fmt_seconds(v)} s"
