@@ -37,34 +37,41 @@ COMMANDS = ("cubic", "analogy")
 
 def _progressive_choice(args: argparse.Namespace, n_faces: int, command: str, *,
                         auto_ok: bool = True):
-    """ProgressiveParams when the command should run through affine progressive meshes, else None.
+    """``(ProgressiveParams or None, reason)``: whether the command runs through affine
+    progressive meshes, and why (a sentence for the output).
 
-    ``--progressive-faces M`` asks for it; above ``AUTO_PROGRESSIVE_FACES`` triangles it is on by
-    default (as in the app), said on stderr, unless ``--no-progressive``.
+    ``--progressive-faces M`` asks for it, ``--no-progressive`` refuses it; otherwise the
+    measured rule :func:`algorithms.deform.progressive.choose_progressive` decides (as in the
+    app), and an automatic switch to progressive meshes is said on stderr.
     """
-    from algorithms.deform.progressive import AUTO_PROGRESSIVE_FACES, ProgressiveParams
+    from algorithms.deform.progressive import ProgressiveParams, choose_progressive
 
     if args.progressive_faces is not None and args.no_progressive:
         raise ParameterError("--progressive-faces and --no-progressive contradict each other; "
                              "choose one.")
     faces = args.progressive_faces
-    if faces is None:
-        if args.no_progressive or not auto_ok or n_faces <= AUTO_PROGRESSIVE_FACES:
-            return None
+    if faces is not None:
+        reason = f"--progressive-faces {faces} asked for a {faces:,}-triangle copy"
+    elif args.no_progressive:
+        return None, "--no-progressive asked to work on every triangle"
+    elif not auto_ok:
+        return None, "the multigrid global solver works on every triangle"
+    else:
         faces = min(ProgressiveParams().target_faces, n_faces // 2)
+        use, reason = choose_progressive(n_faces, faces)
+        if not use:
+            return None, reason
         if not args.quiet:
-            say(f"stylize3d {command}: this mesh has {n_faces:,} triangles (more than "
-                f"{AUTO_PROGRESSIVE_FACES:,}), so it is stylized through affine progressive "
-                f"meshes: on a {faces:,}-triangle copy, then the details are put back. Pass "
-                f"--no-progressive to work on every triangle directly (slower), or "
-                f"--progressive-faces M to choose the copy's size.")
-    return params_from_dict(ProgressiveParams, {"target_faces": faces, "preview_every": 0})
+            say(f"stylize3d {command}: {reason}. Pass --no-progressive to work on every "
+                f"triangle directly, or --progressive-faces M to choose the copy's size.")
+    return params_from_dict(ProgressiveParams, {"target_faces": faces, "preview_every": 0}), reason
 
 
-def cubic_options(args: argparse.Namespace, n_faces: int) -> tuple[dict, bool]:
-    """The Cubic recipe's options for this run and whether progressive meshes were chosen
-    automatically: the project's saved options (if any) < the flags given here; without saved
-    options, the automatic choice for big meshes."""
+def cubic_options(args: argparse.Namespace, n_faces: int) -> tuple[dict, bool, str]:
+    """The Cubic recipe's options for this run, whether progressive meshes were chosen
+    automatically, and why the run works on a coarse copy or on every triangle: the project's
+    saved options (if any) < the flags given here; without saved options, the measured
+    automatic choice for big meshes."""
     from algorithms.deform.progressive import ProgressiveParams
 
     if args.progressive_faces is not None and args.global_solver == "multigrid":
@@ -75,32 +82,49 @@ def cubic_options(args: argparse.Namespace, n_faces: int) -> tuple[dict, bool]:
                              "choose one.")
     saved = saved_panel(args, "Cubic")
     if saved is None:
-        prog = _progressive_choice(args, n_faces, "cubic",
-                                   auto_ok=args.global_solver != "multigrid")
+        prog, reason = _progressive_choice(args, n_faces, "cubic",
+                                           auto_ok=args.global_solver != "multigrid")
         options = {"plane_axis": 0, "progressive": None if prog is None else params_to_dict(prog),
                    "multigrid": args.global_solver == "multigrid" and prog is None}
-        return options, prog is not None and args.progressive_faces is None
+        return options, prog is not None and args.progressive_faces is None, reason
     options = {"plane_axis": 0, "progressive": None, "multigrid": False, **saved["options"]}
+    reason = "the project's saved Cubic options"
     if args.progressive_faces is not None:
         base = options.get("progressive") or params_to_dict(ProgressiveParams())
         options["progressive"] = {**base, "target_faces": args.progressive_faces}
         options["multigrid"] = False
+        reason = (f"--progressive-faces {args.progressive_faces} asked for a "
+                  f"{args.progressive_faces:,}-triangle copy")
     elif args.no_progressive:
         options["progressive"] = None
+        reason = "--no-progressive asked to work on every triangle"
     if args.global_solver is not None:
         options["multigrid"] = args.global_solver == "multigrid"
         if options["multigrid"]:
             options["progressive"] = None
+            reason = "the multigrid global solver works on every triangle"
     if options.get("progressive") is not None:  # no previews on the command line
         options["progressive"] = {**options["progressive"], "preview_every": 0}
-    return options, False
+    return options, False, reason
 
 
-def cubic_params(args: argparse.Namespace):
+def lambda_values(args: argparse.Namespace) -> list[float] | None:
+    """The λ values given with ``--lambda`` (one or several), or None when none was given."""
+    lam = getattr(args, "lam", None)
+    if lam is None:
+        return None
+    return [float(x) for x in (lam if isinstance(lam, (list, tuple)) else [lam])]
+
+
+def cubic_params(args: argparse.Namespace, lam: float | None = None):
     """The CubicParams of ``cubic``'s flags: defaults < a project's saved Cubic settings <
-    ``--params`` < the flags (``--lambda-xyz`` turns per-axis λ on)."""
+    ``--params`` < the flags (``--lambda-xyz`` turns per-axis λ on). ``lam``: one of several
+    ``--lambda`` values (default: the first given)."""
     from algorithms.deform.cubic import CubicParams
 
+    lams = lambda_values(args)
+    if lams is not None:
+        args = argparse.Namespace(**{**vars(args), "lam": lams[0] if lam is None else lam})
     params = method_params(args, CubicParams, panel="Cubic")
     if args.lambda_xyz is not None:
         x, y, z = args.lambda_xyz
@@ -113,41 +137,98 @@ def cubic_params(args: argparse.Namespace):
 def cubic_job(args: argparse.Namespace, n_faces: int) -> tuple:
     """``(params, options)`` of the Cubic recipe that ``cubic`` would run on a mesh of
     ``n_faces`` triangles (``stylize3d batch`` builds its job with it)."""
+    lams = lambda_values(args)
+    if lams is not None and len(lams) > 1:
+        raise ParameterError("A batch job runs one λ; give --lambda a single value (run the "
+                             "batch once per λ, or use stylize3d cubic with several values).")
     return cubic_params(args), cubic_options(args, n_faces)[0]
+
+
+def output_for_lambda(output: str, lam: float, several: bool) -> str:
+    """The output path of one λ: OUTPUT itself for a single λ; with several, ``{lam}`` in OUTPUT
+    replaced by the value, else ``_lambdaVALUE`` inserted before the extension."""
+    if not several:
+        return output
+    text = f"{lam:g}"
+    if "{lam}" in output:
+        return output.replace("{lam}", text)
+    p = Path(output)
+    return str(p.with_name(f"{p.stem}_lambda{text}{p.suffix}"))
 
 
 def cmd_cubic(args: argparse.Namespace) -> int:
     from algorithms.deform.cubic import mean_l1_of_normals
     from algorithms.mesh import write_mesh
 
-    params = cubic_params(args)
-    check_output(args.output, args.overwrite, args.mesh)
+    lams = lambda_values(args)
+    several = lams is not None and len(lams) > 1
+    if several and len(set(lams)) != len(lams):
+        raise ParameterError("--lambda: the same value is given twice.")
+    runs = [(None if lams is None else lam, cubic_params(args, lam))
+            for lam in (lams if lams is not None else [None])]
+    outputs = [output_for_lambda(args.output, p.lam, several) for _, p in runs]
+    for out in outputs:
+        check_output(out, args.overwrite, args.mesh)
     data, _ = read_input(args, quiet=args.json or args.quiet)
     state = input_state(args, data)
     l1_before = mean_l1_of_normals(data.V, data.F)
-    options, auto = cubic_options(args, len(data.F))
+    options, auto, reason = cubic_options(args, len(data.F))
     prog = options.get("progressive")
     recipe = method_recipe("cubic", "Cubic")
-    t0 = time.perf_counter()
-    last = None
-    for last in recipe.steps(state, params, options, {}):
-        if "energy" in last.metrics and not args.json and not args.quiet:
-            print(f"  iteration {last.iteration}: energy {last.metrics['energy']:.6g}, "
-                  f"relative move {last.metrics.get('displacement', 0):.2e}", file=sys.stderr)
-    seconds = time.perf_counter() - t0
-    V = recipe.result(state, last, options).V
-    write_mesh(args.output, V, data.F)
-    l1_after = mean_l1_of_normals(V, data.F)
+    cache: dict = {}  # one solver (factorizations, progressive mesh) for every λ
+    results = []
+    preprocess = None
+    for (_, params), output in zip(runs, outputs):
+        t0 = time.perf_counter()
+        last = None
+        for last in recipe.steps(state, params, options, cache):
+            if "energy" in last.metrics and not args.json and not args.quiet:
+                print(f"  iteration {last.iteration}: energy {last.metrics['energy']:.6g}, "
+                      f"relative move {last.metrics.get('displacement', 0):.2e}",
+                      file=sys.stderr)
+        seconds = time.perf_counter() - t0
+        timings = getattr(cache.get("solver"), "timings", None)
+        if preprocess is None and timings is not None:
+            preprocess = float(timings.get("total", 0.0))
+            online = max(seconds - preprocess, 0.0)
+        else:
+            online = seconds
+        V = recipe.result(state, last, options).V
+        write_mesh(output, V, data.F)
+        results.append({"lam": params.lam, "output": output, "params": params,
+                        "iterations": last.iteration, "seconds": seconds,
+                        "online_seconds": online,
+                        "final_relative_displacement": last.metrics.get("displacement"),
+                        "l1_normals_after": mean_l1_of_normals(V, data.F)})
+    common = {"input": args.mesh,
+              "progressive_faces": None if prog is None else int(prog["target_faces"]),
+              "progressive_auto": auto, "progressive_reason": reason,
+              "preprocess_seconds": preprocess, "l1_normals_before": l1_before}
     if args.json:
-        print_json({"input": args.mesh, "output": args.output, "params": params_to_dict(params),
-                    "iterations": last.iteration, "seconds": seconds,
-                    "final_relative_displacement": last.metrics.get("displacement"),
-                    "progressive_faces": None if prog is None else int(prog["target_faces"]),
-                    "progressive_auto": auto,
-                    "l1_normals_before": l1_before, "l1_normals_after": l1_after})
+        if not several:
+            r = results[0]
+            print_json({"input": args.mesh, "output": r["output"],
+                        "params": params_to_dict(r["params"]), "iterations": r["iterations"],
+                        "seconds": r["seconds"], "online_seconds": r["online_seconds"],
+                        "final_relative_displacement": r["final_relative_displacement"],
+                        **{k: v for k, v in common.items() if k != "input"},
+                        "l1_normals_after": r["l1_normals_after"]})
+        else:
+            print_json({**common, "runs": [
+                {"lambda": r["lam"], "output": r["output"], "params": params_to_dict(r["params"]),
+                 "iterations": r["iterations"], "seconds": r["seconds"],
+                 "online_seconds": r["online_seconds"],
+                 "final_relative_displacement": r["final_relative_displacement"],
+                 "l1_normals_after": r["l1_normals_after"]} for r in results]})
     else:
-        print(f"Stylized {args.mesh} in {seconds:.2f} s ({last.iteration} iterations); mean L1 "
-              f"norm of normals {l1_before:.4f} -> {l1_after:.4f}; wrote {args.output}.")
+        how = ("on every triangle" if prog is None else
+               f"through a {int(prog['target_faces']):,}-triangle copy")
+        for r in results:
+            print(f"Stylized {args.mesh} (λ {r['lam']:g}) in {r['seconds']:.2f} s "
+                  f"({r['iterations']} iterations); mean L1 norm of normals {l1_before:.4f} -> "
+                  f"{r['l1_normals_after']:.4f}; wrote {r['output']}.")
+        pre = "" if preprocess is None else f" (pre-processing {preprocess:.1f} s, once)"
+        print(f"Worked {how}{pre}: {reason}.")
     return 0
 
 
@@ -208,7 +289,7 @@ def analogy_progressive(args: argparse.Namespace, options: dict, n_faces: int) -
         if options["progressive"] is not None:  # no previews on the command line
             options["progressive"] = {**options["progressive"], "preview_every": 0}
         return False
-    prog = _progressive_choice(args, n_faces, "analogy")
+    prog = _progressive_choice(args, n_faces, "analogy")[0]
     options["progressive"] = None if prog is None else params_to_dict(prog)
     return prog is not None and args.progressive_faces is None
 
@@ -286,7 +367,8 @@ def _add_progressive_arguments(s: argparse.ArgumentParser) -> None:
     s.add_argument("--progressive-faces", type=int, metavar="M",
                    help="affine progressive meshes (thesis Alg. 4): stylize a decimated copy "
                         "with M triangles, then put the details back; for big meshes. On by "
-                        f"default (M = 20,000) above {AUTO_PROGRESSIVE_FACES:,} triangles")
+                        f"default (M = 20,000) above {AUTO_PROGRESSIVE_FACES:,} triangles, "
+                        "where it was measured faster")
     s.add_argument("--no-progressive", action="store_true",
                    help="never use progressive meshes, even for big meshes (slower)")
 
@@ -319,6 +401,12 @@ def add_parsers(sub) -> None:
                         "meshes). Default: direct (or the project's saved choice).")
     add_params_file_argument(s)
     add_params_arguments(s, CubicParams)
+    for action in s._actions:  # several λ in one run: the pre-processing is shared
+        if action.dest == "lam":
+            action.nargs = "+"
+            action.help = (action.help + " Several values: one output per value (OUTPUT "
+                           "gets _lambdaVALUE before its extension, or put {lam} in it); "
+                           "factorizations and progressive meshes are built once.")
     s.set_defaults(func=cmd_cubic)
 
     s = sub.add_parser("analogy", help="normal-driven shape analogy (thesis ch. 6)",

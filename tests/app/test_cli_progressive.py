@@ -1,0 +1,84 @@
+"""``stylize3d cubic`` with several λ in one run (the solver and progressive mesh built once),
+and the automatic choice of progressive meshes saying why (issue 25)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from algorithms.deform import progressive
+from algorithms.mesh import read_mesh
+from app import cli
+from tests.conftest import shared_mesh
+
+
+def _json(capsys):
+    cap = capsys.readouterr()
+    return json.loads(cap.out), cap.err
+
+
+def test_several_lambdas_share_the_preprocessing(capsys, tmp_path):
+    src = str(shared_mesh("bob.obj"))
+    out = str(tmp_path / "bob.ply")
+    code = cli.main(["cubic", src, "-o", out, "--lambda", "0.2", "0.5", "--json", "--quiet",
+                     "--progressive-faces", "3000"])
+    assert code == 0
+    d, _ = _json(capsys)
+    assert [r["lambda"] for r in d["runs"]] == [0.2, 0.5]
+    assert [r["output"] for r in d["runs"]] == [str(tmp_path / "bob_lambda0.2.ply"),
+                                                str(tmp_path / "bob_lambda0.5.ply")]
+    assert d["preprocess_seconds"] > 0 and d["progressive_faces"] == 3000
+    assert "--progressive-faces 3000" in d["progressive_reason"]
+    # the second λ is what a run with that λ alone gives, and more cubic than the first
+    assert d["runs"][1]["l1_normals_after"] < d["runs"][0]["l1_normals_after"]
+    single = str(tmp_path / "single.ply")
+    assert cli.main(["cubic", src, "-o", single, "--lambda", "0.5", "--json", "--quiet",
+                     "--progressive-faces", "3000"]) == 0
+    one, _ = _json(capsys)
+    assert one["l1_normals_after"] == d["runs"][1]["l1_normals_after"]
+    assert np.array_equal(read_mesh(single).V, read_mesh(d["runs"][1]["output"]).V)
+
+
+def test_several_lambdas_with_a_placeholder_and_refusals(capsys, tmp_path):
+    src = str(shared_mesh("spot_lowres.obj"))
+    code = cli.main(["cubic", src, "-o", str(tmp_path / "s-{lam}.obj"), "--lambda", "0.1",
+                     "0.3", "--quiet"])
+    assert code == 0
+    assert (tmp_path / "s-0.1.obj").exists() and (tmp_path / "s-0.3.obj").exists()
+    text = capsys.readouterr().out
+    assert text.count("Stylized") == 2 and "on every triangle" in text
+    # the same value twice, and an existing output, are refused before anything runs
+    assert cli.main(["cubic", src, "-o", str(tmp_path / "t.obj"), "--lambda", "0.1",
+                     "0.1"]) == 5
+    assert cli.main(["cubic", src, "-o", str(tmp_path / "s-{lam}.obj"), "--lambda", "0.3",
+                     "0.7"]) == 3
+    assert not (tmp_path / "s-0.7.obj").exists()
+
+
+def test_batch_jobs_take_one_lambda():
+    from algorithms.errors import ParameterError
+    from app.cli.deform import cubic_job
+
+    parser = cli.build_parser("cubic")
+    args = parser.parse_args(["cubic", "x.obj", "-o", "y.obj", "--lambda", "0.2", "0.4"])
+    with pytest.raises(ParameterError):
+        cubic_job(args, 1000)
+    args = parser.parse_args(["cubic", "x.obj", "-o", "y.obj", "--lambda", "0.3"])
+    assert cubic_job(args, 1000)[0].lam == 0.3
+
+
+@pytest.mark.parametrize("threshold,expect", [(1000, True), (10_000, False)])
+def test_automatic_choice_says_why(monkeypatch, capsys, tmp_path, threshold, expect):
+    monkeypatch.setattr(progressive, "AUTO_PROGRESSIVE_FACES", threshold)
+    src = str(shared_mesh("spot_lowres.obj"))  # 1,654 triangles
+    assert cli.main(["cubic", src, "-o", str(tmp_path / "a.obj"), "--json"]) == 0
+    d, err = _json(capsys)
+    assert d["progressive_auto"] is expect
+    assert "1,654 triangles" in d["progressive_reason"]
+    assert f"{threshold:,}" in d["progressive_reason"]
+    if expect:
+        assert d["progressive_reason"] in err and "faster" in err
+    else:
+        assert d["progressive_faces"] is None and "every triangle" in d["progressive_reason"]
