@@ -6,6 +6,12 @@ autograd through the same rasterization, and a whole guided-filter run with its 
 
 Prints sizes, medians and ratios measured in this run. The mesh is Loop-subdivided once
 (fandisk: 7,229 -> 28,910 vertices, the thesis's "26K" row).
+
+Threads (issue 25): the last section runs rasterize, render and the image VJP at 128^2 and 256^2
+in child processes with NUMBA_NUM_THREADS=1 and =2 (alternating rounds,
+benchmarks/_threads.py); ratio = 2 threads / 1 thread. The VJP's per-face terms run on the
+threads; the rasterizer stays on one thread. ``--no-threads`` skips it, ``--rounds`` sets the
+rounds; ``--skip-run`` does not skip it.
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks._threads import child_report, threads_section  # noqa: E402
 from benchmarks._timing import mesh_path  # noqa: E402
 
 
@@ -59,6 +66,41 @@ def torch_peer(V, F, face_id, G, light_matrix, *, seen_only=False):
     return Vt.grad.numpy()
 
 
+def threads_child(mesh: str, repeat: int) -> None:
+    """Child of the threads section: render and VJP with this process's Numba threads."""
+    from algorithms.mesh import loop_subdivide, read_mesh
+    from algorithms.mesh.operators import normalize_unit_box
+    from algorithms.paparazzi import offset_surface, sample_camera
+    from algorithms.render import LambertianShading, image_vjp, rasterize, render
+
+    d = read_mesh(mesh_path(mesh))
+    V, F = loop_subdivide(d.V, d.F, 1)
+    V = normalize_unit_box(V)[0] * 2
+    off = offset_surface(V, F, 0.1)
+    sh = LambertianShading()
+    times = {}
+    for res in (128, 256):
+        rng = np.random.default_rng(0)
+        cams = [sample_camera(off, rng, resolution=res) for _ in range(repeat)]
+        Gs = [np.random.default_rng(i).standard_normal((res, res, 3)) for i in range(repeat)]
+        rs = [render(V, F, c, sh) for c in cams]
+        for i in range(repeat):
+            image_vjp(V, F, rs[i], Gs[i])
+        k = iter(range(10**9))
+        n = 2 * repeat
+        times[f"rasterize {res}^2"] = 1e3 * timed(
+            lambda: rasterize(V, F, cams[next(k) % repeat]), n)[0]
+        times[f"render {res}^2"] = 1e3 * timed(
+            lambda: render(V, F, cams[next(k) % repeat], sh), n)[0]
+
+        def vjp():
+            i = next(k) % repeat
+            image_vjp(V, F, rs[i], Gs[i])
+        times[f"image VJP {res}^2 ({int(np.median([len(r.faces) for r in rs]))} faces)"] = \
+            1e3 * timed(vjp, n)[0]
+    child_report(times)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--mesh", default="fandisk.off")
@@ -69,7 +111,16 @@ def main() -> int:
                     help="whole run's NAdam step (0 = the guided filter's default, as the CLI)")
     ap.add_argument("--remesh-threshold", type=float, default=0.0,
                     help="whole run's remesh_threshold (0 = remesh at every check, the thesis)")
+    ap.add_argument("--no-threads", action="store_true", help="skip the threads section")
+    ap.add_argument("--rounds", type=int, default=3, help="rounds of the threads section")
+    ap.add_argument("--threads-child", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args()
+    if a.threads_child:
+        threads_child(a.mesh, a.repeat)
+        return 0
+    if not a.no_threads and mesh_path(a.mesh).exists():
+        threads_section(__file__, "paparazzi", ["--mesh", a.mesh, "--repeat", str(a.repeat)],
+                        rounds=a.rounds, title=f"renderer on {a.mesh} subdivided once")
     import torch
 
     torch.set_num_threads(1)

@@ -6,7 +6,8 @@ spherical-harmonics shading and its derivatives of :mod:`algorithms.render.sh`.
 Importing this module imports :mod:`numba`; :mod:`algorithms.render.raster` loads it lazily
 through :class:`algorithms.compiled.KernelModule` and falls back to its NumPy code when it
 is unavailable or switched off (``STYLIZE3D_NUMBA=0``). ``@njit(cache=True, nogil=True)``, one
-thread, ``fastmath`` off (no FMA contraction, so the projection is bit-identical to
+thread except the normal derivative's per-face terms (Numba threads, issue 25: the terms are
+added up in face order afterwards, so the same bits for any thread count), ``fastmath`` off (no FMA contraction, so the projection is bit-identical to
 :meth:`Camera.to_pixels`). Same rules as the NumPy code (see :mod:`algorithms.render.raster`):
 pixel centres at integer coordinates, a pixel is covered when its three barycentric coordinates are
 ``>= 0``, the nearest depth ``> near`` wins, ties go to the lower face index. Each kernel's
@@ -18,7 +19,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+from ..compiled import use_threads
+
+VJP_CHUNK = 1024
+"""Faces per work unit of the threaded normal derivative (fixed: the split does not depend on
+the number of threads)."""
 
 __all__ = ["project", "rasterize", "project_rasterize", "barycentrics", "barycentrics_q",
            "seen_faces", "seen_faces_among", "seen_lookup", "slot_paint", "face_normals",
@@ -744,38 +751,49 @@ def face_sums(slot, G, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def lambert_image_vjp(V, F, slot, faces, G, A):  # pragma: no cover - compiled
-    """``dE/dV (n, 3)`` of Lambertian shading without albedo in one call: :func:`face_sums` of
-    ``G (H, W, C)`` into ``gc``, then :func:`lambert_normal_vjp`."""
+def _lambert_image_vjp(V, F, slot, faces, G, A, par):  # pragma: no cover - compiled
     gc = np.zeros((faces.shape[0], G.shape[2]))
     face_sums(slot, G, gc)
     out = np.zeros((V.shape[0], 3))
-    _normal_vjp(V, F, faces, gc, A, out)
+    _normal_vjp(V, F, faces, gc, A, out, par)
     return out
 
 
-@njit(cache=True, nogil=True)
-def normal_vjp(V, F, faces, g, out):  # pragma: no cover - compiled
+def lambert_image_vjp(V, F, slot, faces, G, A):
+    """``dE/dV (n, 3)`` of Lambertian shading without albedo in one call: :func:`face_sums` of
+    ``G (H, W, C)`` into ``gc``, then :func:`lambert_normal_vjp`."""
+    return _lambert_image_vjp(V, F, slot, faces, G, A, _threads(faces.shape[0]))
+
+
+def normal_vjp(V, F, faces, g, out):
     """``out (n, 3)`` (zeroed beforehand) += ``sum_j sum_k -n_j (h_jk . g_j) / |h_jk|^2`` at the
     corners ``v_k`` of the faces ``faces`` (see :mod:`algorithms.render.render`)."""
-    _normal_vjp(V, F, faces, g, np.empty((0, 0)), out)
+    _normal_vjp(V, F, faces, g, np.empty((0, 0)), out, _threads(faces.shape[0]))
 
 
-@njit(cache=True, nogil=True)
-def lambert_normal_vjp(V, F, faces, gc, A, out):  # pragma: no cover - compiled
+def lambert_normal_vjp(V, F, faces, gc, A, out):
     """:func:`normal_vjp` of ``g_j = A gc_j`` (``A (3, C)``, ``gc (k, C)``): the gradient of
     linear shading (colour ``= N M * scale + offset``: ``A = scale M``) in the same loop."""
-    _normal_vjp(V, F, faces, gc, A, out)
+    _normal_vjp(V, F, faces, gc, A, out, _threads(faces.shape[0]))
+
+
+def _threads(k: int) -> bool:
+    """Run the per-face part on threads: more than one chunk of faces and threads allowed."""
+    return k > VJP_CHUNK and use_threads()
 
 
 @njit(cache=True, nogil=True)
-def _normal_vjp(V, F, faces, g, A, out):  # pragma: no cover - compiled
-    """:func:`normal_vjp` (``A`` empty) or :func:`lambert_normal_vjp`."""
+def _normal_vjp_terms(V, F, faces, g, A, lo, hi, T, ok):  # pragma: no cover - compiled
+    """Faces ``faces[lo:hi]``: ``T[q, k]`` = the term of face q at its corner k, ``ok[q, k]``
+    whether there is one (a degenerate face or corner adds nothing)."""
     X = np.empty((3, 3))
     lin = A.shape[0] == 3
     C = g.shape[1]
-    for q in range(faces.shape[0]):
+    for q in range(lo, hi):
         f = faces[q]
+        ok[q, 0] = False
+        ok[q, 1] = False
+        ok[q, 2] = False
         for k in range(3):
             for d in range(3):
                 X[k, d] = V[F[f, k], d]
@@ -824,10 +842,41 @@ def _normal_vjp(V, F, faces, g, A, out):  # pragma: no cover - compiled
             if not hh > 0.0:
                 continue
             s = -(hx * gx + hy * gy + hz * gz) / hh
-            v = F[f, k]
-            out[v, 0] += nx * s
-            out[v, 1] += ny * s
-            out[v, 2] += nz * s
+            T[q, k, 0] = nx * s
+            T[q, k, 1] = ny * s
+            T[q, k, 2] = nz * s
+            ok[q, k] = True
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _normal_vjp_terms_par(V, F, faces, g, A, T, ok):  # pragma: no cover - compiled
+    m = faces.shape[0]
+    for c in prange((m + VJP_CHUNK - 1) // VJP_CHUNK):
+        _normal_vjp_terms(V, F, faces, g, A, c * VJP_CHUNK, min(m, (c + 1) * VJP_CHUNK), T, ok)
+
+
+@njit(cache=True, nogil=True)
+def _normal_vjp(V, F, faces, g, A, out, par):  # pragma: no cover - compiled
+    """:func:`normal_vjp` (``A`` empty) or :func:`lambert_normal_vjp`.
+
+    The terms of the faces are computed first (on threads when ``par``: each face's by one
+    thread, the same operations whatever the thread count), then added to ``out`` at the
+    corners in face order, as one serial loop would: the same bits for any thread count."""
+    m = faces.shape[0]
+    T = np.empty((m, 3, 3))
+    ok = np.empty((m, 3), np.bool_)
+    if par:
+        _normal_vjp_terms_par(V, F, faces, g, A, T, ok)
+    else:
+        _normal_vjp_terms(V, F, faces, g, A, 0, m, T, ok)
+    for q in range(m):
+        f = faces[q]
+        for k in range(3):
+            if ok[q, k]:
+                v = F[f, k]
+                out[v, 0] += T[q, k, 0]
+                out[v, 1] += T[q, k, 1]
+                out[v, 2] += T[q, k, 2]
 
 
 # --------------------------------------------------------------------------------------------
