@@ -1,58 +1,83 @@
-"""Paparazzi per-filter effects (issue 12): each filter, with the CLI's defaults, changes the shape
-measurably in its own way and leaves a clean 2-manifold with the input's topology.
+"""Paparazzi per-filter effects (issues 12 and 23): each filter, with the CLI's defaults, lowers its
+own energy averaged over 16 fixed monitor views, changes the shape measurably in its own way,
+beats remeshing alone (the control) and leaves a clean 2-manifold with the input's topology.
 
     python benchmarks/paparazzi_effects.py [--meshes spot_lowres.obj bob.obj fandisk.off
-        camelhead.off] [--filters guided quantize slic l0 neural-style] [--iterations 1000]
+        camelhead.off blob.obj bumpy.obj pretzel.obj] [--filters guided quantize slic l0
+        neural-style] [--iterations 1000] [--no-sheets]
+    python benchmarks/paparazzi_effects.py --suspects [--meshes bob.obj fandisk.off]
 
-For each mesh (tests/data; Loop-subdivided until it has at least 5,000 vertices, e.g. spot 829 ->
-13,234) and each filter, runs ``Paparazzi`` with ``PaparazziParams(iterations=N)`` and the
-filter's default Params -- exactly what ``stylize3d paparazzi MESH -o OUT --filter NAME`` builds
-from its flags' defaults -- and prints one row: vertices in/out, seconds, the filter's measure
-before -> after and whether it moved the expected way, the output checks (2-manifold, same
-Euler characteristic and boundary-loop count, libigl self-intersecting pairs of the input and of
-the output, and how many of the output's are new: farther than 4 edge lengths from the input's
-own), and how often the surface crossed itself on the way (remeshings, those rejected, retries of
-remeshings that crossed it; rollbacks, the vertices held still after them and the learning rate's
-factor at the end (1 = never halved); see algorithms/paparazzi/optimize.py).
+For each mesh (tests/data, ../shared/meshes or resources/samples; Loop-subdivided until it has at
+least 5,000 vertices, e.g. spot 829 -> 13,234; the bundled samples are used as they are) and each
+filter, runs ``Paparazzi`` with ``PaparazziParams(iterations=N)`` and the filter's default Params
+-- exactly what ``stylize3d paparazzi MESH -o OUT --filter NAME`` builds from its flags' defaults
+-- and the *control*: the same run with a filter that returns each picture unchanged (nothing
+pulls on the surface; only the remeshing acts, with the filter's own remeshing settings). One row
+per run:
 
-Measures (algorithms/paparazzi/measures.py):
-  quantize      area fraction of faces whose normal is within 15 deg of the 20 palette normals (up)
-  slic, l0      area fraction of faces whose dihedral angles to all neighbours are < 3 deg (up);
-                also printed: flat1, the share of the interior edge length along which the
-                two faces meet at < 1 deg (up; patches a few triangles wide count there too)
-  guided        bending energy sum |L V|^2 / M (discrete Willmore energy; down)
-  neural-style  Gram (style) loss between the monitor view and its stylization (down)
-  identity      (--filters identity) the control run of the guided row: f(R) = R, so the
-                gradient is 0 and only the remeshing every 30 iterations acts; its bending
-                energy says how much of the guided row's change is the remeshing's;
-                identity-planar: the same run measured like the L0 / SLIC rows
-A filter that is not registered (neural-style needs its optional packages) is skipped with a
-message.
+  E16 before -> after   the run's monitor energy (mean over the 16 fixed monitor views, the
+                        filter's own energy: 1/2 |f(R) - R|^2 over the foreground); must fall
+  measure               the filter's shape measure before -> after, and the control's after;
+                        "beats" says whether the filter moved it further than the control
+  crease5               (guided) share of the length of the input's sharp edges (> 30 deg) whose
+                        dihedral angle the output keeps within 5 deg (measures.crease_fraction)
+  checks                2-manifold, same Euler characteristic and boundary loops, libigl
+                        self-intersecting pairs in -> out
+
+Measures (algorithms/paparazzi/measures.py): quantize palette15 (up); slic, l0 planar3 (up;
+also flat1); guided bending sum |L V|^2 / M (down); neural-style Gram loss of monitor view 0
+against its stylization (down).
+
+Unless --no-sheets, writes one contact sheet per filter, docs/images/paparazzi_<filter>.png:
+one row per mesh, before / after / control, rendered off-screen with a grey light from a fixed
+three-quarter view (algorithms.render).
+
+``--suspects`` measures, for the guided filter, each suspect of issue 23 separately (see
+docs/paparazzi.md): the filter's change per view against the optimizer's step, the radius
+against the triangles' size in pixels, what a remeshing does to the energy, resolution and the
+defaults (old: radius 15, epsilon 1e-8; the thesis's Fig. 2.15: radius 4, epsilon 0.02).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 
 from benchmarks._timing import mesh_path  # noqa: E402
 
 MIN_VERTICES = 5000
+SAMPLES = ROOT / "resources" / "samples"
+
+
+def load(name):
+    from algorithms.mesh import loop_subdivide, read_mesh
+
+    p = SAMPLES / name if (SAMPLES / name).exists() else mesh_path(name)
+    if not p.exists():
+        return None
+    d = read_mesh(p)
+    V, F = d.V, d.F
+    if p.parent != SAMPLES:
+        while len(V) < MIN_VERTICES:
+            V, F = loop_subdivide(V, F, 1)
+    return V, F
 
 
 def _gram_monitor(run, V, F):
-    """Gram loss between the monitor view (world-frame V) and the filter's stylization of it."""
+    """Gram loss between monitor view 0 (world-frame V) and the filter's stylization of it."""
     from algorithms.paparazzi.filters import FilterContext
     from algorithms.paparazzi.neural_style import gram_style_loss
     from algorithms.render import render
 
-    cam = run.camera(np.random.default_rng([run.params.seed, 1]))
+    cam = run.monitor_cameras()[0]
     X = (np.asarray(V) - run.center) / run.scale
     r = render(X, F, cam, run.shading)
     ctx = FilterContext(camera=cam, mask=r.mask, state=run.state)
@@ -65,57 +90,89 @@ def measure(name, run, V, F):
 
     if name == "quantize":
         return "palette15", palette_fraction(V, F), +1
-    if name in ("slic", "l0", "identity-planar"):
+    if name in ("slic", "l0"):
         return "planar3", planar_area_fraction(V, F), +1
-    if name in ("guided", "identity"):
+    if name == "guided":
         return "bending", bending_energy(V, F), -1
     if name == "neural-style":
         return "gram", _gram_monitor(run, V, F), -1
     raise KeyError(name)
 
 
-def second_measure(name, V, F):
-    """The planar rows' second look (flat_edge_fraction), or None for the other filters."""
-    from algorithms.paparazzi.measures import flat_edge_fraction
-
-    if name in ("slic", "l0", "identity-planar"):
-        return "flat1", flat_edge_fraction(V, F)
-    return None
+def control_spec(spec):
+    """The filter's control: the image itself, with the filter's resolution and remeshing."""
+    return dataclasses.replace(spec, name=f"{spec.name}-control", kind="iterative",
+                               function=lambda image, params, ctx: image)
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--meshes", nargs="+",
-                    default=["spot_lowres.obj", "bob.obj", "fandisk.off", "camelhead.off"])
-    ap.add_argument("--filters", nargs="+",
-                    default=["guided", "quantize", "slic", "l0", "neural-style"])
-    ap.add_argument("--iterations", type=int, default=1000)
-    a = ap.parse_args()
-    from algorithms.mesh import loop_subdivide, read_mesh
+def run_filter(V, F, spec, fparams, params):
+    from algorithms.paparazzi import Paparazzi
+
+    t = time.perf_counter()
+    run = Paparazzi(V, F, spec, fparams, params)
+    last = None
+    for last in run.steps():
+        pass
+    return run, last, time.perf_counter() - t
+
+
+def view_picture(V, F, size=256):
+    """A grey flat-shaded picture of ``(V, F)`` from a fixed three-quarter view (uint8)."""
+    from algorithms.render import LambertianShading, look_at, render
+
+    c = (V.max(0) + V.min(0)) / 2
+    s = float(np.linalg.norm(V.max(0) - V.min(0)))
+    X = (V - c) / s * 2.0
+    cam = look_at((1.6, 1.0, 2.4), (0, 0, 0), width=2.2, resolution=size)
+    sh = LambertianShading(directions=[[0.35, 0.6, 1.0]], colors=[[1.0]], mapping="linear")
+    r = render(X, F, cam, sh)
+    img = np.clip(0.15 + 0.85 * r.image[..., 0], 0, 1)
+    img[~r.mask] = 1.0
+    return (img * 255 + 0.5).astype(np.uint8)
+
+
+def contact_sheet(rows, path, title):
+    """rows: [(label, before, after, control-or-None)] of uint8 pictures -> a PNG."""
+    from PIL import Image, ImageDraw
+
+    size = rows[0][1].shape[0]
+    pad, head = 6, 22
+    W = 3 * size + 4 * pad + 110
+    H = head + len(rows) * (size + pad) + pad + 16
+    sheet = Image.new("L", (W, H), 255)
+    d = ImageDraw.Draw(sheet)
+    d.text((pad, 4), title, fill=0)
+    for j, cap in enumerate(("before", "after", "control (remeshing alone)")):
+        d.text((110 + pad + j * (size + pad), head - 2), cap, fill=0)
+    for i, (label, *pics) in enumerate(rows):
+        y = head + 14 + i * (size + pad)
+        d.text((pad, y + size // 2), label, fill=0)
+        for j, pic in enumerate(pics):
+            if pic is not None:
+                sheet.paste(Image.fromarray(pic), (110 + pad + j * (size + pad), y))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    sheet.save(path)
+
+
+def effects(a) -> int:
     from algorithms.mesh.topology import boundary_loops, euler_characteristic, is_manifold
-    from algorithms.paparazzi import (Paparazzi, PaparazziParams, count_self_intersections,
-                                      filter_names, get_filter, register_filter)
+    from algorithms.paparazzi import (PaparazziParams, count_self_intersections, filter_names,
+                                      get_filter)
+    from algorithms.paparazzi.measures import crease_fraction
 
-    for control in ("identity", "identity-planar"):
-        if control in a.filters and control not in filter_names():
-            planar = "planar" in control  # the L0 / SLIC rows' control: their remeshing too
-            register_filter(control, kind="iterative", resolution=256 if planar else 128,
-                            crease_angle=45.0 if planar else 0.0,
-                            description="control: the image itself")(
-                lambda image, params, ctx: image)
-
-    print(f"{'mesh':<16}{'filter':<13}{'V in':>7}{'V out':>7}{'sec':>8}  {'measure':<10}"
-          f"{'before':>10} -> {'after':<10}{'ok':<4}{'manifold':<9}{'topology':<9}"
-          f"{'crossings in->out':>18}", flush=True)
+    import os
+    print(f"load average {os.getloadavg()[0]:.2f}; {a.iterations} iterations; 16 monitor views",
+          flush=True)
+    print(f"{'mesh':<16}{'filter':<13}{'V in':>7}{'V out':>7}{'sec':>7}{'ctl s':>7}  "
+          f"{'E16 before -> after':<24}{'falls':<6}{'measure':<10}{'before':>9} -> "
+          f"{'after':<9}{'control':>9} {'beats':<6}{'crease5':<16}checks", flush=True)
+    sheets: dict[str, list] = {}
     for mesh in a.meshes:
-        p = mesh_path(mesh)
-        if not p.exists():
+        got = load(mesh)
+        if got is None:
             print(f"{mesh} not found; skipping")
             continue
-        d = read_mesh(p)
-        V, F = d.V, d.F
-        while len(V) < MIN_VERTICES:
-            V, F = loop_subdivide(V, F, 1)
+        V, F = got
         topo = (euler_characteristic(F), len(boundary_loops(F)))
         for name in a.filters:
             if name not in filter_names():
@@ -123,34 +180,158 @@ def main() -> int:
                       f"(its optional packages are missing)", flush=True)
                 continue
             spec = get_filter(name)
-            t = time.perf_counter()
-            run = Paparazzi(V, F, spec, spec.params(), PaparazziParams(iterations=a.iterations))
-            last = None
-            for last in run.steps():
-                pass
-            sec = time.perf_counter() - t
+            params = PaparazziParams(iterations=a.iterations)
+            run, last, sec = run_filter(V, F, spec, spec.params(), params)
+            crun, clast, csec = run_filter(V, F, control_spec(spec), spec.params(), params)
             Vo, Fo = last.V, last.F
             m = last.metrics
             label, before, sign = measure(name, run, V, F)
             _, after, _ = measure(name, run, Vo, Fo)
-            ok = (after - before) * sign > 0
+            _, ctl, _ = measure(name, run, clast.V, clast.F)
+            beats = (after - ctl) * sign > 0
+            e0, e1 = m["initial_monitor_energy"], m["monitor_energy"]
             same = (euler_characteristic(Fo), len(boundary_loops(Fo))) == topo
             crossings = count_self_intersections(Vo, Fo)
-            crossings_in = run.input_intersections
-            new = run.new_self_intersections(Vo, Fo) if crossings else 0
-            second = second_measure(name, V, F)
-            also = (f"  [{second[0]} {second[1]:.4g} -> {second_measure(name, Vo, Fo)[1]:.4g}]"
-                    if second else "")
-            print(f"{mesh:<16}{name:<13}{len(V):>7}{len(Vo):>7}{sec:>8.1f}  {label:<10}"
-                  f"{before:>10.4g} -> {after:<10.4g}{'yes' if ok else 'NO':<4}"
-                  f"{'yes' if is_manifold(Fo) else 'NO':<9}{'same' if same else 'CHANGED':<9}"
-                  f"{crossings_in:>12} -> {crossings:<3} ({new} new)  "
-                  f"(remeshes {int(m['remeshes'])}, "
-                  f"rejected {int(m['remesh_rejected'])}, retries {int(m['remesh_retries'])}; "
-                  f"rollbacks {int(m['rollbacks'])}, held {int(m['held_vertices'])} V; "
-                  f"step x{m['learning_rate'] / (0.2 * run.learning_rate):.3g}){also}",
-                  flush=True)
+            crease = ""
+            if name == "guided":
+                crease = (f"{crease_fraction(V, F, Vo, Fo):.3f} "
+                          f"(c {crease_fraction(V, F, clast.V, clast.F):.3f})")
+            print(f"{mesh:<16}{name:<13}{len(V):>7}{len(Vo):>7}{sec:>7.1f}{csec:>7.1f}  "
+                  f"{f'{e0:.4g} -> {e1:.4g}':<24}{'yes' if e1 < e0 else 'NO':<6}{label:<10}"
+                  f"{before:>9.4g} -> {after:<9.4g}{ctl:>9.4g} {'yes' if beats else 'NO':<6}"
+                  f"{crease:<16}{'manifold' if is_manifold(Fo) else 'NOT-MANIFOLD'} "
+                  f"{'same-topology' if same else 'TOPOLOGY-CHANGED'} crossings "
+                  f"{run.input_intersections}->{crossings} (rollbacks {int(m['rollbacks'])}, "
+                  f"rejected remeshes {int(m['remesh_rejected'])})", flush=True)
+            if not a.no_sheets:
+                sheets.setdefault(name, []).append(
+                    (f"{Path(mesh).stem}\n{len(V):,} V", view_picture(V, F),
+                     view_picture(Vo, Fo), view_picture(clast.V, clast.F)))
+    for name, rows in sheets.items():
+        out = ROOT / "docs" / "images" / f"paparazzi_{name}.png"
+        contact_sheet(rows, out, f"Paparazzi, filter {name}: {a.iterations} iterations, "
+                                 "command-line defaults")
+        print(f"wrote {out.relative_to(ROOT)}")
     return 0
+
+
+# ----------------------------------------------------------------------------- suspects
+def _step_against_change(run, V, F, views=32):
+    """(rms colour change |f(R) - R| per foreground pixel, the displacement it asks for (2 |dR|
+    times the mean edge length: colour = (n + 1) / 2, a face turns by about |dn| radians when a
+    corner moves |dn| h), the NAdam step (about the learning rate per coordinate, whatever the
+    gradient's size)) over ``views`` random views of the input."""
+    from algorithms.render import render
+
+    rng = np.random.default_rng(7)
+    X = (np.asarray(V) - run.center) / run.scale
+    dR = []
+    for _ in range(views):
+        cam = run.camera(rng)
+        r = render(X, F, cam, run.shading)
+        E, G, _, _ = run._filter(r, run._context(r, cam))
+        if r.mask.any():
+            dR.append(np.sqrt((G[r.mask] ** 2).sum(1).mean()))
+    rms = float(np.mean(dR))
+    return rms, 2.0 * rms * run.edge_length, run.learning_rate
+
+
+def _remesh_effect(V, F, spec, fparams, params):
+    """Mean monitor energy just before and just after each remeshing of a run, and its change
+    over the whole run: does remeshing undo what the steps did?"""
+    from algorithms.paparazzi import Paparazzi
+
+    run = Paparazzi(V, F, spec, fparams, params)
+    cams = run.monitor_cameras()
+    jumps = []
+    original = run._remesh
+
+    def remesh(X, G, free):
+        U, H = original(X, G, free)
+        jumps.append((run.monitor_energy(X, G, cams), run.monitor_energy(U, H.astype(np.int64),
+                                                                           cams)))
+        return U, H
+
+    run._remesh = remesh
+    last = None
+    for last in run.steps():
+        pass
+    m = last.metrics
+    return m["initial_monitor_energy"], m["monitor_energy"], jumps, last
+
+
+def suspects(a) -> int:
+    import os
+
+    from algorithms.paparazzi import PaparazziParams, bending_energy, get_filter
+    from algorithms.paparazzi.measures import crease_fraction
+
+    spec = get_filter("guided")
+    P = spec.params
+    print(f"load average {os.getloadavg()[0]:.2f}; guided filter suspects; "
+          f"{a.iterations} iterations", flush=True)
+    settings = {"old (r 15, eps 1e-8)": P(radius=15, epsilon=1e-8),
+                "thesis (r 4, eps 0.02)": P(radius=4, epsilon=0.02)}
+    for mesh in a.meshes:
+        got = load(mesh)
+        if got is None:
+            continue
+        V, F = got
+        from algorithms.paparazzi import Paparazzi
+
+        probe = Paparazzi(V, F, spec, P(), PaparazziParams(iterations=1))
+        px = probe.edge_length / probe.width * probe.resolution
+        print(f"\n{mesh}: {len(V):,} vertices; mean edge {probe.edge_length:.4f} "
+              f"(shape in a cube of side 2) = {px:.1f} px at {probe.resolution} px, view "
+              f"{probe.width}; radius {P().radius} px = {P().radius / px:.2f} edges "
+              f"(subsampling {P().subsample}: windows of {max(1, round(P().radius / P().subsample))}"
+              f" coarse pixels)")
+        for label, fp in settings.items():
+            run = Paparazzi(V, F, spec, fp, PaparazziParams(iterations=1))
+            rms, want, lr = _step_against_change(run, V, F)
+            print(f"  {label:<24} colour change per view {rms:.3g} (rms per pixel) -> asks for "
+                  f"{want:.3g} per step; NAdam step ~{lr:.3g} ({lr / want:.3g} x what it asks)")
+        ctl = control_spec(spec)
+        pp = PaparazziParams(iterations=a.iterations)
+        _, _, _, clast = _remesh_effect(V, F, ctl, P(), pp)
+        print(f"  control (remeshing alone): bending {bending_energy(V, F):.4g} -> "
+              f"{bending_energy(clast.V, clast.F):.4g}, crease5 "
+              f"{crease_fraction(V, F, clast.V, clast.F):.3f}")
+        rows = [(label, fp, pp) for label, fp in settings.items()]
+        rows += [(f"thesis, lr {lr:g}", P(radius=4, epsilon=0.02),
+                  PaparazziParams(iterations=a.iterations, learning_rate=lr))
+                 for lr in (2e-5, 1e-4, 2e-4)]
+        rows += [(f"thesis, {res} px", P(radius=4, epsilon=0.02),
+                  PaparazziParams(iterations=a.iterations, resolution=res)) for res in (64, 256)]
+        rows += [(f"thesis, radius {r}", P(radius=r, epsilon=0.02), pp) for r in (8, 15)]
+        rows += [(f"eps {e:g}, r 4", P(radius=4, epsilon=e), pp) for e in (1e-4, 1e-3, 0.1)]
+        rows += [("thesis, no remeshing", P(radius=4, epsilon=0.02),
+                  PaparazziParams(iterations=a.iterations, remesh_every=0))]
+        for label, fp, params in rows:
+            e0, e1, jumps, last = _remesh_effect(V, F, spec, fp, params)
+            up = sum(j[1] - j[0] for j in jumps)
+            print(f"  {label:<24} E16 {e0:.4g} -> {e1:.4g} ({100 * (e1 - e0) / e0:+.1f} %); "
+                  f"remeshings changed it by {up:+.4g} in all ({len(jumps)} of them); bending "
+                  f"{bending_energy(last.V, last.F):.4g}; crease5 "
+                  f"{crease_fraction(V, F, last.V, last.F):.3f}", flush=True)
+    return 0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--meshes", nargs="+", default=None)
+    ap.add_argument("--filters", nargs="+",
+                    default=["guided", "quantize", "slic", "l0", "neural-style"])
+    ap.add_argument("--iterations", type=int, default=1000)
+    ap.add_argument("--no-sheets", action="store_true")
+    ap.add_argument("--suspects", action="store_true")
+    a = ap.parse_args()
+    if a.suspects:
+        a.meshes = a.meshes or ["bob.obj", "fandisk.off"]
+        return suspects(a)
+    a.meshes = a.meshes or ["spot_lowres.obj", "bob.obj", "fandisk.off", "camelhead.off",
+                            "blob.obj", "bumpy.obj", "pretzel.obj"]
+    return effects(a)
 
 
 if __name__ == "__main__":

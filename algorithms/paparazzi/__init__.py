@@ -5,7 +5,7 @@ renderer (:mod:`algorithms.render`). See :mod:`.optimize` for the loop and its c
 from .filters import (FilterContext, FilterSpec, ImageReadError, NoParams, filter_names,
                       get_filter, read_image, register_filter, unregister_filter)
 from .measures import bending_energy, palette_fraction, planar_area_fraction
-from .offset import OffsetSurface, offset_surface, sample_camera
+from .offset import OffsetSurface, monitor_cameras, offset_surface, sample_camera
 from .optimize import (FilterFailed, Paparazzi, PaparazziParams, PaparazziStep,
                        count_self_intersections, paparazzi, paparazzi_iter)
 from . import neural_style  # noqa: F401  (registers the neural-style filter; no heavy imports)
@@ -13,5 +13,6 @@ from . import neural_style  # noqa: F401  (registers the neural-style filter; no
 __all__ = ["FilterContext", "FilterSpec", "ImageReadError", "NoParams", "filter_names",
            "get_filter", "read_image", "register_filter", "unregister_filter", "bending_energy",
            "palette_fraction", "planar_area_fraction", "OffsetSurface", "offset_surface",
-           "sample_camera", "FilterFailed", "Paparazzi", "PaparazziParams", "PaparazziStep",
+           "sample_camera", "monitor_cameras", "FilterFailed", "Paparazzi", "PaparazziParams",
+           "PaparazziStep",
            "count_self_intersections", "paparazzi", "paparazzi_iter"]

@@ -10,6 +10,13 @@
   flat patches only a few triangles wide (SLIC's superpixels covered about 3 triangles of a
   13k-vertex spot with the former 0.3-wide views, about 38 at today's 1.0) add little there
   even when most of their edges are flat.
+* :func:`crease_fraction` -- share of the length of the input's sharp edges (dihedral angle
+  above ``sharp`` degrees, default 30) along which the output still has the input's angle within
+  ``degrees`` (default 5): at three points of each sharp edge, points a quarter of the mean edge
+  length inside each of its two faces are projected onto the output, and the angle between the
+  output's normals there is compared with the input's dihedral angle. The output may have other
+  triangles (Paparazzi remeshes), so it is measured on the surface, not per edge; a crease
+  rounded over one ring of triangles puts both points on the rounding and fails.
 * :func:`bending_energy` -- ``sum_i |(L V)_i|^2 / M_ii`` over the interior vertices (squared
   mean-curvature normal, cotangent Laplacian and barycentric mass of
   :mod:`algorithms.mesh.operators`; a discrete Willmore energy, invariant to scale; guided-filter
@@ -26,7 +33,7 @@ from ..mesh.topology import edge_flaps
 from .filters import icosahedron_face_normals
 
 __all__ = ["palette_fraction", "planar_area_fraction", "flat_edge_fraction",
-           "bending_energy"]
+           "crease_fraction", "bending_energy"]
 
 
 def palette_fraction(V, F, degrees: float = 15.0, palette=None) -> float:
@@ -76,3 +83,36 @@ def bending_energy(V, F) -> float:
     if len(b):
         e[np.unique(b.ravel())] = 0.0
     return float(e.sum())
+
+
+def crease_fraction(V0, F0, V1, F1, degrees: float = 5.0, sharp: float = 30.0) -> float:
+    """See the module docstring; 1.0 when the input has no sharp edge."""
+    import igl
+
+    V0 = np.asarray(V0, float)
+    F0 = np.asarray(F0, np.int64)
+    V1 = np.ascontiguousarray(V1, float)
+    F1 = np.ascontiguousarray(F1, np.int64)
+    E, f0, f1, ang = _dihedral_angles(V0, F0)
+    keep = ang > sharp
+    if not keep.any():
+        return 1.0
+    E, f0, f1, ang = E[keep], f0[keep], f1[keep], ang[keep]
+    L = np.linalg.norm(V0[E[:, 0]] - V0[E[:, 1]], axis=1)
+    h = float(igl.edge_lengths(V0, F0).mean())
+    C0 = V0[F0].mean(1)
+    ok = np.zeros(len(E))
+    for t in (0.2, 0.5, 0.8):
+        P = (1 - t) * V0[E[:, 0]] + t * V0[E[:, 1]]
+        sides = []
+        for f in (f0, f1):
+            d = C0[f] - P
+            d -= ((d * (V0[E[:, 1]] - V0[E[:, 0]])).sum(1, keepdims=True)
+                  / np.maximum(L[:, None] ** 2, 1e-300)) * (V0[E[:, 1]] - V0[E[:, 0]])
+            d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+            Q = P + 0.25 * h * d
+            _, I, _ = igl.point_mesh_squared_distance(Q, V1, F1)
+            sides.append(face_normals(V1, F1)[np.asarray(I, np.int64)])
+        out = np.degrees(np.arccos(np.clip((sides[0] * sides[1]).sum(1), -1, 1)))
+        ok += (np.abs(out - ang) < degrees) / 3.0
+    return float((L * ok).sum() / L.sum())

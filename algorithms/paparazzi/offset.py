@@ -16,6 +16,16 @@ Cameras
 proportional to its area, then a uniform point in it), takes the interpolated outward normal
 there and puts a camera at the point looking along the *inward* normal, with a uniformly random
 roll (up vector) -- thesis 255-257.
+
+Monitor views
+-------------
+:func:`monitor_cameras` is the fixed set of views whose mean energy says whether a whole run
+works (the thesis measures one fixed view, 353-356; one view sees a sixth of the shape at most
+and can rise while the rest falls, so the run's monitor is an average over ``k`` >= 16 views):
+``32 k`` area-uniform candidate points of the offset surface thinned to ``k`` by farthest-point
+sampling (starting from the first candidate), so the views are spread over the whole cage,
+each looking inwards with a random roll, all drawn from the given generator (same seed, same
+views).
 """
 
 from __future__ import annotations
@@ -27,7 +37,7 @@ import numpy as np
 from ..errors import InvalidMeshError
 from ..render import Camera
 
-__all__ = ["OffsetSurface", "offset_surface", "sample_camera"]
+__all__ = ["OffsetSurface", "offset_surface", "sample_camera", "monitor_cameras"]
 
 
 @dataclass
@@ -81,16 +91,17 @@ def offset_surface(V, F, sigma: float, *, max_cells: int = 72) -> OffsetSurface:
     return OffsetSurface(Vo, Fo, N, face_areas(Vo, Fo), float(sigma))
 
 
-def sample_camera(offset: OffsetSurface, rng: np.random.Generator, *, width: float = 0.5,
-                  resolution: int = 128, projection: str = "orthographic",
-                  fov: float = 30.0) -> Camera:
-    """A camera at an area-uniform random point of ``offset``, looking along the inward normal,
-    with a random roll."""
+def _sample_point(offset: OffsetSurface, rng: np.random.Generator):
+    """An area-uniform point of the offset mesh: (face, barycentric weights)."""
     f = int(np.searchsorted(offset.cdf, rng.random(), side="right"))
     f = min(f, len(offset.F) - 1)
     r1, r2 = rng.random(2)
     s = np.sqrt(r1)
-    w = np.array([1 - s, s * (1 - r2), s * r2])
+    return f, np.array([1 - s, s * (1 - r2), s * r2])
+
+
+def _camera_at(offset: OffsetSurface, f: int, w: np.ndarray, rng: np.random.Generator, *,
+               width: float, resolution: int, projection: str, fov: float) -> Camera:
     tri = offset.F[f]
     p = w @ offset.V[tri]
     n = w @ offset.N[tri]
@@ -107,3 +118,30 @@ def sample_camera(offset: OffsetSurface, rng: np.random.Generator, *, width: flo
         if np.linalg.norm(u) > 1e-6:
             break
     return Camera(p, d, u, projection=projection, width=width, fov=fov, resolution=resolution)
+
+
+def sample_camera(offset: OffsetSurface, rng: np.random.Generator, *, width: float = 0.5,
+                  resolution: int = 128, projection: str = "orthographic",
+                  fov: float = 30.0) -> Camera:
+    """A camera at an area-uniform random point of ``offset``, looking along the inward normal,
+    with a random roll."""
+    f, w = _sample_point(offset, rng)
+    return _camera_at(offset, f, w, rng, width=width, resolution=resolution,
+                      projection=projection, fov=fov)
+
+
+def monitor_cameras(offset: OffsetSurface, k: int, rng: np.random.Generator, *,
+                    width: float = 0.5, resolution: int = 128,
+                    projection: str = "orthographic", fov: float = 30.0) -> list[Camera]:
+    """``k`` fixed views spread over ``offset`` (module docstring, *Monitor views*)."""
+    k = max(1, int(k))
+    cand = [_sample_point(offset, rng) for _ in range(32 * k)]
+    P = np.array([w @ offset.V[offset.F[f]] for f, w in cand])
+    chosen = [0]
+    d = np.linalg.norm(P - P[0], axis=1)
+    while len(chosen) < min(k, len(P)):
+        i = int(np.argmax(d))
+        chosen.append(i)
+        d = np.minimum(d, np.linalg.norm(P - P[i], axis=1))
+    return [_camera_at(offset, cand[i][0], cand[i][1], rng, width=width,
+                       resolution=resolution, projection=projection, fov=fov) for i in chosen]

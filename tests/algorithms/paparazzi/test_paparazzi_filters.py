@@ -287,3 +287,30 @@ def test_registry_builtins_one_function_extension_and_unknown_names():
         get_filter("test-darken")
     with pytest.raises(ParameterError, match="kind"):
         register_filter("x", kind="magic")
+
+
+def test_guided_defaults_keep_a_crease_and_smooth_facets_the_old_ones_did_neither():
+    # issue 23: a flat-shaded picture holds a few flat colours per window, which the colour-
+    # guided filter reproduces exactly as epsilon -> 0 (its target = the render), and the fast
+    # variant's subsampling mixes the two sides of a sharp edge
+    from algorithms.paparazzi.filters import GuidedParams
+
+    H = 64
+    crease = np.zeros((H, H, 3))
+    crease[:, :33] = (0.5, 0.5, 0.95)                          # two faces meeting at ~60 deg
+    crease[:, 33:] = (0.93, 0.5, 0.75)
+    x = np.arange(H) / H                                       # a curved strip cut in facets
+    facets = np.stack(np.broadcast_arrays((np.floor(x * 12) / 12)[None, :] * 0.3 + 0.35,
+                                          np.full((H, H), 0.5), np.full((H, H), 0.8)), -1)
+    new = GuidedParams()
+    assert (new.radius, new.epsilon, new.subsample) == (4, 1e-3, 1)
+    q = guided_filter(crease, crease, new.radius, new.epsilon, new.subsample)
+    assert np.abs(q - crease).max() < 0.015 * 0.43           # the crease keeps > 98 % contrast
+    # the authors' script's settings (subsampling 4) and the thesis's epsilon 0.02 blur it
+    assert np.abs(guided_filter(crease, crease, 15, 1e-8, 4) - crease).max() > 0.04
+    assert np.abs(guided_filter(crease, crease, 4, 0.02, 4) - crease).max() > 0.15
+    smooth = guided_filter(facets, facets, new.radius, new.epsilon, new.subsample)
+    step = np.abs(np.diff(facets[H // 2, 8:-8, 0])).max()
+    assert np.abs(np.diff(smooth[H // 2, 8:-8, 0])).max() < 0.6 * step   # facets smoothed
+    same = guided_filter(facets, facets, 15, 1e-8, 1)          # epsilon -> 0: the input back
+    assert np.abs(same - facets).max() < 1e-3
