@@ -19,6 +19,13 @@ process's fixed cost is the same; targets <= 1.2 s and <= 2 s), the time of ``py
 'import torch'`` (what the command no longer pays), and in this process the NumPy inference
 against the PyTorch path (``neural_subdivide_torch``, one torch thread) on the same meshes.
 
+``--roughness`` (issue 22) subdivides every shared mesh as it is (tests/data/*,
+resources/samples/*.obj) 1-3 levels with Loop and with neural subdivision as the recipe runs it
+(shipped weights, default settings), and at 2 levels also the network scaled
+(``dense_input="scale"``) and unguarded (``"off"``), printing the planar-region normal
+deviation (degrees) and the bending energy of each (:mod:`algorithms.subdivision.metrics`)
+with the ratio to Loop's; ``--render DIR`` also writes a picture per mesh (pyvista off-screen).
+
 Usage: ``python benchmarks/subdivision.py [--quick] [--full [--save W.pt]]`` (``--quick``: fewer
 repeats and meshes; ``--full``: also runs the whole default training once -- 200 coarse meshes
 with 2 workers, then ``TrainParams()`` -- and prints its measured split).
@@ -66,6 +73,11 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--learn-loop", nargs=2, type=int, metavar=("N", "EPOCHS"))
+    ap.add_argument("--roughness", action="store_true",
+                    help="only the roughness figures (every shared mesh, 1-3 levels)")
+    ap.add_argument("--render", default="", help="with --roughness: write pictures here")
+    ap.add_argument("--max-levels", type=int, default=3,
+                    help="with --roughness: up to this many levels (default 3)")
     ap.add_argument("--inference", action="store_true",
                     help="only the inference figures (whole CLI process, NumPy vs PyTorch)")
     ap.add_argument("--coarse", type=int, default=0,
@@ -85,6 +97,8 @@ def main() -> int:
     args = ap.parse_args()
     if args.inference:
         return inference(5 if not args.quick else 3)
+    if args.roughness:
+        return roughness(args.max_levels, args.render)
     import torch
 
     torch.set_num_threads(1)
@@ -302,6 +316,77 @@ def inference(repeat: int) -> int:
             print(f"  {label:9s} ({len(V)} V): NumPy {t_np * 1e3:7.1f} ms, PyTorch "
                   f"{t_pt * 1e3:7.1f} ms, ratio {t_np / t_pt:4.2f}; max difference "
                   f"{np.abs(a - b).max() / diag:.1e} of the diagonal", flush=True)
+    print(f"end: {_load()}")
+    return 0
+
+
+def _shared_meshes() -> list:
+    root = Path(__file__).resolve().parents[1]
+    paths = sorted(p for p in (root / "tests" / "data").iterdir()
+                   if p.suffix in (".obj", ".off", ".ply"))
+    return paths + sorted((root / "resources" / "samples").glob("*.obj"))
+
+
+def _render(path: Path, title: str, meshes: list) -> None:
+    import pyvista as pv
+
+    pl = pv.Plotter(off_screen=True, shape=(1, len(meshes)), window_size=(520 * len(meshes), 520))
+    for k, (name, V, F) in enumerate(meshes):
+        pl.subplot(0, k)
+        pl.add_text(f"{title}: {name}", font_size=9)
+        faces = np.hstack([np.full((len(F), 1), 3), F]).ravel()
+        pl.add_mesh(pv.PolyData(V, faces), color="lightgray", specular=0.3)
+        pl.view_isometric()
+    pl.link_views()
+    pl.screenshot(str(path))
+    pl.close()
+
+
+def roughness(max_levels: int, render: str) -> int:
+    """Issue 22: never rougher than Loop, on every shared mesh as it is."""
+    from algorithms.mesh import read_mesh
+    from algorithms.subdivision.baselines import subdivide_baseline
+    from algorithms.subdivision.inference import load_network, neural_subdivide_np
+    from algorithms.subdivision.metrics import (bending_energy, planar_faces,
+                                                planar_normal_deviation)
+
+    print(f"start: {_load()}", flush=True)
+    net = load_network(None)
+    print("planar = RMS degrees off the planar coarse triangles (nan: none); bend = bending "
+          "energy; x = ratio to Loop's; neural = the recipe's default (shipped weights)")
+    worst = 0.0
+    for path in _shared_meshes():
+        m = read_mesh(path)
+        planar = planar_faces(m.V, m.F)
+        for levels in range(1, max_levels + 1):
+            if len(m.F) * 4 ** levels > 4_000_000:
+                print(f"{path.name:18s} L{levels}: skipped ({len(m.F) * 4 ** levels:,} faces)")
+                continue
+            t = time.perf_counter()
+            VL, FL = subdivide_baseline(m.V, m.F, levels, "loop")
+            runs = [("Loop", VL, FL, "")]
+            runs.append(("neural",) + tuple(neural_subdivide_np(m.V, m.F, levels, net)))
+            if levels == 2:
+                for mode in ("scale", "off"):
+                    runs.append((f"net {mode}",) + tuple(
+                        neural_subdivide_np(m.V, m.F, levels, net, dense=mode)))
+            rows = []
+            bl = bending_energy(VL, FL)
+            for name, V, F, note in runs:
+                pd = planar_normal_deviation(m.V, m.F, V, F, levels, planar)
+                be = bending_energy(V, F)
+                rows.append(f"{name} planar {pd:7.3f} bend {be:9.1f} ({be / bl:5.2f}x)")
+                if name == "neural":
+                    worst = max(worst, be / bl)
+                    used = "Loop (denser than trained)" if "Loop subdivision was used" in note \
+                        else ("scaled" if note else "network as is")
+            print(f"{path.name:18s} {len(m.V):6d} V L{levels}: neural = {used}; "
+                  + " | ".join(rows) + f"  [{time.perf_counter() - t:.1f} s]", flush=True)
+            if render and levels == 2:
+                Path(render).mkdir(parents=True, exist_ok=True)
+                _render(Path(render) / f"{path.stem}.png", path.stem,
+                        [(name, V, F) for name, V, F, _ in runs])
+    print(f"worst bending ratio neural / Loop (default settings): {worst:.3f}")
     print(f"end: {_load()}")
     return 0
 
