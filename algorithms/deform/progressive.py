@@ -68,11 +68,13 @@ and ``j``. The splits are grouped into *waves* (a longest-path layering of the r
 dependencies, in replay order: a split comes after every split that last wrote one of its
 inputs, and not before a replay-earlier split that reads the value it overwrites); all splits of
 a wave read first and then write, so each wave is a few NumPy operations. The result is
-identical (to round-off) to replaying the splits one by one (tested).
+identical (to round-off) to replaying the splits one by one (tested). With Numba the replay
+runs the splits one by one in compiled code (:mod:`.progressive_kernel`, ~5x faster and no
+schedule to build); the waves are the fallback without it.
 
 Steps (:meth:`ProgressiveCubic.steps`, :func:`progressive_cubic_iter`): mapping coarse positions
-to the full mesh costs one replay (0.34 s at 1.07M triangles, measured), more than a coarse
-iteration, so the coarse iterations are streamed as full-resolution previews only every
+to the full mesh costs one replay (0.12-0.15 s CPU at 1.29M triangles, measured), more than a
+coarse iteration, so the coarse iterations are streamed as full-resolution previews only every
 ``preview_every`` iterations (default 10; 0 = none): those Steps carry ``V`` = the replayed fine
 positions of that coarse iterate and the coarse metrics. The last Step is always the
 full-resolution result of the converged coarse run (its iteration number is the coarse run's
@@ -91,21 +93,38 @@ Other choices:
   mesh has nearly the same bounding box, so λ keeps its meaning.
 * The faces are never changed: the output uses the input ``F``.
 
-Speed (``benchmarks/progressive.py``, igea Loop-subdivided to 1.07M triangles, λ = 0.2, 2 shared
-cores): pre-processing 89 s (m = 2,000) / 92 s (m = 20,000), of which decimation 82 / 85 s;
-online 0.72 s (51 coarse iterations) / 0.97 s (95), of which the replay 0.33 s (119 / 90
-waves); direct full-resolution stylization extrapolated to 59 / 81 s for the same iteration
-counts.
+Speed (``benchmarks/progressive.py``, issue 25; rocker-arm Loop-subdivided 3x: 1.29M
+triangles, m = 20,000, λ = 0.2; the shared 2-core machine was loaded 4-12, so CPU seconds are
+the figures that carry, wall seconds were 2-4x more): pre-processing 28.7 s CPU (decimation
+with recorded collapses 23.0 s in the compiled loop, split weights 5.5 s, cluster labels
+0.01 s, coarse stylizer 0.13 s); online per λ 0.6-1.2 s CPU (coarse solve 0.5-1.1 s, 42-125
+iterations; replay of the ~630k splits 0.12-0.15 s in the compiled sequential replay); PLY
+write/read 0.02 s each; peak memory 1.45 GB (the mesh alone 0.28 GB). Peer in the same run,
+stylizing every triangle: factorization 23.3 s CPU + 114 iterations 62.5 s CPU, peak 6.0 GB.
+The online step is therefore ~86x faster than the direct run, and the whole progressive run
+(pre-processing + one λ) 1.9x faster. Before issue 25 the Python collapse loop alone took
+170 s wall at this size (loaded) and ~3 GB; the wave replay 0.3-0.5 s.
 
-Resolution (measured, λ = 0.2, thesis defaults otherwise): the replay keeps the coarse result's
-cubeness (the area-weighted mean L1 norm of the unit vertex normals of the full-resolution
-result equals the coarse one's to about 0.005), but cubic stylization itself is stiffer on
-coarser meshes (the thesis's Fig. 5.27 caveat), so a small ``m`` gives a less cubic result at
-the same λ. Bob (10.7k triangles): input 1.466, direct 1.290; m = 5.3k 1.311 (rigidly aligned RMS
-distance to the direct result 0.0030 of the diagonal, against 0.0130 for direct vs input);
-m = 2.7k 1.373 (0.0067). Armadillo (29k): input 1.489, direct 1.368; m = 14.6k 1.410 (0.0027);
-m = 7k 1.444 (0.0064); m = 3k 1.464 (0.011, and a 6 degree different overall turn). Raise λ or m
-to get closer to the direct result.
+Resolution (measured, λ = 0.2): the replay keeps the coarse result's cubeness (the change of
+the area-weighted mean L1 norm of the unit vertex normals on the full mesh equals the coarse
+mesh's to ~0.001), so how cubic the result is depends on how the coarse solve compares with
+the full-resolution one. Two cases were measured:
+
+* meshes whose surface is smooth below the coarse resolution (subdivided, over-sampled): the
+  plain λ matches. rocker-arm Loop x3 (1.29M -> 20k): change 0.114 against 0.112 stylizing
+  every triangle (ratio 1.02); bob Loop x2 (171k -> 20k): 1.07.
+* meshes detailed down to their own resolution (scans): stylizing every triangle also
+  flattens the details that the coarse copy does not have, which the replay puts back as they
+  were (the thesis's Fig. 5.17: m sets the level of detail kept), so the plain λ gives less
+  change: rocker-arm 20k -> 5k 0.73 of the direct change, camelhead 0.67, armadillo 29k -> 7k
+  0.37, armadillo Loop x1 (117k -> 20k) 0.62; the Stanford dragon scan (871k -> 20k) 0.48 in
+  the issue's own figures.
+
+``ProgressiveParams.lam_exponent`` (default 0: the thesis's λ) multiplies the coarse λ by
+``(triangles / coarse triangles) ** exponent`` for the second case: 0.5 gave 1.06 (rocker-arm
+20k), 1.00 (camelhead), 0.80 (armadillo 29k); about 0.22 matched armadillo Loop x1. It must
+stay 0 for the first case (0.25 gave 1.47 on the 1.29M subdivided mesh), and no single value
+fits both, so it is a setting, not automatic. Raising m keeps more of the change too.
 """
 
 from __future__ import annotations
@@ -140,8 +159,10 @@ __all__ = [
 
 
 #: Default exponent of the coarse λ correction (module docstring, "Resolution"): the coarse λ is
-#: ``λ (m_fine / m_coarse) ** LAM_EXPONENT``.
-LAM_EXPONENT = 0.25
+#: ``λ (m_fine / m_coarse) ** LAM_EXPONENT``; 0 (the thesis's plain λ) matched the full
+#: result's cubeness within 2 % on a 1.29M-triangle subdivided mesh, 0.5 is closer on meshes
+#: detailed down to their own resolution (measured there).
+LAM_EXPONENT = 0.0
 
 
 def coarse_lambda_factor(n_faces: int, n_coarse_faces: int, exponent: float) -> float:
