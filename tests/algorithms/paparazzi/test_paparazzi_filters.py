@@ -303,9 +303,9 @@ def test_guided_defaults_keep_a_crease_and_smooth_facets_the_old_ones_did_neithe
     facets = np.stack(np.broadcast_arrays((np.floor(x * 12) / 12)[None, :] * 0.3 + 0.35,
                                           np.full((H, H), 0.5), np.full((H, H), 0.8)), -1)
     new = GuidedParams()
-    assert (new.radius, new.epsilon, new.subsample) == (4, 1e-3, 1)
+    assert (new.radius, new.epsilon, new.subsample) == (4, 2e-3, 1)
     q = guided_filter(crease, crease, new.radius, new.epsilon, new.subsample)
-    assert np.abs(q - crease).max() < 0.015 * 0.43           # the crease keeps > 98 % contrast
+    assert np.abs(q - crease).max() < 0.03 * 0.43            # the crease keeps > 97 % contrast
     # the authors' script's settings (subsampling 4) and the thesis's epsilon 0.02 blur it
     assert np.abs(guided_filter(crease, crease, 15, 1e-8, 4) - crease).max() > 0.04
     assert np.abs(guided_filter(crease, crease, 4, 0.02, 4) - crease).max() > 0.15
