@@ -91,8 +91,14 @@ _OPTS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
 _PAR = dict(_OPTS, parallel=True)
 
 
-def _chunks(n: int) -> int:
-    return (n + CHUNK - 1) // CHUNK
+MIN_PARALLEL = 4
+"""Work units (chunks or Jacobi blocks) below which a kernel runs serially even with threads: a
+parallel launch wakes the other threads (tens of microseconds, much more on a busy machine)."""
+
+
+def _par(n: int, unit: int) -> bool:
+    """Run ``n`` items in units of ``unit`` on threads?"""
+    return n > (MIN_PARALLEL - 1) * unit and use_threads()
 
 
 # ------------------------------------------------------------------------------ Procrustes
@@ -269,8 +275,9 @@ def _procrustes_ser(S, idx, R):
 
 @njit(**_OPTS)
 def _procrustes_indices(S, idx, R, par):
-    """R[i] = Procrustes(S[i]) for i in idx, blocks on threads when ``par``."""
-    if par:
+    """R[i] = Procrustes(S[i]) for i in idx, blocks on threads when ``par`` (and there are
+    at least ``MIN_PARALLEL`` blocks)."""
+    if par and idx.shape[0] > (MIN_PARALLEL - 1) * BLOCK:
         _procrustes_par(S, idx, R)
     else:
         _procrustes_ser(S, idx, R)
@@ -279,7 +286,7 @@ def _procrustes_indices(S, idx, R, par):
 def procrustes_batch(S, R):
     """``R[i]`` = the rotation maximizing ``tr(R[i] S[i])``; S, R: (n, 3, 3) float64 (R written).
     Blocks of matrices run on Numba's threads (the same bits for any thread count)."""
-    _procrustes_indices(S, np.arange(S.shape[0]), R, use_threads())
+    _procrustes_indices(S, np.arange(S.shape[0]), R, _par(S.shape[0], BLOCK))
 
 
 # ------------------------------------------------------------------------------ cubic local step
@@ -403,7 +410,7 @@ def _admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_
     for _ in range(max_iter):
         if n_active == 0:
             break
-        if par:
+        if par and n_active > (MIN_PARALLEL - 1) * BLOCK:  # late waves: a few vertices
             _admm_wave_par(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, R, iters,
                            frames, active, n_active, done)
         else:
@@ -437,7 +444,7 @@ def admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_r
     a vertex's updates do not depend on its block).
     """
     _admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_rel, mu, tau,
-                          max_iter, R, iters, frames, use_threads())
+                          max_iter, R, iters, frames, _par(S.shape[0], BLOCK))
 
 
 # ------------------------------------------------------------------------------ small helpers
@@ -511,7 +518,7 @@ def _arap_energy_terms(R, C, S, par):
 def arap_energy_terms(R, C, S):
     """``(sum_i tr(R_i C_i R_i^T), sum_i tr(R_i S_i))`` for (n, 3, 3) arrays R, C, S (per-cell
     terms on threads, added up in cell order)."""
-    return _arap_energy_terms(R, C, S, use_threads())
+    return _arap_energy_terms(R, C, S, _par(R.shape[0], CHUNK))
 
 
 @njit(**_OPTS)
@@ -555,7 +562,7 @@ def _quadratic_form(indptr, indices, data, U, par):
 def quadratic_form(indptr, indices, data, U):
     """``tr(U^T A U)`` for A in CSR (``indptr``, ``indices``, ``data``) and (n, 3) U (per-row
     terms on threads, added up in row order)."""
-    return _quadratic_form(indptr, indices, data, U, use_threads())
+    return _quadratic_form(indptr, indices, data, U, _par(U.shape[0], CHUNK))
 
 
 @njit(**_OPTS)
@@ -604,7 +611,7 @@ def cube_l1_energy(R, normals, frames, diag, lam_a):
     """``sum_i lam_a[i] ||diag * (Q_i^T) R_i n_i||_1`` (cubic stylization's L1 term for a
     diagonal style; ``frames`` None or (n, 3, 3) Q_i); per-vertex terms on threads, added up in
     vertex order."""
-    return _cube_l1_energy(R, normals, frames, diag, lam_a, use_threads())
+    return _cube_l1_energy(R, normals, frames, diag, lam_a, _par(R.shape[0], CHUNK))
 
 
 @njit(**_OPTS)
@@ -679,7 +686,7 @@ def _displacement_maxima(U_new, U_old, U_rest, par):
 def displacement_maxima(U_new, U_old, U_rest):
     """``(max_i |U_new_i - U_old_i|, max_i |U_new_i - U_rest_i|, |bbox diagonal of U_rest|)``
     for (n, 3) arrays (the first two NaN when any difference is NaN, like NumPy's ``max``)."""
-    return _displacement_maxima(U_new, U_old, U_rest, use_threads())
+    return _displacement_maxima(U_new, U_old, U_rest, _par(U_new.shape[0], CHUNK))
 
 
 @njit(**_OPTS)
@@ -724,7 +731,7 @@ def block_covariances(ptr, col, val, U, S):
     ``(ptr, col, val)`` is K stored by 3x1 blocks: block k of vertex i holds
     ``K[3 i + a, col[k]] = val[k, a]``. S: (n, 3, 3) output. Chunks of cells on threads.
     """
-    (_covariances_par if use_threads() else _covariances_ser)(ptr, col, val, U, S)
+    (_covariances_par if _par(S.shape[0], CHUNK) else _covariances_ser)(ptr, col, val, U, S)
 
 
 @njit(**_OPTS)
@@ -767,4 +774,4 @@ def block_rhs(tptr, tk, kcell, val, R, b):
     column is j, in increasing k (so in increasing cell, the order of a serial scatter over the
     cells: the same sums, term by term), ``kcell[k]`` is block k's cell. b: (n, 3) output.
     """
-    (_rhs_par if use_threads() else _rhs_ser)(tptr, tk, kcell, val, R, b)
+    (_rhs_par if _par(b.shape[0], CHUNK) else _rhs_ser)(tptr, tk, kcell, val, R, b)
