@@ -1,8 +1,9 @@
 """Normal-driven shape analogies: iterations per second per regularizer, libigl's ARAP as the peer.
 
 Meshes (default): armadillo (tests/data, 14,587 vertices) and a procedural ~20k-vertex mesh
-("bumpy20k": organic_sample("bumpy") after one Loop subdivision, 19,722 vertices). For each mesh
-and regularizer (arap, farap, acap), cube style, λ = 1, fixed and dynamic targets, a fixed
+("bumpy20k": organic_sample("bumpy") after one Loop subdivision; 19,722 vertices when
+this was written, 23,714 since organic_sample changed; the benchmark prints the count). For
+each mesh and regularizer (arap, farap, acap), cube style, λ = 1, fixed and dynamic targets, a fixed
 number of iterations (the stopping rule off):
 
   V           vertices

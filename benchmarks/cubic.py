@@ -1,8 +1,9 @@
 """Cubic stylization: ms per local-global iteration, local/global split, libigl's ARAP as the peer.
 
 Meshes (default): spot_lowres, bob, rocker-arm, armadillo (tests/data) and a procedural
-~20k-vertex mesh ("bumpy20k": organic_sample("bumpy") after one Loop subdivision, 19,722
-vertices). For each mesh, with the thesis defaults (lambda 0.2, stop at relative move 3e-3):
+~20k-vertex mesh ("bumpy20k": organic_sample("bumpy") after one Loop subdivision; 19,722
+vertices when this was written, 23,714 since organic_sample changed; the benchmark
+prints the count). For each mesh, with the thesis defaults (lambda 0.2, stop at relative move 3e-3):
 
   V, its        vertices, and local-global iterations the stopping rule gives
   run s         a whole run of CubicStylizer.steps (construction excluded; precompute column)
