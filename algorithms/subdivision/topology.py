@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["HalfFlaps", "half_flaps", "unique_edge_ids", "refine", "refine_barycentric",
-           "locate_vertices", "igl_odd_order"]
+           "locate_vertices", "igl_odd_order", "split_vertex_order"]
 
 
 def unique_edge_ids(F: np.ndarray, n: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -174,4 +174,39 @@ def igl_odd_order(F: np.ndarray, n: int, E: np.ndarray) -> np.ndarray:
     perm = order[np.minimum(pos, len(order) - 1)]
     if not np.array_equal(key_igl[perm], key_ours):
         raise RuntimeError("libigl's edge vertices do not match the mesh's edges")
+    return perm
+
+
+def _new_vertex_of_edges(F_fine: np.ndarray, n: int, E: np.ndarray) -> np.ndarray:
+    """Index, in a 1-to-4 split ``F_fine`` (any vertex order with the ``n`` old vertices
+    first) of a mesh, of the new vertex of each edge ``E`` -- read off the corner triangles
+    (one old vertex, two new ones: each new one is on an edge from that old vertex)."""
+    F_fine = np.asarray(F_fine, dtype=np.int64)
+    corner = F_fine[(F_fine < n).sum(axis=1) == 1]
+    old = np.where(corner < n, corner, -1).max(axis=1)
+    ends: dict = {}
+    for f, a in zip(corner.tolist(), old.tolist()):
+        for v in f:
+            if v >= n:
+                ends.setdefault(v, set()).add(a)
+    index = {tuple(sorted(s)): v for v, s in ends.items() if len(s) == 2}
+    try:
+        return np.array([index[(int(a), int(b))] for a, b in E], dtype=np.int64)
+    except KeyError:
+        raise ValueError("the fine mesh is not a 1-to-4 split of the coarse one") from None
+
+
+def split_vertex_order(F0: np.ndarray, n0: int, fine_faces: list) -> np.ndarray:
+    """For every vertex of ``len(fine_faces)`` levels of :func:`refine` of ``(F0, n0)``, its
+    index in another program's levels of the same splits (``fine_faces[l]``: its faces of
+    level ``l + 1``, old vertices first at every level, new ones in any order), e.g. the thesis
+    author's outputs or ground truth. Returns ``order`` with ``ours[v] == theirs[order[v]]``."""
+    F = np.asarray(F0, dtype=np.int64)
+    n = int(n0)
+    perm = np.arange(n)
+    for Ff in fine_faces:
+        E, EF = unique_edge_ids(F, n)
+        perm = np.r_[perm, _new_vertex_of_edges(Ff, len(perm), np.sort(perm[E], axis=1))]
+        F = refine(F, n, EF)
+        n = len(perm)
     return perm

@@ -15,7 +15,7 @@ from algorithms.subdivision.inference import (AUTHOR_REFERENCE_EDGE, SCALE_TOLER
                                               SubdividedStep, WeightsError, load_network,
                                               mean_edge_length, neural_subdivide_np,
                                               neural_subdivision_iter, scale_plan)
-from algorithms.subdivision.topology import refine, unique_edge_ids
+from algorithms.subdivision.topology import split_vertex_order
 from algorithms.subdivision.weights_file import NotATorchFile, read_torch_file
 from tests.conftest import ROOT
 
@@ -25,30 +25,6 @@ needs_reference = pytest.mark.skipif(
     not AUTHOR.is_file(), reason=f"the thesis author's network and outputs are not here ({REF}; "
                                  f"MPL-2.0 data kept outside the repository)")
 DATA = ROOT / "tests" / "data"
-
-
-def _new_vertex_of_edges(F_fine: np.ndarray, n: int, E: np.ndarray) -> np.ndarray:
-    """Index, in a Loop 1-to-4 split ``F_fine`` of a mesh with ``n`` vertices, of the new vertex
-    of each edge ``E`` (read off the corner faces: one old vertex and two new ones)."""
-    corner = F_fine[(F_fine < n).sum(axis=1) == 1]
-    old = np.where(corner < n, corner, -1).max(axis=1)
-    pairs = {}
-    for f, a in zip(corner, old):
-        for v in f:
-            if v >= n:
-                pairs.setdefault(int(v), set()).add(int(a))
-    index = {tuple(sorted(s)): v for v, s in pairs.items()}
-    return np.array([index[(int(a), int(b))] for a, b in E])
-
-
-def _author_order(F0: np.ndarray, n0: int, F1a: np.ndarray, F2a: np.ndarray) -> np.ndarray:
-    """For each vertex of our level 2 (refine twice), its index in the author's level 2."""
-    E0, _ = unique_edge_ids(F0, n0)
-    perm1 = np.r_[np.arange(n0), _new_vertex_of_edges(F1a, n0, E0)]
-    F1 = refine(F0, n0)
-    n1 = len(perm1)
-    E1, _ = unique_edge_ids(F1, n1)
-    return np.r_[perm1, _new_vertex_of_edges(F2a, n1, np.sort(perm1[E1], axis=1))]
 
 
 @needs_reference
@@ -62,7 +38,7 @@ def test_reproduces_the_authors_outputs_on_its_validation_set():
         assert note == ""  # the validation meshes are inside the training range
         a1 = read_mesh(REF / "author_outputs" / f"{k:03d}_level1.obj")
         a2 = read_mesh(REF / "author_outputs" / f"{k:03d}_level2.obj")
-        order = _author_order(m.F, len(m.V), a1.F, a2.F)
+        order = split_vertex_order(m.F, len(m.V), [a1.F, a2.F])
         diag = np.linalg.norm(m.V.max(0) - m.V.min(0))
         err = np.abs(V - a2.V[order]).max() / diag
         worst = max(worst, err)

@@ -66,3 +66,32 @@ def test_subdivision_positions_reproduce_midpoint_subdivision():
     assert cKDTree(NV).query(P)[0].max() < 1e-12
     assert cKDTree(P).query(NV)[0].max() < 1e-12
     assert (bary >= 0).all() and np.allclose(bary.sum(1), 1)
+
+
+def test_split_vertex_order_recovers_another_numbering():
+    """Two levels of refine, with the new vertices of each level renumbered at random (as
+    another program may number them): split_vertex_order finds the renumbering."""
+    import numpy as np
+
+    from algorithms.mesh import read_mesh
+    from algorithms.subdivision.topology import refine, split_vertex_order
+
+    m = read_mesh("tests/data/hand_lowres.obj")  # open: boundary edges too
+    rng = np.random.default_rng(0)
+    F, n = m.F, len(m.V)
+    theirs_faces, maps = [], []
+    for _ in range(2):
+        Fn = refine(F, n)
+        nn = int(Fn.max()) + 1
+        p = np.r_[np.arange(n), n + rng.permutation(nn - n)]  # ours -> theirs (this level)
+        maps.append(p)
+        F, n = Fn, nn
+    # theirs at level 2 numbers its level-1 vertices as their level 1 does
+    F1 = refine(m.F, len(m.V))
+    theirs1 = maps[0][F1]
+    n1 = int(F1.max()) + 1
+    F2 = refine(F1, n1)
+    full = np.r_[maps[0], maps[1][n1:]]  # ours(level 2) -> theirs(level 2)
+    theirs2 = full[F2]
+    order = split_vertex_order(m.F, len(m.V), [theirs1, theirs2])
+    assert np.array_equal(order, full)
