@@ -146,6 +146,7 @@ from .cubic import CubicParams, CubicStylizer
 __all__ = [
     "AUTO_PROGRESSIVE_FACES",
     "LAM_EXPONENT",
+    "PROGRESSIVE_FASTER_FROM",
     "choose_progressive",
     "coarse_lambda_factor",
     "ProgressiveParams",
@@ -570,12 +571,15 @@ def _constraint_vertices(n: int, fixed, handles, coord_constraints):
 
 
 #: Above this many triangles the app and the CLI stylize through affine progressive meshes unless
-#: told not to. Decided from measurements (``benchmarks/progressive.py``, module docstring
-#: "Speed"): the whole progressive run (pre-processing + coarse solve + replay, one λ) is faster
-#: than stylizing every triangle from about PROGRESSIVE_BREAK_EVEN triangles on; the threshold
-#: keeps a factor of 2 of margin so that the automatic choice is never the slower one.
-PROGRESSIVE_BREAK_EVEN = 50_000
-AUTO_PROGRESSIVE_FACES = 2 * PROGRESSIVE_BREAK_EVEN
+#: told not to. Decided from measurements (``benchmarks/progressive.py --sweep``, one λ, the
+#: whole run: pre-processing + coarse solve + replay against factorization + solve on every
+#: triangle, 2 shared cores): progressive (m = 20,000) was faster at every size measured, from
+#: 42,752 triangles (bob Loop x1: 1.6x wall, 2.2x CPU) through 80k (2.4x), 117k (5.0x) to 1.29M
+#: (1.9x wall under load, 2.9x CPU). The threshold keeps more than a factor of 2 above the
+#: smallest size measured faster, so that the automatic choice is never the slower one (and
+#: the coarse copy is at most a fifth of the mesh).
+PROGRESSIVE_FASTER_FROM = 42_752
+AUTO_PROGRESSIVE_FACES = 100_000
 
 
 def choose_progressive(n_faces: int, target_faces: int | None = None) -> tuple[bool, str]:
@@ -591,12 +595,13 @@ def choose_progressive(n_faces: int, target_faces: int | None = None) -> tuple[b
         return True, (f"this mesh has {n_faces:,} triangles, more than "
                       f"{AUTO_PROGRESSIVE_FACES:,}: from there on, stylizing a {m:,}-triangle "
                       f"copy and putting the details back (affine progressive meshes) is "
-                      f"faster than working on every triangle (measured break-even about "
-                      f"{PROGRESSIVE_BREAK_EVEN:,} triangles)")
+                      f"faster than working on every triangle (measured faster from "
+                      f"{PROGRESSIVE_FASTER_FROM:,} triangles on)")
     return False, (f"this mesh has {n_faces:,} triangles, not more than "
                    f"{AUTO_PROGRESSIVE_FACES:,}: working on every triangle directly is "
-                   f"fast enough (progressive meshes pay off above about "
-                   f"{PROGRESSIVE_BREAK_EVEN:,}; the automatic switch keeps a margin)")
+                   f"fast enough (progressive meshes were measured faster from "
+                   f"{PROGRESSIVE_FASTER_FROM:,} triangles on; the automatic switch keeps a "
+                   f"margin of more than 2x)")
 
 
 class AffineProgressiveMesh:

@@ -14,7 +14,7 @@ from algorithms.deform import progressive
 from algorithms.deform.cubic import CubicParams, CubicStylizer, mean_l1_of_normals
 from algorithms.deform.progressive import (
     AUTO_PROGRESSIVE_FACES,
-    PROGRESSIVE_BREAK_EVEN,
+    PROGRESSIVE_FASTER_FROM,
     AffineSplits,
     ProgressiveCubic,
     ProgressiveParams,
@@ -113,8 +113,8 @@ def test_coarse_lambda_correction():
 
 
 def test_automatic_choice_follows_the_measured_rule():
-    assert AUTO_PROGRESSIVE_FACES >= PROGRESSIVE_BREAK_EVEN  # a margin, never below break-even
-    for n in (10_000, PROGRESSIVE_BREAK_EVEN, AUTO_PROGRESSIVE_FACES):
+    assert AUTO_PROGRESSIVE_FACES >= 2 * PROGRESSIVE_FASTER_FROM  # a margin above the measured
+    for n in (10_000, PROGRESSIVE_FASTER_FROM, AUTO_PROGRESSIVE_FACES):
         use, why = choose_progressive(n)
         assert not use and f"{n:,}" in why and "every triangle" in why
     for n in (AUTO_PROGRESSIVE_FACES + 1, 2_000_000):
