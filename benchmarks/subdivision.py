@@ -26,6 +26,13 @@ resources/samples/*.obj) 1-3 levels with Loop and with neural subdivision as the
 deviation (degrees) and the bending energy of each (:mod:`algorithms.subdivision.metrics`)
 with the ratio to Loop's; ``--render DIR`` also writes a picture per mesh (pyvista off-screen).
 
+``--validation-set W...`` (issue 22) subdivides the thesis author's validation set
+(../shared/reference/neural_subdivision/cartoon_elephant_10: ten coarse elephants with ground
+truth at level 2) 2 levels with each weights file (``author``: the author's network,
+``shipped``: ours) and with Loop and butterfly, and prints each one's per-vertex RMS and max
+error against the ground truth, in units of the bounding-box diagonal (the author's README:
+~1.0-1.4e-3 for its network).
+
 Usage: ``python benchmarks/subdivision.py [--quick] [--full [--save W.pt]]`` (``--quick``: fewer
 repeats and meshes; ``--full``: also runs the whole default training once -- 200 coarse meshes
 with 2 workers, then ``TrainParams()`` -- and prints its measured split).
@@ -73,6 +80,9 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--learn-loop", nargs=2, type=int, metavar=("N", "EPOCHS"))
+    ap.add_argument("--validation-set", nargs="+", metavar="W",
+                    help="only: level-2 errors on the author's validation set for these weights "
+                         "('author', 'shipped' or files), with Loop and butterfly")
     ap.add_argument("--roughness", action="store_true",
                     help="only the roughness figures (every shared mesh, 1-3 levels)")
     ap.add_argument("--render", default="", help="with --roughness: write pictures here")
@@ -99,6 +109,8 @@ def main() -> int:
         return inference(5 if not args.quick else 3)
     if args.roughness:
         return roughness(args.max_levels, args.render)
+    if args.validation_set:
+        return validation_set(args.validation_set)
     import torch
 
     torch.set_num_threads(1)
@@ -387,6 +399,54 @@ def roughness(max_levels: int, render: str) -> int:
                 _render(Path(render) / f"{path.stem}.png", path.stem,
                         [(name, V, F) for name, V, F, _ in runs])
     print(f"worst bending ratio neural / Loop (default settings): {worst:.3f}")
+    print(f"end: {_load()}")
+    return 0
+
+
+def validation_set(weights: list) -> int:
+    """Level-2 vertex errors on the author's validation set (cartoon_elephant_10)."""
+    from algorithms.mesh import read_mesh
+    from algorithms.subdivision.baselines import subdivide_baseline
+    from algorithms.subdivision.inference import load_network, neural_subdivide_np
+    from algorithms.subdivision.topology import split_vertex_order
+
+    ref = Path(__file__).resolve().parents[2] / "shared" / "reference" / "neural_subdivision"
+    if not (ref / "cartoon_elephant_10").is_dir():
+        print(f"the validation set is not here ({ref}); nothing to do")
+        return 0
+    print(f"start: {_load()}", flush=True)
+    methods = {}
+    for w in weights:
+        path = {"author": ref / "author_network" / "netparams.dat", "shipped": None}.get(w, w)
+        net = load_network(path)
+        methods[w] = (lambda V, F, net=net: neural_subdivide_np(V, F, 2, net,
+                                                                 dense="scale")[:2])
+    def baseline(method):
+        def run(V, F):  # two levels, put in our refine's vertex order
+            V1, F1 = subdivide_baseline(V, F, 1, method)
+            V2, F2 = subdivide_baseline(V1, F1, 1, method)
+            return V2[split_vertex_order(F, len(V), [F1, F2])], None
+        return run
+
+    methods["Loop"] = baseline("loop")
+    methods["butterfly"] = baseline("butterfly")
+    errs = {k: [] for k in methods}
+    for k in range(1, 11):
+        m = read_mesh(ref / "cartoon_elephant_10" / "subd0" / f"{k:03d}.obj")
+        g1 = read_mesh(ref / "cartoon_elephant_10" / "subd1" / f"{k:03d}.obj")
+        g2 = read_mesh(ref / "cartoon_elephant_10" / "subd2" / f"{k:03d}.obj")
+        order = split_vertex_order(m.F, len(m.V), [g1.F, g2.F])
+        diag = float(np.linalg.norm(m.V.max(0) - m.V.min(0)))
+        for name, fn in methods.items():
+            V, _ = fn(m.V, m.F)
+            d = np.linalg.norm(V - g2.V[order], axis=1) / diag
+            errs[name].append((float(np.sqrt((d ** 2).mean())), float(d.max())))
+    print("level-2 vertex error against the ground truth, in units of the diagonal "
+          "(mean over the 10 meshes of the RMS, and of the max; range of the RMS)")
+    for name, e in errs.items():
+        r = np.array(e)
+        print(f"  {str(name)[-28:]:28s} RMS {r[:, 0].mean():.2e} ({r[:, 0].min():.2e}-"
+              f"{r[:, 0].max():.2e})  max {r[:, 1].mean():.2e}")
     print(f"end: {_load()}")
     return 0
 
