@@ -447,18 +447,19 @@ class AffineSplits:
         return dec.replay(coarse_positions, fn)[0]
 
 
+_KERNEL = None  # the algorithms.compiled.KernelModule of progressive_kernel, made on first use
+
+
 def _compiled_replay():
     """The compiled replay (:mod:`algorithms.deform.progressive_kernel`), or None when Numba is
-    missing or ``STYLIZE3D_NUMBA=0``."""
-    import os
+    missing or switched off (``STYLIZE3D_NUMBA=0``; :mod:`algorithms.compiled`)."""
+    global _KERNEL
+    if _KERNEL is None:
+        from ..compiled import KernelModule
 
-    if os.environ.get("STYLIZE3D_NUMBA", "1") == "0":
-        return None
-    try:
-        from .progressive_kernel import replay_splits
-    except ImportError:
-        return None
-    return replay_splits
+        _KERNEL = KernelModule("algorithms.deform.progressive_kernel")
+    module = _KERNEL.get()
+    return None if module is None else module.replay_splits
 
 
 def _regularized_solve(M: np.ndarray, D: np.ndarray, tikhonov: float):

@@ -347,9 +347,7 @@ class Decimation:
         lab = self.fine_to_coarse
         kept, removed = self.kept, self.removed
         if _compiled_loop() is not None:
-            from .decimate_kernel import propagate_clusters
-
-            return propagate_clusters(lab, kept, removed)
+            return _KERNEL.get().propagate_clusters(lab, kept, removed)
         for k in range(len(self) - 1, -1, -1):
             lab[removed[k]] = lab[kept[k]]
         return lab
@@ -475,18 +473,19 @@ def _check_input(V, F, target_faces) -> tuple[np.ndarray, np.ndarray, int]:
     return V, F, target_faces
 
 
+_KERNEL = None  # the algorithms.compiled.KernelModule of decimate_kernel, made on first use
+
+
 def _compiled_loop():
     """The compiled collapse loop (:mod:`algorithms.mesh.decimate_kernel`), or None when Numba
-    is missing or ``STYLIZE3D_NUMBA=0``."""
-    import os
+    is missing or switched off (``STYLIZE3D_NUMBA=0``; :mod:`algorithms.compiled`)."""
+    global _KERNEL
+    if _KERNEL is None:
+        from ..compiled import KernelModule
 
-    if os.environ.get("STYLIZE3D_NUMBA", "1") == "0":
-        return None
-    try:
-        from .decimate_kernel import collapse_loop
-    except ImportError:
-        return None
-    return collapse_loop
+        _KERNEL = KernelModule("algorithms.mesh.decimate_kernel")
+    module = _KERNEL.get()
+    return None if module is None else module.collapse_loop
 
 
 def _from_kernel(out, V, F, strategy: str, target: int) -> Decimation:
