@@ -17,8 +17,10 @@ sets:
 
 The only difference: the Python loop visits a new 1-ring in Python's set order, this loop in
 ascending vertex order, so equal-cost edges can collapse in a different order (tested: both
-give valid, replayable decimations of the same quality). Speed: about 30x the Python loop
-(``benchmarks/progressive.py``).
+give valid, replayable decimations of the same quality; on bob, camelhead and wingnut the
+records are identical). Speed, measured on the shared machine: bob 10.7k -> 1k triangles
+0.16 s against 1.2 s for the Python loop; rocker-arm Loop x3 (1.29M) -> 20k 23 s CPU and
+1.3 GB peak against 170 s wall and 2.9 GB (``benchmarks/progressive.py``).
 
 Importing this module imports Numba; :mod:`algorithms.mesh.decimate` imports it lazily.
 """
