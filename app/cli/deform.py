@@ -167,6 +167,9 @@ def cmd_cubic(args: argparse.Namespace) -> int:
     runs = [(None if lams is None else lam, cubic_params(args, lam))
             for lam in (lams if lams is not None else [None])]
     outputs = [output_for_lambda(args.output, p.lam, several) for _, p in runs]
+    if len(set(outputs)) != len(outputs):
+        raise ParameterError("--lambda: two values would write the same file "
+                             f"({', '.join(outputs)}); give values that differ in 6 digits.")
     for out in outputs:
         check_output(out, args.overwrite, args.mesh)
     data, _ = read_input(args, quiet=args.json or args.quiet)
