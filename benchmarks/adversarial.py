@@ -254,6 +254,111 @@ def unseen_views(iterations: int, subsets=(1, 5), names=None, seed: int = 0):
                   f"{ok}/{n_seen}")
 
 
+def _subject_scene(name, args):
+    """The subject's scene with the set-up chosen on the command line."""
+    from algorithms.render.sh import convolution_weights
+
+    V, F, A = SUBJECTS[name]()
+    scene = prepare_scene(V, F, albedo=A, lighting=args.environment,
+                          background=args.background)
+    if args.formation == "radiance":
+        # the same starting image: the irradiance coefficients A_l U_l become the radiance's
+        scene.lighting = convolution_weights()[:, None] * scene.lighting
+    return scene
+
+
+def table34(args):
+    """Table 3.4 on the procedural subjects: per subject, random correctly classified views
+    (azimuth, elevation and view width drawn at random), adversaries on 1 and 5 of them (several
+    random draws), evaluated on all the other views, against random perturbations of the same
+    norm on the same views. Returns the totals (also printed)."""
+    from algorithms.adversarial.transfer import fooled, sample_views, transfer_trial
+
+    import os
+
+    names = list(SUBJECTS) if args.shapes is None else args.shapes
+    mode = args.mode
+    radius = DEFAULT_RADIUS[mode]
+    params = AdversaryParams(mode=mode, iterations=args.iterations, step=args.step,
+                             direction=args.direction, until_fooled=not args.all_iterations,
+                             formation=args.formation)
+    print(f"\n== Table 3.4 ({mode}): load average {os.getloadavg()[0]:.1f} on "
+          f"{os.cpu_count()} cores ==")
+    print(f"set-up: environment {args.environment}, background {args.background}, formation "
+          f"{args.formation}, elevation {args.elevation[0]:g}-{args.elevation[1]:g} deg, view "
+          f"width {args.width[0]:g}-{args.width[1]:g} x the shape; attack: L-inf {radius}, step "
+          f"{args.step} ({args.direction}), <= {args.iterations} iterations"
+          f"{' (all of them)' if args.all_iterations else ' (stop once fooled)'}; "
+          f"{args.draws} draws of the attacked views per subset size {args.subsets}; random: "
+          f"{args.random} corners of the ball")
+    clf = default_classifier()
+    tot = {s: [0, 0, 0.0, 0] for s in args.subsets}    # unseen fooled, unseen views, random, fooled seen
+    seen_tot = {s: 0 for s in args.subsets}
+    per_subject = {}
+    t_all = time.perf_counter()
+    for name in names:
+        t0 = time.perf_counter()
+        scene = _subject_scene(name, args)
+        k = resolve_label(name, clf.class_names)
+        seed = zlib.crc32(name.encode())
+        views, tried = sample_views(scene, clf, k, wanted=args.views,
+                                    max_candidates=args.max_candidates,
+                                    elevation=tuple(args.elevation), width=tuple(args.width),
+                                    seed=seed, formation=args.formation)
+        print(f"{name}: {len(scene.V)} vertices; {len(views)} correctly classified views of "
+              f"{tried} random candidates ({time.perf_counter() - t0:.0f} s)", flush=True)
+        if len(views) < max(args.subsets) + 2:
+            print(f"  too few views for the protocol; skipped")
+            continue
+        rnd = np.array([fooled(scene, clf, k, views, formation=args.formation,
+                               **({"lighting": x} if mode == "lighting" else {"V": x}))
+                        for x in (random_perturbation(scene, mode, radius, seed=seed + r)
+                                  for r in range(args.random))])        # (R, n views)
+        rng = np.random.default_rng([args.seed, seed])
+        row = {}
+        for s in args.subsets:
+            fs, ns, rs = 0, 0, 0.0
+            its = []
+            for d in range(args.draws):
+                t = time.perf_counter()
+                tr = transfer_trial(scene, clf, k, views, s, params, rng)
+                keep = np.ones(len(views), bool)
+                keep[tr.attacked] = False
+                r_rate = float(rnd[:, keep].mean())
+                fs += int(tr.unseen_fooled.sum())
+                ns += len(tr.unseen_fooled)
+                rs += r_rate * len(tr.unseen_fooled)
+                seen_tot[s] += tr.attacked_fooled
+                its.append(tr.iterations)
+                print(f"  {s} view(s), draw {d}: attacked fooled {tr.attacked_fooled}/{s} in "
+                      f"{tr.iterations} it. (norm {tr.norm:.3f}) -> unseen "
+                      f"{int(tr.unseen_fooled.sum())}/{len(tr.unseen_fooled)} "
+                      f"({100 * tr.unseen_rate:.0f} %), random {100 * r_rate:.0f} %  "
+                      f"({time.perf_counter() - t:.0f} s)", flush=True)
+            tot[s][0] += fs
+            tot[s][1] += ns
+            tot[s][2] += rs
+            row[s] = (fs, ns, rs)
+        per_subject[name] = (len(views), tried, row)
+    print(f"TABLE 3.4 ({mode}; thesis lighting 0 / 29.4 / 64.2 %, geometry 0 / 0.6 / 3.6 % "
+          f"for 0 / 1 / 5 views), {time.perf_counter() - t_all:.0f} s:")
+    print("| subject | views (of candidates) | " +
+          " | ".join(f"{s} view{'s' if s > 1 else ''}: adversarial | random" for s in args.subsets)
+          + " |")
+    for name, (nv, tried, row) in per_subject.items():
+        cells = " | ".join(f"{100 * f / n:.0f} % ({f}/{n}) | {100 * r / n:.0f} %"
+                           for f, n, r in (row[s] for s in args.subsets))
+        print(f"| {name} | {nv} ({tried}) | {cells} |")
+    cells = " | ".join(f"**{100 * tot[s][0] / max(tot[s][1], 1):.1f} %** ({tot[s][0]}/"
+                       f"{tot[s][1]}) | {100 * tot[s][2] / max(tot[s][1], 1):.1f} %"
+                       for s in args.subsets)
+    print(f"| **all** | | {cells} |")
+    for s in args.subsets:
+        print(f"  attacked views fooled ({s} view(s)): {seen_tot[s]}/"
+              f"{s * args.draws * len(per_subject)}")
+    return tot
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="2 views, 5 iterations")
@@ -261,7 +366,29 @@ def main():
     ap.add_argument("--skip-unseen", action="store_true")
     ap.add_argument("--shapes", nargs="+", metavar="CLASS", choices=list(SUBJECTS),
                     help="subjects (ImageNet class names; default: all of shapes.SUBJECTS)")
+    t34 = ap.add_argument_group("--table34: Table 3.4 (unseen views) and its suspects")
+    t34.add_argument("--table34", action="store_true", help="run only the Table 3.4 protocol")
+    t34.add_argument("--mode", choices=("lighting", "geometry"), default="lighting")
+    t34.add_argument("--views", type=int, default=100, help="correctly classified views wanted")
+    t34.add_argument("--max-candidates", type=int, default=320)
+    t34.add_argument("--subsets", type=int, nargs="+", default=[1, 5])
+    t34.add_argument("--draws", type=int, default=3, help="random draws of the attacked views")
+    t34.add_argument("--random", type=int, default=2, help="random perturbations per subject")
+    t34.add_argument("--seed", type=int, default=0)
+    t34.add_argument("--iterations", type=int, default=30)
+    t34.add_argument("--step", type=float, default=0.05)
+    t34.add_argument("--direction", choices=("gradient", "sign"), default="gradient")
+    t34.add_argument("--all-iterations", action="store_true",
+                     help="do not stop once the attacked views are fooled")
+    t34.add_argument("--formation", choices=("irradiance", "radiance"), default="irradiance")
+    t34.add_argument("--environment", default="Grace Cathedral")
+    t34.add_argument("--background", type=float, default=0.0)
+    t34.add_argument("--elevation", type=float, nargs=2, default=[0.0, 60.0])
+    t34.add_argument("--width", type=float, nargs=2, default=[1.3, 1.9])
     args = ap.parse_args()
+    if args.table34:
+        table34(args)
+        return
     if not args.skip_speed:
         speed()
     acceptance(2 if args.quick else 8, 5 if args.quick else 30, args.shapes)

@@ -52,7 +52,7 @@ from .labels import resolve_label, short_name
 __all__ = ["AdversaryParams", "Scene", "prepare_scene", "orbit_cameras", "render_views",
            "classify", "find_recognized_views", "attack_iter", "attack", "AttackStep",
            "AttackResult", "random_perturbation", "evaluate", "DEFAULT_RADIUS", "ViewResult",
-           "cost_image_gradients"]
+           "cost_image_gradients", "RadianceSHShading", "FORMATIONS", "shading_for"]
 
 #: the thesis's L-infinity norm balls (Fig. 3.10)
 DEFAULT_RADIUS = {"lighting": 0.1, "geometry": 0.002}
@@ -96,6 +96,17 @@ class AdversaryParams:
                                       "longest side.")
     seed: int = param(0, label="Random seed", minimum=0, maximum=2**31 - 1, step=1,
                       advanced=True, tooltip="Seed of the random baseline perturbation.")
+    until_fooled: bool = param(True, label="Stop once fooled", advanced=True,
+                               tooltip="Stop as soon as every attacked view is fooled (thesis "
+                                       "App. 3.7.6). Off: run all the iterations (a stronger "
+                                       "perturbation, for views the attack does not see).")
+    formation: str = param("irradiance", label="Image formation",
+                           choices=("irradiance", "radiance"), advanced=True,
+                           tooltip="irradiance: the thesis's diffuse surface (Eq. 3.24, the "
+                                   "light convolved with the clamped cosine; degrees 3 and 5 "
+                                   "do not shade). radiance: the light looked up along the "
+                                   "normal, every degree shades (not the thesis's; an "
+                                   "experiment).")
 
     def ball(self) -> float:
         return float(self.radius) if self.radius > 0 else DEFAULT_RADIUS[self.mode]
@@ -184,13 +195,42 @@ def _upsample_grad(g: np.ndarray, s: int) -> np.ndarray:
     return np.repeat(np.repeat(g, s, axis=0), s, axis=1) / (s * s)
 
 
+class RadianceSHShading(SHShading):
+    """The SH lighting looked up along the face normal, ``I = rho sum_j U_j Y_j(n)``: the
+    radiance arriving from the normal's direction instead of the irradiance of a diffuse
+    surface (Eq. 3.24 with every ``A_l`` replaced by 1). Not the thesis's image formation (App.
+    3.7.3 derives the Lambertian one, :class:`SHShading`); an option measured in
+    ``benchmarks/adversarial.py --table34``: with it, degrees 3 and 5 shade and degrees 4 and 6
+    shade at full weight instead of ``|A_4| / A_0 = 1/24`` and ``A_6 / A_0 = 1/64``.
+
+    Everything else (rendering, lighting and normal derivatives, compiled kernels) is the
+    renderer's: they all use the weights ``_A``."""
+
+    def __init__(self, coefficients):
+        super().__init__(coefficients)
+        self._A = np.ones_like(self._A)
+
+
+FORMATIONS = {"irradiance": SHShading, "radiance": RadianceSHShading}
+
+
+def shading_for(lighting, formation: str = "irradiance") -> SHShading:
+    """The shading of ``lighting (49, 3)`` for an image formation of :data:`FORMATIONS`."""
+    try:
+        return FORMATIONS[formation](lighting)
+    except KeyError:
+        raise ParameterError(f"Unknown image formation {formation!r}: use one of "
+                             f"{', '.join(FORMATIONS)}.") from None
+
+
 def render_views(scene: Scene, cameras: Sequence[Camera], *, V=None, lighting=None,
-                 supersample: int = 2, check_visible: bool = True):
+                 supersample: int = 2, check_visible: bool = True,
+                 formation: str = "irradiance"):
     """Images ``(B, S, S, 3)`` in [0, 1] as the classifier sees them (``S`` = camera resolution
     / supersample), the renderings (for the derivatives) and the unclipped images."""
     V = scene.V if V is None else V
     U = scene.lighting if lighting is None else lighting
-    shading = SHShading(U)
+    shading = shading_for(U, formation)
     images, renders, raw = [], [], []
     for k, cam in enumerate(cameras):
         r = sh_render(V, scene.F, cam, shading, albedo=scene.albedo, background=scene.background)
@@ -351,7 +391,8 @@ def attack_iter(scene: Scene, classifier, cameras: Sequence[Camera],
 
     U, V = state(x)
     images, renders, raw = render_views(scene, cameras, V=V, lighting=U,
-                                        supersample=params.supersample)
+                                        supersample=params.supersample,
+                                        formation=params.formation)
     p0 = classify(classifier, images)
     dec = [p0[b].argmax() if d is None else d for b, d in
            enumerate(_per_view(decrease, B, "label"))]
@@ -373,7 +414,7 @@ def attack_iter(scene: Scene, classifier, cameras: Sequence[Camera],
                          f"iteration {it}: {sum(fooled)}/{B} views fooled",
                          lighting=U.copy(), images=images.astype(np.float32),
                          top5=[_top5(probs[b], names) for b in range(B)], fooled=fooled)
-        if all(fooled) or it >= params.iterations:
+        if (params.until_fooled and all(fooled)) or it >= params.iterations:
             break
         g = _parameter_gradient(scene, renders, V, raw, gI, mode, params.supersample)
         step = np.sign(g) if params.direction == "sign" else g
@@ -381,7 +422,8 @@ def attack_iter(scene: Scene, classifier, cameras: Sequence[Camera],
         it += 1
         U, V = state(x)
         images, renders, raw = render_views(scene, cameras, V=V, lighting=U,
-                                            supersample=params.supersample, check_visible=False)
+                                            supersample=params.supersample, check_visible=False,
+                                            formation=params.formation)
     if _out is not None:
         views = []
         for b in range(B):
@@ -411,17 +453,23 @@ def random_perturbation(scene: Scene, mode: str, radius: float, seed: int = 0) -
 
 
 def evaluate(scene: Scene, classifier, cameras, *, V=None, lighting=None, supersample: int = 2,
-             resolution: int = 224):
-    """Top-1 class indices and probabilities ``(B,), (B, K)`` of the views (V in unit-box units)."""
+             resolution: int = 224, formation: str = "irradiance", batch: int = 16):
+    """Top-1 class indices and probabilities ``(B,), (B, K)`` of the views (V in unit-box units),
+    rendered and classified ``batch`` views at a time."""
     cams = [c.with_resolution(resolution * supersample) for c in cameras]
-    images, _, _ = render_views(scene, cams, V=V, lighting=lighting, supersample=supersample)
-    p = classify(classifier, images)
+    ps = []
+    for i in range(0, len(cams), batch):
+        images, _, _ = render_views(scene, cams[i:i + batch], V=V, lighting=lighting,
+                                    supersample=supersample, formation=formation)
+        ps.append(classify(classifier, images))
+    p = np.concatenate(ps) if ps else np.zeros((0, len(classifier.class_names)))
     return p.argmax(1), p
 
 
 def find_recognized_views(scene: Scene, classifier, label, *, candidates: int = 24,
                           elevation: float = 30.0, width: float = 1.5, resolution: int = 224,
-                          supersample: int = 2, top: int = 1, batch: int = 8):
+                          supersample: int = 2, top: int = 1, batch: int = 8,
+                          formation: str = "irradiance"):
     """Azimuths (degrees) among ``candidates`` evenly spaced ones whose view the classifier gets
     right (``label`` among its top-``top``), best first, with the label's probability:
     ``[(azimuth, probability), ...]``."""
@@ -431,7 +479,7 @@ def find_recognized_views(scene: Scene, classifier, label, *, candidates: int = 
     for i in range(0, candidates, batch):
         cams = orbit_cameras(az[i:i + batch], elevation=elevation, width=width,
                              resolution=resolution * supersample)
-        images, _, _ = render_views(scene, cams, supersample=supersample)
+        images, _, _ = render_views(scene, cams, supersample=supersample, formation=formation)
         p = classify(classifier, images)
         for a, pb in zip(az[i:i + batch], p):
             if k in np.argsort(-pb)[:top]:

@@ -97,16 +97,20 @@ def test_cost_gradient_is_eq_3_1_and_matches_finite_differences():
     assert fd == pytest.approx(float((g * D).sum()), rel=1e-2)
 
 
+@pytest.mark.parametrize("formation", ["irradiance", "radiance"])
 @pytest.mark.parametrize("mode", ["lighting", "geometry"])
-def test_chain_rule_through_renderer_and_classifier_matches_finite_differences(mode):
+def test_chain_rule_through_renderer_and_classifier_matches_finite_differences(mode, formation):
     V, F, A = SUBJECTS["orange"]()
     scene = prepare_scene(V, F, albedo=A)
+    # all 49 x 3 coefficients non-zero: degrees 3-6 take part in the image and its derivatives
+    scene.lighting = scene.lighting + 0.05 * np.random.default_rng(7).standard_normal((49, 3))
     cams = orbit_cameras([20.0, 200.0], resolution=64)
     clf = _toy(torch.float64)
 
     def cost_at(x):
         kw = {"lighting": x} if mode == "lighting" else {"V": x}
-        images, renders, raw = render_views(scene, cams, supersample=2, **kw)
+        images, renders, raw = render_views(scene, cams, supersample=2, formation=formation,
+                                            **kw)
         c, gI, _ = cost_image_gradients(clf, images, [1, 1], [2, None])
         return c, gI, renders, raw
 
@@ -120,6 +124,34 @@ def test_chain_rule_through_renderer_and_classifier_matches_finite_differences(m
     eps = 1e-8 if mode == "geometry" else 1e-5
     fd = (cost_at(x0 + eps * D)[0] - cost_at(x0 - eps * D)[0]) / (2 * eps)
     assert fd == pytest.approx(float((g * D).sum()), rel=1e-4)
+
+
+def test_radiance_formation_shades_every_degree_and_irradiance_skips_odd_ones():
+    """Eq. 3.24: A_3 = A_5 = 0, so degrees 3 and 5 do not change a diffuse image; looked up as
+    radiance they do. With degree-0-2 light, the radiance of A_l U_l is the irradiance of U."""
+    from algorithms.adversarial.attack import RadianceSHShading, shading_for
+    from algorithms.render.sh import SHShading, convolution_weights, sh_index
+
+    V, F, A = SUBJECTS["orange"]()
+    scene = prepare_scene(V, F, albedo=A)
+    cams = orbit_cameras([30.0], resolution=96)
+    base, _, _ = render_views(scene, cams, supersample=1)
+    same, _, _ = render_views(scene, cams, supersample=1, formation="radiance",
+                              lighting=convolution_weights()[:, None] * scene.lighting)
+    np.testing.assert_allclose(same, base, atol=1e-12)
+    for l, moves_diffuse in ((3, False), (4, True), (5, False), (6, True)):
+        U = scene.lighting.copy()
+        U[sh_index(l, -l):sh_index(l, l) + 1] += 0.3
+        irr, _, raw_i = render_views(scene, cams, supersample=1, lighting=U)
+        rad, _, raw_r = render_views(scene, cams, supersample=1, lighting=U,
+                                     formation="radiance")
+        assert (np.abs(raw_i - render_views(scene, cams, supersample=1)[2]).max() > 1e-3) \
+            == moves_diffuse, l
+        assert np.abs(rad - same).max() > 1e-2, l
+    assert isinstance(shading_for(scene.lighting, "radiance"), RadianceSHShading)
+    assert type(shading_for(scene.lighting)) is SHShading
+    with pytest.raises(ParameterError, match="Unknown image formation"):
+        shading_for(scene.lighting, "phong")
 
 
 @pytest.fixture(scope="module")
@@ -145,6 +177,17 @@ def test_lighting_attack_streams_steps_and_stays_in_the_ball(mug, clf):
     # the cost goes down (confidence in the true class decreases)
     assert steps[-1].metrics["confidence_decreased"] < steps[0].metrics["confidence_decreased"]
     np.testing.assert_allclose(steps[-1].V, mug.to_original(mug.V))   # geometry untouched
+
+
+def test_the_attack_can_run_all_its_iterations(mug, clf):
+    """until_fooled=False keeps stepping after the views are fooled (a stronger light for views
+    the attack does not see); the default stops at the first fooled iterate."""
+    cams = orbit_cameras([270.0])                  # a view where the mug is easily fooled
+    short = attack(mug, clf, cams, AdversaryParams(iterations=6, direction="sign"))
+    full = attack(mug, clf, cams, AdversaryParams(iterations=6, direction="sign",
+                                                  until_fooled=False))
+    assert short.views[0].success and short.iterations < 6
+    assert full.iterations == 6 and full.norm <= 0.1 + 1e-12
 
 
 def test_geometry_attack_and_random_baseline_keep_the_norm(mug, clf):
