@@ -223,7 +223,17 @@ def generalized_eigs(L, M, k: int, sigma: float | None = None, progress=None):
     the basis it is orthogonalized against, so the reported fraction is
     ``0.9 (steps / expected steps)^2``: the work done, not the step count. An exception it
     raises (e.g. :class:`~algorithms.steps.Cancelled`) stops ARPACK and propagates.
+
+    It runs with one BLAS thread (:func:`algorithms.spectral._blas.single_blas_thread`), as in
+    the panel's child process: with a busy machine, OpenBLAS's threads made ARPACK 3x slower.
     """
+    from ._blas import single_blas_thread
+
+    with single_blas_thread():
+        return _generalized_eigs(L, M, k, sigma, progress)
+
+
+def _generalized_eigs(L, M, k, sigma, progress):
     n = L.shape[0]
     k = int(min(k, n - 1))
     Ms = M if sp.issparse(M) else sp.diags(np.asarray(M, float))
@@ -239,7 +249,15 @@ def generalized_eigs(L, M, k: int, sigma: float | None = None, progress=None):
     if n <= max(200, 3 * k):
         import scipy.linalg as sla
         try:
-            lam, phi = sla.eigh(Ld.toarray(), Ms.toarray())
+            kk = int(min(k, n))
+            if abs(Ms - sp.diags(mass)).max() == 0 if Ms.nnz else True:
+                # diagonal M: the standard problem of D^-1 L D^-1 (D = M^1/2), first k only
+                dinv = 1.0 / np.sqrt(mass)
+                Cd = Ld.toarray() * dinv[:, None] * dinv[None, :]
+                lam, y = sla.eigh((Cd + Cd.T) * 0.5, subset_by_index=[0, kk - 1])
+                phi = y * dinv[:, None]
+            else:
+                lam, phi = sla.eigh(Ld.toarray(), Ms.toarray(), subset_by_index=[0, kk - 1])
         except (np.linalg.LinAlgError, ValueError) as exc:
             raise ParameterError(f"the eigenvectors of the operator could not be computed "
                                  f"({exc}); the mesh probably has degenerate triangles: run "
@@ -252,9 +270,7 @@ def generalized_eigs(L, M, k: int, sigma: float | None = None, progress=None):
         # fixed start vector: ARPACK's random one makes results (and everything optimized
         # from them) differ from run to run
         v0 = np.random.default_rng(0).uniform(0.5, 1.5, n)
-        OPinv = None
-        if progress is not None:
-            OPinv = _counting_shift_invert(Ld, Ms, sigma, k, progress)
+        OPinv = _counting_shift_invert(Ld, Ms, sigma, k, progress)
         try:
             lam, phi = eigsh(sp.csc_matrix(Ld), k=k, M=sp.csc_matrix(Ms), sigma=sigma,
                              which="LM", v0=v0, OPinv=OPinv)
@@ -283,28 +299,45 @@ def generalized_eigs(L, M, k: int, sigma: float | None = None, progress=None):
 
 
 def _counting_shift_invert(L, M, sigma: float, k: int, progress):
-    """``(L - sigma M)^-1`` as a LinearOperator (SuperLU, as eigsh builds it itself) that
-    reports every application to ``progress`` (see :func:`generalized_eigs`)."""
+    """``(L - sigma M)^-1`` as a LinearOperator that reports every application to
+    ``progress`` when given (see :func:`generalized_eigs`).
+
+    The factor is CHOLMOD's (:class:`algorithms.linalg.SPDSolver`, when ``cholespy`` is
+    installed: ``L - sigma M`` is positive definite for a PSD L and sigma < 0), else SuperLU's
+    as eigsh builds it itself. ARPACK on a 30k-vertex Laplacian, k 101, one BLAS thread: 3.9 s
+    of CPU with CHOLMOD against 5.8 s with SuperLU (306 solves either way)."""
     from scipy.sparse.linalg import LinearOperator, splu
 
+    from ..linalg import SPDSolver, cholmod_available
+
     n = L.shape[0]
-    try:
-        lu = splu(sp.csc_matrix(L - sigma * M))
-    except RuntimeError as exc:   # "Factor is exactly singular": eigsh's own message path
-        raise ValueError(str(exc)) from None
+    A = sp.csc_matrix(L - sigma * M)
+    solve_fn = None
+    if cholmod_available():
+        try:
+            solve_fn = SPDSolver(A, backend="cholmod").solve
+        except Exception:   # not positive definite (an indefinite operator): SuperLU below
+            solve_fn = None
+    if solve_fn is None:
+        try:
+            solve_fn = splu(A).solve
+        except RuntimeError as exc:   # "Factor is exactly singular": eigsh's message path
+            raise ValueError(str(exc)) from None
     ncv = min(n, max(2 * k + 1, 20))
     expected = [ncv + (ncv - k) // 2]
     count = [0]
+
+    shown = [0.0]
 
     def solve(x):
         count[0] += 1
         c = count[0]
         if c > expected[0]:   # one more implicit restart than expected: say so, never "200 of 150"
             expected[0] += max(1, (ncv - k) // 2)
-        if c == 1 or c % 5 == 0:
-            progress(0.9 * min(1.0, c / expected[0]) ** 2,
-                     f"Lanczos step {c} of about {expected[0]}")
-        return lu.solve(np.asarray(x, dtype=np.float64).reshape(n))
+        if progress is not None and (c == 1 or c % 5 == 0):
+            shown[0] = max(shown[0], 0.9 * min(1.0, c / expected[0]) ** 2)   # never backwards
+            progress(shown[0], f"Lanczos step {c} of about {expected[0]}")
+        return solve_fn(np.asarray(x, dtype=np.float64).reshape(n))
 
     return LinearOperator((n, n), matvec=solve, dtype=np.float64)
 
@@ -574,13 +607,16 @@ class _Energy:
     products on known patterns, :func:`algorithms.spectral.kernels.spgemm_fixed`: about
     ``nnz(L) r + n r^2`` multiply-adds with r ~ 7 clusters per row of G), and all the work
     on the k eigenvectors happens at the coarse size m: ``W = M~^-1 L~ B - A`` and
-    ``Z = W2 B^T + B W2^T`` (m x m, one matrix product), then the gradient on the pattern
-    ``g_ij = (Y Z)_ij`` (App. 7.6.1: dE/dG = Y Z). ``W2 = W`` for the thesis energy, or
-    ``W2 = W diag(w)`` for column weights ``w`` (the balanced energy of
+    ``Z = W2 B^T + B W2^T`` (m x m, :func:`~algorithms.spectral.kernels.sym_outer`), then the
+    gradient on the pattern ``g_ij = (Y Z)_ij`` (App. 7.6.1: dE/dG = Y Z). ``W2 = W`` for the
+    thesis energy, or ``W2 = W diag(w)`` for column weights ``w`` (the balanced energy of
     :func:`_balance_stage`, whose columns of A and B are scaled by ``sqrt(w)``: its gradient is
     this one with W2). Earlier, each evaluation formed ``L G`` and ``G^T L G`` with SciPy's
-    general sparse products and the gradient from n x k products: 30k -> 500, k 100 took
-    ~160 ms per evaluation here, against ~15 ms now (benchmarks/spectral.py --kernels).
+    general sparse products and the gradient from n x k products plus a small matrix product
+    per cluster: 30k -> 500, k 100 took 64-67 ms of CPU per evaluation here against 29-32 ms
+    now (one thread each; measured side by side, benchmarks/spectral.py --kernels). No BLAS
+    is called per evaluation: OpenBLAS's threads stalled for tens of ms per call while the
+    machine's cores were busy with other work.
     For m > 4000 (an m x m Z above 128 MB) the gradient is taken as
     ``(Y W2)_i . B_j + (Y B)_i . W2_j`` instead. Without Numba everything runs in SciPy.
     The constraint G P Phi0 = Phi0 with one null vector (every Laplacian on one or several
@@ -667,9 +703,8 @@ class _Energy:
         if not gradient:
             return E, Ew, None
         if kn is not None and m <= self.Z_LIMIT:
-            Zt = W2 @ self.B.T
             g = kn.pattern_rowdot(self.indptr, self.indices, self.Y_indptr, self.Y_indices,
-                                  yd, Zt + Zt.T)
+                                  yd, kn.sym_outer(W2, self.B))
         elif kn is not None:
             YW = kn.csr_dense(self.Y_indptr, self.Y_indices, yd, W2)
             YB = kn.csr_dense(self.Y_indptr, self.Y_indices, yd, self.B)

@@ -132,12 +132,22 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
         raise ParameterError(f"Need 2k < m < n (here n = {n}, m = {params.m}, k = "
                              f"{params.k or round(params.m / 3)}).")
     recipe = method_recipe("spectral", "Spectral coarsening")
+    import time
+
     last = None
+    shown_stage, shown_at = None, 0.0
     for last in recipe.steps(input_state(args, data), params, options, {}):
-        if ("energy" in last.metrics and not args.json and not args.quiet
-                and last.iteration % 50 == 0):
-            print(f"  iteration {last.iteration}: energy {last.metrics['energy']:.6g}",
-                  file=sys.stderr)
+        if args.json or args.quiet or not last.message or last.total != 100:
+            continue
+        # the recipe's one progress (stage, step of total, time left): a line when the stage
+        # changes and at most one every 2 s within it
+        stage = last.message.split(":")[0].split(" ·")[0]
+        now = time.perf_counter()
+        if stage != shown_stage or now - shown_at >= 2.0:
+            energy = (f" (energy {last.metrics['energy']:.6g})" if "energy" in last.metrics
+                      else "")
+            print(f"  {last.iteration:3d} %  {last.message}{energy}", file=sys.stderr)
+            shown_stage, shown_at = stage, now
     outcome = recipe.outcome(last)
     seconds = last.seconds  # each method's time (the outcome holds none)
     out = {"n": outcome["n"], "m": outcome["m"], "k": outcome["k"],

@@ -86,24 +86,129 @@ def spectral_options(options: dict | None) -> dict:
             "compare": [c for c in BASELINES if c in compare], "isolated": bool(o["isolated"])}
 
 
+#: the stages of a run, in order, with the words the progress uses for them
+STAGES = ("eigenvectors", "clustering", "optimizing", "balancing", "comparing")
+STAGE_LABELS = {"eigenvectors": "Eigenvectors", "clustering": "Clustering the vertices",
+                "optimizing": "Optimizing", "balancing": "Balancing", "comparing": "Comparing"}
+#: NADAM iterations a run usually takes before its patience stops it (measured: 134 on a
+#: 30k-vertex koala -> 500, 142 on armadillo, 180 on the blob sample)
+TYPICAL_NADAM_ITERATIONS = 160
+
+#: The cost model of :func:`estimate_seconds`, in seconds, calibrated on this project's
+#: machine (2 cores) from CPU times of single-threaded runs (the machine was shared while it
+#: was measured; ``benchmarks/spectral.py --estimate`` prints measured against modelled
+#: figures): a 30k-vertex koala, m 500, k 100: ARPACK 3.9 s, one energy evaluation 30 ms,
+#: clustering 0.9 s, QSlim 1.5 s, scoring 0.23 s per method; the blob sample: QSlim 0.23 s,
+#: the child process's start 1.4 s. The terms:
+#: eigenvectors ``eig * n * ke^2`` (ARPACK's shift-invert Lanczos, ke = k + parts),
+#: clustering ``cluster * n``, one energy evaluation ``eval_n * n + eval_mmk * m^2 k``,
+#: QSlim ``qslim * n``, AMG ``amg * n``, scoring ``score * m^2 k`` per method, and the child
+#: process's start ``start``.
+COST = {"eig": 1.3e-8, "cluster": 3.0e-5, "eval_n": 8.0e-7, "eval_mmk": 2.0e-10,
+        "qslim": 6.0e-5, "amg": 4.0e-5, "score": 8.0e-9, "start": 1.4}
+
+
+def estimate_seconds(n: int, params, options: dict | None = None, parts: int = 1
+                     ) -> dict[str, float]:
+    """Seconds each stage of a run on an ``n``-vertex mesh should take with ``params`` (a
+    CoarsenParams) and ``options`` (see :data:`COST`; a model, good to a factor of about 1.5
+    on a quiet machine). Keys: the :data:`STAGES` and "start"."""
+    o = spectral_options(options)
+    m = int(params.m)
+    k = int(params.k or max(1, round(m / 3)))
+    ke = k + max(1, int(parts))
+    c = COST
+    evals = min(int(params.max_iterations), TYPICAL_NADAM_ITERATIONS)
+    per_eval = c["eval_n"] * n + c["eval_mmk"] * m * m * k
+    compare = c["score"] * m * m * k
+    for name in o["compare"]:
+        compare += c[name] * n + c["score"] * m * m * k
+    return {"start": c["start"] if o["isolated"] else 0.0,
+            "eigenvectors": c["eig"] * n * ke * ke,
+            "clustering": c["cluster"] * n * min(1.0, params.clustering_iterations / 20),
+            "optimizing": per_eval * (evals + 1),
+            "balancing": per_eval * 1.07 * int(params.balance_iterations),
+            "comparing": compare}
+
+
+def format_seconds(seconds: float) -> str:
+    """A duration in words for an estimate: "under a second", "8 s", "2 min"."""
+    if seconds < 1.0:
+        return "under a second"
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    return f"{seconds / 60:.0f} min"
+
+
+def estimate_text(n: int, params, options: dict | None = None, parts: int = 1) -> str:
+    """What a run will take, said before it starts (the panel shows it next to Run)."""
+    est = estimate_seconds(n, params, options, parts)
+    total = sum(est.values())
+    big = max(STAGES, key=lambda s: est[s])
+    what = {"eigenvectors": "the eigenvectors", "clustering": "the clustering",
+            "optimizing": "the optimization", "balancing": "the balancing",
+            "comparing": "the comparison"}[big]
+    return (f"Estimated time: about {format_seconds(total)} on this {n:,}-vertex mesh "
+            f"(mostly {what}).")
+
+
+class _Progress:
+    """One progress for the whole run: each stage's share of the estimated time
+    (:func:`estimate_seconds`), the elapsed time, and what is left (the estimate of the stages
+    to come, scaled by how fast the stages so far went against their estimates)."""
+
+    def __init__(self, est: dict[str, float]):
+        import time
+
+        self.est = est
+        self.total = max(sum(est.values()), 1e-9)
+        self.t0 = time.perf_counter()
+        self.clock = time.perf_counter
+        self.pct = 0
+
+    def step(self, stage: str, fraction: float, detail: str = "") -> tuple[int, str]:
+        done = self.est.get("start", 0.0)
+        for s in STAGES:
+            if s == stage:
+                done += max(0.0, min(1.0, fraction)) * self.est[s]
+                break
+            done += self.est[s]
+        self.pct = max(self.pct, min(99, int(100 * done / self.total)))
+        elapsed = self.clock() - self.t0
+        left = self.total - done
+        if done > 0.05 * self.total:      # scale by the speed seen so far
+            left *= elapsed / done
+        label = STAGE_LABELS[stage] + (f": {detail}" if detail else "")
+        tail = f" · {format_seconds(left)} left" if left >= 1.0 else ""
+        text = (label + tail) if len(label + tail) <= 60 else label[:60]
+        return self.pct, text
+
+
 def spectral_steps(state, params, options: dict | None = None, cache: dict | None = None
                    ) -> Iterator[Step]:
-    """The panel's Run: the eigenvectors of the fine operator (streamed as per-mille progress
-    with no metrics), one Step per optimizer iteration of ours (metric ``energy``), then a
+    """The panel's Run: one progress for the whole run (``total`` 100, ``iteration`` the share
+    of the estimated work done, ``message`` the stage, its step of total where known and an
+    estimate of the time left, at most 60 characters), through the stages of
+    :data:`STAGES`; the optimizer's steps carry the metric ``energy``; then a
     :class:`ComparisonStep` carrying the outcome. ``cache`` is not used (every run starts from
     the mesh)."""
+    import re
+
     from algorithms.spectral.compare import compare_coarsenings_iter
 
     o = spectral_options(options)
     args = (state.V, state.F, o["operator"], params.m, params.k or None, params)
     kwargs = {"methods": ("ours", *o["compare"]), "alpha": o["alpha"], "eig_progress": True}
+    prog = _Progress(estimate_seconds(len(state.V), params, o))
     if o["isolated"]:
         # in a child process: ARPACK, SciPy's sparse products and PyAMG hold the GIL for
         # seconds, which would freeze the window even from the worker thread
         gen = isolated_iter(compare_coarsenings_iter, *args, **kwargs)
     else:
         gen = compare_coarsenings_iter(*args, **kwargs)
-    last_it = 0
+    nadam_cap = max(1, int(params.max_iterations))
+    typical = min(nadam_cap, TYPICAL_NADAM_ITERATIONS)
+    balance_cap = max(1, int(params.balance_iterations))
     try:
         while True:
             try:
@@ -111,15 +216,29 @@ def spectral_steps(state, params, options: dict | None = None, cache: dict | Non
             except StopIteration as stop:
                 out = comparison_outcome(stop.value)
                 secs = {name: float(r.seconds) for name, r in stop.value.methods.items()}
-                yield ComparisonStep(last_it + 1, None, state.V, {}, "done", outcome=out,
+                yield ComparisonStep(100, 100, state.V, {}, "done", outcome=out,
                                      seconds=secs)
                 return
-            if np.isnan(cs.energy):      # the eigenvector stage: its own progress
-                yield Step(cs.iteration, cs.total, state.V, {}, cs.message)
+            stage = getattr(cs, "stage", "optimizing")
+            if cs.done:      # ours' result (its best iterate): the comparison follows
                 continue
-            last_it = cs.iteration
-            yield Step(cs.iteration, cs.total, state.V, {"energy": cs.energy},
-                       f"iteration {cs.iteration}")
+            if stage == "eigenvectors":
+                hit = re.search(r"Lanczos step (\d+) of about (\d+)", cs.message)
+                detail = f"Lanczos step {hit[1]} of about {hit[2]}" if hit else ""
+                pct, text = prog.step(stage, cs.iteration / 1000.0, detail)
+            elif stage in ("clustering", "comparing"):
+                detail = cs.message.replace("Comparing ", "") if stage == "comparing" else ""
+                pct, text = prog.step(stage, 0.0, detail)
+            elif stage == "balancing":
+                it = int(cs.metrics.get("balancing_iteration", 0))
+                pct, text = prog.step(stage, it / balance_cap,
+                                      f"iteration {it} of at most {balance_cap}")
+            else:
+                it = cs.iteration
+                pct, text = prog.step(stage, min(0.95, it / typical),
+                                      f"iteration {it} of at most {nadam_cap}")
+            metrics = {"energy": cs.energy} if np.isfinite(cs.energy) else {}
+            yield Step(pct, 100, state.V, metrics, text)
     finally:
         gen.close()   # a cancelled run stops the computation (and its child process) now
 

@@ -193,3 +193,53 @@ def test_a_cancelled_run_stops_its_child_process(state):
     gen.close()
     assert not any(p.name == "stylize3d-isolated" and p.is_alive()
                    for p in mp.active_children())
+
+
+# ---------------------------------------------------------------------------- issue 24 item 1
+def test_one_progress_names_stages_counts_and_what_is_left(state):
+    """Every streamed step is one progress (total 100, never backwards) whose message names
+    the stage, its step of total where known and the time left, in at most 60 characters (the
+    status bar shows 60); the stages come in order."""
+    from app.recipes import get_recipe
+    from app.recipes.spectral import STAGE_LABELS
+
+    r = get_recipe("coarsen")
+    steps = list(r.steps(state, r.make_params(SMALL), {}, {}))
+    body = steps[:-1]
+    assert all(s.total == 100 for s in steps)
+    pct = [s.iteration for s in body]
+    assert pct == sorted(pct) and pct[-1] <= 99 and steps[-1].iteration == 100
+    assert all(0 < len(s.message) <= 60 for s in steps)
+    order = []
+    for s in body:
+        label = next(v for k, v in STAGE_LABELS.items() if s.message.startswith(v))
+        if not order or order[-1] != label:
+            order.append(label)
+    assert order == ["Eigenvectors", "Clustering the vertices", "Optimizing", "Balancing",
+                     "Comparing"]
+    opt = [s for s in body if s.message.startswith("Optimizing")]
+    assert all(f"of at most {SMALL['max_iterations']}" in s.message for s in opt)
+    assert all("energy" in s.metrics for s in opt)
+    bal = [s for s in body if s.message.startswith("Balancing")]
+    assert bal and all(f"of at most {SMALL['balance_iterations']}" in s.message for s in bal)
+    assert any("QSlim" in s.message for s in body) and any("AMG" in s.message for s in body)
+    assert not any(s.message.startswith("Iteration") for s in steps)
+
+
+def test_estimate_grows_with_the_settings():
+    """The estimate said before a run (cost model) grows with m, k and the iteration counts,
+    and with the mesh; the text names the total."""
+    from algorithms.spectral.coarsen import CoarsenParams
+    from app.recipes.spectral import estimate_seconds, estimate_text
+
+    def total(n, **kw):
+        return sum(estimate_seconds(n, CoarsenParams(**kw), {"isolated": True}).values())
+
+    base = total(3232, m=404)
+    assert total(3232, m=600) > base
+    assert total(3232, m=404, k=200) > base
+    assert total(3232, m=404, balance_iterations=1000) > base
+    assert total(3232, m=404, max_iterations=20) < base
+    assert total(30000, m=404) > base
+    text = estimate_text(3232, CoarsenParams(m=404), {"isolated": True})
+    assert text.startswith("Estimated time: about") and "3,232-vertex" in text
