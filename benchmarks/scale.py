@@ -726,8 +726,9 @@ def document(cases, levels, methods, a, meta: dict, finished: bool) -> list[str]
              f"the other)",
              f"- meshes: {BASE_MESH} (tests/data) and its Loop subdivisions; iterations "
              f"{a.iterations} (cubic, analogies, ARAP), views {a.views} (Paparazzi); median of "
-             f"{a.repeat} runs below 10^5 vertices, one run above; per-case timeout {a.timeout:.0f} s; every "
-             f"case in its own process",
+             f"{a.repeat} runs below 10^5 vertices, one run above; per-case timeout "
+             f"{a.timeout:.0f} s; every case in its own process; Numba and BLAS threads as the "
+             f"environment sets them (BLAS 1 thread for multigrid and CHOLMOD, torch 1 thread)",
              ""]
     if not finished:
         lines += ["**Incomplete: the run had not finished when this file was written; only the "
@@ -777,7 +778,8 @@ def main(argv=None) -> int:
     except ValueError:
         exe_text = str(exe)
     args_text = shlex.join(sys.argv[1:] if argv is None else argv)
-    meta = dict(command=f"{exe_text} benchmarks/scale.py" + (f" {args_text}" if args_text else ""),
+    meta = dict(command=f"{exe_text} benchmarks/scale.py"
+                + (f" {args_text}" if args_text else ""),
                 start=datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M"),
                 machine=machine(), load_before=_load_text())
     print(f"scale table: {', '.join(methods)} at levels {levels} of {BASE_MESH} ({n0:,} "
