@@ -152,3 +152,24 @@ def test_a_plugin_that_cannot_be_loaded_is_a_plain_error_and_nothing_is_written(
     assert message in err and "Traceback" not in err and str(plugin) in err
     assert not out.exists()
     assert filter_names() == before
+
+
+def test_the_report_logs_the_monitor_energy_averaged_over_16_views(sphere, tmp_path, capsys):
+    # issue 23: the run report's monitor energies are the mean over the fixed monitor views
+    # (not one view), the same numbers the optimizer computes for the input and the output
+    from algorithms.paparazzi import Paparazzi, PaparazziParams
+
+    out = tmp_path / "o.obj"
+    assert main(["paparazzi", str(sphere), "-o", str(out), "--filter", "quantize", "--json",
+                 "--seed", "2", *FAST]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    d, o = read_mesh(sphere), read_mesh(out)
+    pp = PaparazziParams(iterations=12, resolution=32, remesh_every=6, monitor_every=0, seed=2)
+    run = Paparazzi(d.V, d.F, "quantize", None, pp)
+    assert len(run.monitor_cameras()) == 16
+    norm = lambda V: (V - run.center) / run.scale  # noqa: E731
+    assert rep["initial_monitor_energy"] == pytest.approx(run.monitor_energy(norm(d.V), d.F))
+    assert rep["final_monitor_energy"] == pytest.approx(run.monitor_energy(norm(o.V), o.F),
+                                                        rel=1e-5)
+    one = run.evaluate(norm(d.V), d.F, run.monitor_cameras()[0])[0]
+    assert rep["initial_monitor_energy"] != pytest.approx(one)

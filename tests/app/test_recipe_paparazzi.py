@@ -239,3 +239,26 @@ def test_options_are_json_and_blobs_only_for_readable_files(tmp_path):
     assert filter_options("target-image", TargetImageParams(image=ref))["filter_params"] == \
         {"image": ref}
     json.dumps(filter_options("slic", get_filter("slic").params()))
+
+
+@pytest.mark.parametrize("name, iterations, resolution, factor", [
+    ("guided", 300, 0, 0.99), ("quantize", 60, 0, 0.95)])
+def test_every_built_in_filter_lowers_its_energy_averaged_over_16_views(name, iterations,
+                                                                        resolution, factor):
+    # issue 23: the guided filter and quantize at their defaults (fewer iterations, no
+    # remeshing, on a small bumpy shape) lower the mean of their energy over the 16 fixed
+    # monitor views (quantize measured 960 -> 875 in 60 iterations). slic and
+    # l0 need more iterations at 256 px than a unit test can afford (40 at 128 px: slic 8.51 ->
+    # 8.58, l0 9.68 -> 9.54); their 1000-iteration runs at the command line's defaults on the
+    # shared meshes: benchmarks/paparazzi_effects.py, docs/paparazzi.md
+    from algorithms.mesh import loop_subdivide
+
+    V, F = loop_subdivide(*icosphere(2), 1)
+    V = V * (1.0 + 0.2 * np.sin(4.0 * V[:, :1]) * np.cos(3.0 * V[:, 1:2]))
+    V = V + 0.004 * np.random.default_rng(0).standard_normal(V.shape)
+    params = {"iterations": iterations, "remesh_every": 0, "monitor_every": 0,
+              "resolution": resolution}
+    res = run("paparazzi", MeshState.make(V, F), params, {"filter": name})
+    o = res.outcome
+    assert o["monitor_views"] == 16
+    assert o["monitor_energy"] < factor * o["initial_monitor_energy"], o
