@@ -359,6 +359,76 @@ def table34(args):
     return tot
 
 
+def contact_sheet(args, out: Path):
+    """One 5-view attack (the set-up of the command line) on ``args.shapes[0]``: a PNG with,
+    per view (the attacked ones first, then unseen ones), the image before, with the adversary
+    and with a random perturbation of the same norm, and the classifier's top-1 of each."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from algorithms.adversarial.transfer import sample_views, view_camera
+
+    name = (args.shapes or ["coffee mug"])[0]
+    mode = args.mode
+    radius = DEFAULT_RADIUS[mode]
+    clf = default_classifier()
+    scene = _subject_scene(name, args)
+    k = resolve_label(name, clf.class_names)
+    seed = zlib.crc32(name.encode())
+    views, tried = sample_views(scene, clf, k, wanted=args.views,
+                                max_candidates=args.max_candidates,
+                                elevation=tuple(args.elevation), width=tuple(args.width),
+                                seed=seed, formation=args.formation)
+    n_att = min(args.subsets[-1], len(views) - 1)
+    rng = np.random.default_rng([args.seed, seed])
+    pick = np.sort(rng.choice(len(views), n_att, replace=False))
+    params = AdversaryParams(mode=mode, iterations=args.iterations, step=args.step,
+                             direction=args.direction, until_fooled=not args.all_iterations,
+                             formation=args.formation)
+    res = attack(scene, clf, [view_camera(views[i]) for i in pick], params, decrease=k)
+    x_adv = res.lighting if mode == "lighting" else (res.V - scene.center) / scene.scale
+    x_rnd = random_perturbation(scene, mode, radius, seed=seed)
+    rest = [i for i in range(len(views)) if i not in set(pick.tolist())]
+    shown = list(pick[:2]) + rest[:args.sheet_views - min(2, len(pick))]
+    cams = [view_camera(views[i]) for i in shown]
+    from algorithms.adversarial import render_views
+    from algorithms.adversarial.attack import classify
+
+    cols = []
+    for kw in ({}, {"lighting" if mode == "lighting" else "V": x_adv},
+               {"lighting" if mode == "lighting" else "V": x_rnd}):
+        imgs, _, _ = render_views(scene, cams, formation=args.formation, **kw)
+        cols.append((imgs, classify(clf, imgs)))
+    titles = ("before", f"adversarial ({mode}, L-inf {radius})", f"random, same norm")
+    fig, axes = plt.subplots(len(shown), 3, figsize=(7.2, 2.5 * len(shown)))
+    for r, i in enumerate(shown):
+        v = views[i]
+        for c, (imgs, p) in enumerate(cols):
+            ax = axes[r, c]
+            ax.imshow(imgs[r])
+            ax.set_xticks([])
+            ax.set_yticks([])
+            top = int(p[r].argmax())
+            ok = top == k
+            ax.set_title(f"{short_name(clf.class_names[top])} {100 * p[r, top]:.0f} %",
+                         fontsize=8, color="black" if ok else "red")
+            if r == 0:
+                ax.text(0.5, 1.25, titles[c], transform=ax.transAxes, ha="center",
+                        fontsize=9, weight="bold")
+            if c == 0:
+                ax.set_ylabel(f"{'ATTACKED' if i in pick else 'unseen'}\naz {v.azimuth:.0f} el "
+                              f"{v.elevation:.0f}", fontsize=8)
+    fig.suptitle(f"{name}: {mode} adversary on {n_att} views ({res.iterations} iterations, "
+                 f"{args.formation}, background {args.background:g}); red = fooled", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out, dpi=80)
+    plt.close(fig)
+    print(f"wrote {out}: {name}, {n_att} attacked views of {len(views)} ({tried} candidates), "
+          f"attacked fooled {sum(v.success for v in res.views)}/{n_att}")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="2 views, 5 iterations")
@@ -385,7 +455,14 @@ def main():
     t34.add_argument("--background", type=float, default=0.0)
     t34.add_argument("--elevation", type=float, nargs=2, default=[0.0, 60.0])
     t34.add_argument("--width", type=float, nargs=2, default=[1.3, 1.9])
+    t34.add_argument("--pictures", type=Path, metavar="PNG",
+                     help="write the contact sheet of one attack with this set-up (first of "
+                          "--shapes) instead of the table")
+    t34.add_argument("--sheet-views", type=int, default=5, help="views on the contact sheet")
     args = ap.parse_args()
+    if args.pictures:
+        contact_sheet(args, args.pictures)
+        return
     if args.table34:
         table34(args)
         return

@@ -1,0 +1,64 @@
+"""Table 3.4 in small (issue 23): a lighting adversary computed on 2 views fools more of the
+views it never saw than a random light of the same norm does.
+
+The full protocol (>= 100 correctly classified views per subject, 1 and 5 attacked views,
+several draws, every subject) is ``benchmarks/adversarial.py --table34``; here one subject (the
+procedural orange), 12 random correctly classified views, one 2-view attack with the thesis's
+norm and step (<= 10 iterations), evaluated on the 10 others against three random corners of
+the L-infinity ball. The test fails if the adversary stops transferring to unseen views better
+than random light does.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+torch.set_num_threads(1)
+
+from algorithms.adversarial import (AdversaryParams, default_classifier, evaluate,  # noqa: E402
+                                    prepare_scene, random_perturbation, resolve_label)
+from algorithms.adversarial.shapes import SUBJECTS  # noqa: E402
+from algorithms.adversarial.transfer import (fooled, sample_views, transfer_trial,  # noqa: E402
+                                             view_camera)
+from algorithms.errors import ParameterError  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def orange():
+    clf = default_classifier()
+    V, F, A = SUBJECTS["orange"]()
+    scene = prepare_scene(V, F, albedo=A)
+    k = resolve_label("orange", clf.class_names)
+    views, tried = sample_views(scene, clf, k, wanted=12, max_candidates=48, seed=3)
+    return clf, scene, k, views, tried
+
+
+def test_sampled_views_are_random_and_correctly_classified(orange):
+    clf, scene, k, views, tried = orange
+    assert len(views) == 12 and 12 <= tried <= 48
+    assert len({round(v.azimuth, 6) for v in views}) == 12           # all different
+    assert all(0 <= v.elevation <= 60 and 1.3 <= v.width <= 1.9 for v in views)
+    top, _ = evaluate(scene, clf, [view_camera(v) for v in views])
+    assert (top == k).all()
+    assert not fooled(scene, clf, k, views).any()                     # "#views 0": 0 %
+
+
+def test_a_two_view_lighting_adversary_fools_more_unseen_views_than_random_light(orange):
+    clf, scene, k, views, _ = orange
+    trial = transfer_trial(scene, clf, k, views, 2, AdversaryParams(iterations=10),
+                           np.random.default_rng(0))
+    assert len(trial.attacked) == 2 and len(trial.unseen_fooled) == 10
+    assert trial.norm <= 0.1 + 1e-12
+    unseen = [v for i, v in enumerate(views) if i not in trial.attacked]
+    rnd = [int(fooled(scene, clf, k, unseen,
+                      lighting=random_perturbation(scene, "lighting", 0.1, seed=s)).sum())
+           for s in range(3)]
+    adv = int(trial.unseen_fooled.sum())
+    print(f"orange: 2-view lighting adversary ({trial.attacked_fooled}/2 attacked views fooled "
+          f"in {trial.iterations} iterations): unseen views fooled {adv}/10; random lights of "
+          f"the same norm {rnd}/10")
+    assert adv > np.mean(rnd) and adv >= max(rnd)
+    with pytest.raises(ParameterError, match="Attack between 1 and 11"):
+        transfer_trial(scene, clf, k, views, 12, AdversaryParams(), np.random.default_rng(0))
