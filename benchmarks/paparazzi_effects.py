@@ -209,15 +209,13 @@ def effects(a) -> int:
                   f"{'same-topology' if same else 'TOPOLOGY-CHANGED'} crossings "
                   f"{run.input_intersections}->{crossings} (rollbacks {int(m['rollbacks'])}, "
                   f"rejected remeshes {int(m['remesh_rejected'])})", flush=True)
-            if not a.no_sheets:
-                sheets.setdefault(name, []).append(
-                    (f"{Path(mesh).stem}\n{len(V):,} V", view_picture(V, F),
-                     view_picture(Vo, Fo), view_picture(clast.V, clast.F)))
-    for name, rows in sheets.items():
-        out = ROOT / "docs" / "images" / f"paparazzi_{name}.png"
-        contact_sheet(rows, out, f"Paparazzi, filter {name}: {a.iterations} iterations, "
-                                 "command-line defaults")
-        print(f"wrote {out.relative_to(ROOT)}")
+            if not a.no_sheets:       # written after each row: a long run stopped early
+                rows = sheets.setdefault(name, [])   # keeps the rows it has
+                rows.append((f"{Path(mesh).stem}\n{len(V):,} V", view_picture(V, F),
+                             view_picture(Vo, Fo), view_picture(clast.V, clast.F)))
+                out = ROOT / "docs" / "images" / f"paparazzi_{name}.png"
+                contact_sheet(rows, out, f"Paparazzi, filter {name}: {a.iterations} "
+                                         "iterations, command-line defaults")
     return 0
 
 
