@@ -3,41 +3,25 @@ primitives and subdivision. Conventions: ``V`` is ``(n, 3) float64``, ``F`` is `
 
 The submodules are importable as ``algorithms.mesh.io``, ``.topology``, ``.operators``,
 ``.validate``, ``.primitives``, ``.subdivision`` and ``.samples``; the most used names are
-re-exported here.
+re-exported here. Only ``io``, ``topology`` and ``validate`` (NumPy only) load with the
+package; the others (and SciPy with them) load when a name of theirs is first used, so reading
+and checking a mesh (``stylize3d info``) starts in a fraction of a second.
 """
 
 from __future__ import annotations
 
-from . import io, operators, primitives, samples, subdivision, topology, validate
-from .io import SUPPORTED_READ, SUPPORTED_WRITE, MeshData, file_filter, read_mesh, write_mesh
-from .operators import (
-    barycentric_vertex_areas,
-    bounding_box_diagonal,
-    cotangent_laplacian,
-    cotangent_laplacian_psd,
-    denormalize,
-    face_areas,
-    face_normals,
-    mass_matrix,
-    normalize_unit_box,
-    signed_volume,
-    vertex_normals,
+import importlib
+
+from . import io, topology, validate
+from .io import (  # noqa: F401
+    SUPPORTED_READ,
+    SUPPORTED_WRITE,
+    MeshData,
+    file_filter,
+    read_mesh,
+    write_mesh,
 )
-from .primitives import (
-    cube,
-    dodecahedron,
-    grid,
-    icosahedron,
-    icosphere,
-    octahedron,
-    organic_sample,
-    platonic_solid,
-    tetrahedron,
-    torus,
-)
-from .samples import SAMPLES_DIR, sample_path
-from .subdivision import loop_subdivide, midpoint_subdivide
-from .topology import (
+from .topology import (  # noqa: F401
     boundary_edges,
     boundary_loops,
     connected_components,
@@ -57,7 +41,46 @@ from .topology import (
     vertex_adjacency,
     vertex_face_adjacency,
 )
-from .validate import CleanResult, MeshIssue, MeshReport, clean_mesh, validate_mesh
+from .validate import (  # noqa: F401
+    CleanResult,
+    MeshIssue,
+    MeshReport,
+    clean_mesh,
+    validate_mesh,
+)
+
+#: names re-exported from the submodules loaded on first use
+_LAZY = {
+    'barycentric_vertex_areas': 'operators',
+    'bounding_box_diagonal': 'operators',
+    'cotangent_laplacian': 'operators',
+    'cotangent_laplacian_psd': 'operators',
+    'denormalize': 'operators',
+    'face_areas': 'operators',
+    'face_normals': 'operators',
+    'mass_matrix': 'operators',
+    'normalize_unit_box': 'operators',
+    'signed_volume': 'operators',
+    'vertex_normals': 'operators',
+    'cube': 'primitives',
+    'dodecahedron': 'primitives',
+    'grid': 'primitives',
+    'icosahedron': 'primitives',
+    'icosphere': 'primitives',
+    'octahedron': 'primitives',
+    'organic_sample': 'primitives',
+    'platonic_solid': 'primitives',
+    'tetrahedron': 'primitives',
+    'torus': 'primitives',
+    'SAMPLES_DIR': 'samples',
+    'sample_path': 'samples',
+    'loop_subdivide': 'subdivision',
+    'midpoint_subdivide': 'subdivision',
+    'CollapseRecord': 'decimate',
+    'Decimation': 'decimate',
+}
+_SUBMODULES = ("operators", "primitives", "samples", "subdivision", "decimate")
+
 
 __all__ = [
     # modules
@@ -83,10 +106,19 @@ __all__ = [
     # samples
     "SAMPLES_DIR", "sample_path",
 ]  # fmt: skip
-
-# decimation with recorded collapses (progressive meshes); ``decimate`` is the submodule, its
-# function is ``decimate.decimate``
-from . import decimate  # noqa: E402
-from .decimate import CollapseRecord, Decimation  # noqa: E402
-
 __all__ += ["decimate", "Decimation", "CollapseRecord"]
+
+
+def __getattr__(name: str):
+    if name in _SUBMODULES:
+        return importlib.import_module(f"{__name__}.{name}")
+    mod = _LAZY.get(name)
+    if mod is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{mod}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY) | set(_SUBMODULES))

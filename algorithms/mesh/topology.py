@@ -22,9 +22,7 @@ raise :class:`~algorithms.errors.InvalidMeshError` with a plain-language message
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order
-from scipy.sparse.csgraph import connected_components as _cc
+from .components import connected_components as _cc
 
 from ..errors import InvalidMeshError
 
@@ -280,6 +278,7 @@ def vertex_adjacency(F, n: int | None = None) -> sp.csr_matrix:
     A : (n, n) scipy.sparse.csr_matrix of float64
         Symmetric, ``A[i, j] = 1`` if ``i`` and ``j`` share an edge, zero diagonal.
     """
+    import scipy.sparse as sp
     F = _faces(F)
     n = _n_vertices(F, n)
     d = _EdgeData(F)
@@ -307,6 +306,7 @@ def vertex_face_adjacency(F, n: int | None = None) -> sp.csr_matrix:
         ``VF[v, f] = 1`` if face ``f`` uses vertex ``v``. ``VF.indices[VF.indptr[v]:
         VF.indptr[v+1]]`` lists the faces around ``v``.
     """
+    import scipy.sparse as sp
     F = _faces(F)
     n = _n_vertices(F, n)
     m = F.shape[0]
@@ -333,6 +333,7 @@ def face_adjacency(F) -> sp.csr_matrix:
         Symmetric; ``A[f, g] = 1`` if faces ``f`` and ``g`` share an edge (on a non-manifold
         edge all its faces are mutually adjacent).
     """
+    import scipy.sparse as sp
     d = _EdgeData(_faces(F))
     rows, cols = _edge_face_pairs(d)
     m = d.m
@@ -416,8 +417,7 @@ def _corner_fans(d: _EdgeData, n: int) -> tuple[np.ndarray, np.ndarray]:
     same_dir = Fc[s1] == Fc[s2]
     a = np.concatenate([s1, e1])
     b = np.concatenate([np.where(same_dir, s2, e2), np.where(same_dir, e2, s2)])
-    G = sp.coo_matrix((np.ones(a.size, dtype=np.int8), (a, b)), shape=(3 * m, 3 * m))
-    ncomp, labels = _cc(G, directed=False)
+    ncomp, labels = _cc(3 * m, a, b)
     # every fan (corner component) lives at a single vertex, so counting fans is a bincount
     vertex_of_fan = np.empty(ncomp, dtype=np.int64)
     vertex_of_fan[labels] = Fc
@@ -532,8 +532,7 @@ def boundary_loops(F) -> list[np.ndarray]:
     nxt = pos[cand]
     k = bh.size
     start_v = d.H[bh, 0]
-    G = sp.coo_matrix((np.ones(k, np.int8), (np.arange(k), nxt)), shape=(k, k))
-    ncomp, lab = _cc(G, directed=False)
+    ncomp, lab = _cc(k, np.arange(k), nxt)
     # start of each loop: the boundary half-edge with the smallest start vertex
     key = lab * (int(start_v.max()) + 1) + start_v
     first_in_loop = np.full(ncomp, -1, dtype=np.int64)
@@ -605,8 +604,7 @@ def connected_components(F, n: int | None = None, *, over: str = "faces") -> tup
         raise ValueError(f"over must be 'faces' or 'vertices', not {over!r}")
     rows = np.concatenate([F[:, 0], F[:, 1]])
     cols = np.concatenate([F[:, 1], F[:, 2]])
-    G = sp.coo_matrix((np.ones(rows.size, np.int8), (rows, cols)), shape=(n, n))
-    _, vlab = _cc(G, directed=False)
+    _, vlab = _cc(n, rows, cols)
     vlab = vlab.astype(np.int64)
     lab = vlab[F[:, 0]] if over == "faces" else vlab
     if lab.size == 0:
@@ -712,8 +710,7 @@ def _genus_from(d: _EdgeData, n: int, C: int, flab: np.ndarray, per_component: b
     if bmask.any():
         # boundary loops = connected components of the boundary-edge graph (manifold input)
         BE = d.E[bmask]
-        G = sp.coo_matrix((np.ones(BE.shape[0], np.int8), (BE[:, 0], BE[:, 1])), shape=(n, n))
-        _, lab = _cc(G, directed=False)
+        _, lab = _cc(n, BE[:, 0], BE[:, 1])
         loop_comp = np.unique(lab[BE[:, 0]].astype(np.int64) * C + comp_of_vertex[BE[:, 0]])
         b_c = np.bincount(loop_comp % C, minlength=C)
     g = (2 - chi - b_c) // 2
@@ -730,6 +727,8 @@ def _orientation_data(d: _EdgeData) -> tuple[np.ndarray, np.ndarray, bool]:
 
     Returns (flip (m,) bool, patch labels (m,), orientable). Requires edge-manifold input.
     """
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import breadth_first_order
     m = d.m
     if m == 0:
         return np.zeros(0, bool), np.zeros(0, np.int64), True
@@ -741,8 +740,7 @@ def _orientation_data(d: _EdgeData) -> tuple[np.ndarray, np.ndarray, bool]:
     rel = (d.fwd[h1] == d.fwd[h2]).astype(np.int8)  # 1: same direction -> one must flip
     selfpair = f1 == f2
     f1, f2, rel = f1[~selfpair], f2[~selfpair], rel[~selfpair]
-    G = sp.coo_matrix((np.ones(f1.size, np.int8), (f1, f2)), shape=(m, m)).tocsr()
-    ncomp, lab = _cc(G, directed=False)
+    ncomp, lab = _cc(m, f1, f2)
     # virtual root m joined to the first face of every patch
     roots = np.full(ncomp, -1, dtype=np.int64)
     roots[lab[::-1]] = np.arange(m)[::-1]

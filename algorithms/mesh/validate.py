@@ -56,8 +56,7 @@ from dataclasses import dataclass, field
 from typing import Any, Iterable
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components as _cc
+from .components import connected_components as _cc
 
 from ..errors import InvalidMeshError, ParameterError
 from .topology import (
@@ -388,8 +387,7 @@ def _coincident_representatives(V: np.ndarray, candidates: np.ndarray, tol: floa
     if pairs.size == 0:
         return rep
     k = idx.size
-    G = sp.coo_matrix((np.ones(len(pairs), np.int8), (pairs[:, 0], pairs[:, 1])), shape=(k, k))
-    _, lab = _cc(G, directed=False)
+    _, lab = _cc(k, pairs[:, 0], pairs[:, 1])
     first = np.full(lab.max() + 1, k, dtype=np.int64)
     first[lab[::-1]] = np.arange(k)[::-1]
     rep[idx] = idx[first[lab]]
@@ -825,8 +823,7 @@ def validate_mesh(V, F, notes: Iterable[str] = ()) -> MeshReport:
     stats["boundary_edges"] = n_bedges
     if n_bedges:
         BE = d.E[bmask]
-        G = sp.coo_matrix((np.ones(BE.shape[0], np.int8), (BE[:, 0], BE[:, 1])), shape=(n, n))
-        _, blab = _cc(G, directed=False)
+        _, blab = _cc(n, BE[:, 0], BE[:, 1])
         n_loops = int(np.count_nonzero(np.bincount(blab[BE[:, 0]])))
     else:
         n_loops = 0
@@ -911,8 +908,7 @@ def _report(issues: list[MeshIssue], stats: dict[str, Any]) -> MeshReport:
 def _face_components(F: np.ndarray, n: int) -> tuple[int, np.ndarray]:
     rows = np.concatenate([F[:, 0], F[:, 1]])
     cols = np.concatenate([F[:, 1], F[:, 2]])
-    G = sp.coo_matrix((np.ones(rows.size, np.int8), (rows, cols)), shape=(n, n))
-    _, vlab = _cc(G, directed=False)
+    _, vlab = _cc(n, rows, cols)
     return _relabel_by_first_appearance(vlab[F[:, 0]].astype(np.int64))
 
 

@@ -3,7 +3,7 @@ refer to), built once from a method sub-command's own flags, a project's panel s
 panel-settings ``.json`` file, exactly as the one-mesh command builds them.
 
 The one-mesh commands' public helpers build the Params and options (``cubic_job``,
-``analogy_job`` in :mod:`app.cli.deform`, ``smooth_job`` in :mod:`app.cli.smooth`,
+``analogy_job`` in :mod:`app.cli.analogy`, ``smooth_job`` in :mod:`app.cli.smooth`,
 ``subdivide_job`` in :mod:`app.cli.subdivision`, ``paparazzi_job`` in
 :mod:`app.cli.paparazzi`); the settings of a project or a ``.json`` file reach them as the
 "input project" of :mod:`app.cli.common` (precedence: defaults < the panel's settings <
@@ -45,7 +45,7 @@ def _cubic(args, panel, n_faces):
 
 
 def _analogy(args, panel, n_faces):
-    from app.cli.deform import analogy_job
+    from app.cli.analogy import analogy_job
 
     return ("Analogies", *analogy_job(args, n_faces))
 

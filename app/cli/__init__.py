@@ -10,7 +10,7 @@ every method sub-command takes a mesh file or a project (``.s3d``) and ``--param
 
 One module per method family registers its sub-parsers (``COMMANDS``, ``add_parsers(sub)``):
 :mod:`~app.cli.mesh_tools` (info, clean), :mod:`~app.cli.smooth` (smooth, multigrid-info),
-:mod:`~app.cli.deform` (cubic, analogy), :mod:`~app.cli.study`, :mod:`~app.cli.spectral`
+:mod:`~app.cli.deform` (cubic), :mod:`~app.cli.analogy`, :mod:`~app.cli.study`, :mod:`~app.cli.spectral`
 (coarsen), :mod:`~app.cli.paparazzi`, :mod:`~app.cli.adversary`, :mod:`~app.cli.subdivision`
 (subdivide, subdivide-train, subdivide-eval).
 """
@@ -34,7 +34,8 @@ from app.cli.common import INTERNAL_ERROR_EXIT, say, silence_stdout, write_crash
 COMMAND_MODULES: dict[str, tuple[str, ...]] = {
     "mesh_tools": ("info", "clean"),
     "smooth": ("smooth", "multigrid-info"),
-    "deform": ("cubic", "analogy"),
+    "deform": ("cubic",),
+    "analogy": ("analogy",),
     "study": ("study",),
     "spectral": ("coarsen",),
     "paparazzi": ("paparazzi",),
@@ -47,7 +48,7 @@ _MODULE_OF = {c: m for m, cs in COMMAND_MODULES.items() for c in cs}
 
 #: names re-exported lazily (PEP 562): ``app.cli.cmd_cubic`` imports :mod:`app.cli.deform`
 _LAZY = {
-    "cmd_adversary": "adversary", "cmd_analogy": "deform", "cmd_cubic": "deform",
+    "cmd_adversary": "adversary", "cmd_analogy": "analogy", "cmd_cubic": "deform",
     "cmd_clean": "mesh_tools", "cmd_info": "mesh_tools", "cmd_paparazzi": "paparazzi",
     "cmd_multigrid_info": "smooth", "cmd_smooth": "smooth", "cmd_coarsen": "spectral",
     "cmd_study": "study", "cmd_subdivide": "subdivision", "cmd_subdivide_eval": "subdivision",

@@ -1,5 +1,5 @@
-"""``stylize3d cubic`` (the Cubic recipe, thesis ch. 5) and ``stylize3d analogy`` (the Analogies
-recipe: normal-driven shape analogies, thesis ch. 6).
+"""``stylize3d cubic`` (the Cubic recipe, thesis ch. 5); the analogy command is in
+:mod:`app.cli.analogy` and shares this module's progressive-meshes choice and flags.
 
 ``cubic`` is a thin wrapper around the recipe :mod:`app.recipes.cubic`: on a project
 (``scene.s3d``) it uses the painted λ scale, fixed region, plane, cube frames and point handles,
@@ -8,14 +8,6 @@ it gives the same vertices as ``app.recipes.run("cubic", project)``. Flags given
 line win (``--progressive-faces`` / ``--no-progressive`` / ``--global-solver`` over the saved
 options). On a plain mesh (or a project without saved Cubic settings) meshes above
 ``AUTO_PROGRESSIVE_FACES`` triangles go through affine progressive meshes, as in the app.
-
-``analogy`` is a thin wrapper around the recipe :mod:`app.recipes.analogies`: its options are
-the style (a primitive, a style file given here, stored as a blob, or on a project the saved
-style: a primitive, a style file or the painted capture sphere), the style map and progressive
-meshes; defaults < the Analogies panel's saved options < ``--style`` / ``--style-map`` /
-``--progressive-faces`` / ``--no-progressive``. The panel has no progressive switch: unless the
-saved options hold one, big meshes go through progressive meshes as on a plain mesh. Without
-that (or below the size), the output is ``app.recipes.run("analogy", project)`` bit for bit.
 """
 
 from __future__ import annotations
@@ -32,7 +24,7 @@ from app.cli.common import (MESH_HELP, add_params_arguments, add_params_file_arg
                             check_output, input_state, method_params, method_recipe,
                             params_to_dict, print_json, read_input, saved_panel, say)
 
-COMMANDS = ("cubic", "analogy")
+COMMANDS = ("cubic",)
 
 
 def _progressive_choice(args: argparse.Namespace, n_faces: int, command: str, *,
@@ -252,118 +244,6 @@ def user_paths(named: dict[str, str]):
         raise
 
 
-def analogy_style_options(args: argparse.Namespace) -> tuple[dict, dict]:
-    """The Analogies recipe's style options (``style``, ``style_map``, ``capture``): defaults <
-    the project's saved options < ``--style`` / ``--style-map``; a style file given here becomes
-    a blob. Returns ``(options, {blob reference: path given})``."""
-    from algorithms.deform.targets import PRIMITIVES, load_style
-    from app.recipes import put_blob_file
-    from app.recipes.analogies import CAPTURE
-
-    saved = saved_panel(args, "Analogies")
-    saved = dict(saved["options"]) if saved is not None else {}
-    options = {"style": "cube", "style_map": "auto", **saved}
-    named: dict[str, str] = {}
-    style = args.style
-    if style is None or style in PRIMITIVES:
-        pass
-    elif style == CAPTURE and saved.get("capture") is not None:
-        pass  # the project's painted capture sphere
-    elif Path(style).is_file():
-        named[put_blob_file(style)] = style
-        style = next(iter(named))
-    else:
-        load_style(style, args.style_map or "auto")  # its plain message (no such file, ...)
-        raise ParameterError(f"Unknown style '{style}': use one of {', '.join(PRIMITIVES)}, a "
-                             "capture .json file or a mesh file.")
-    if style is not None:
-        options["style"] = style
-    if args.style_map is not None:
-        options["style_map"] = args.style_map
-    return options, named
-
-
-def analogy_progressive(args: argparse.Namespace, options: dict, n_faces: int) -> bool:
-    """Set ``options["progressive"]``: ``--progressive-faces`` / ``--no-progressive``, else the
-    project's saved choice, else the automatic one for big meshes (the panel has no such
-    switch, so a project without it keeps the command's automatic choice). Returns whether
-    progressive meshes were chosen automatically."""
-    if args.progressive_faces is None and not args.no_progressive and "progressive" in options:
-        if options["progressive"] is not None:  # no previews on the command line
-            options["progressive"] = {**options["progressive"], "preview_every": 0}
-        return False
-    prog = _progressive_choice(args, n_faces, "analogy")[0]
-    options["progressive"] = None if prog is None else params_to_dict(prog)
-    return prog is not None and args.progressive_faces is None
-
-
-def analogy_job(args: argparse.Namespace, n_faces: int) -> tuple:
-    """``(params, options)`` of the Analogies recipe that ``analogy`` would run on a mesh of
-    ``n_faces`` triangles (the style checked; a style file given becomes a blob)."""
-    from algorithms.deform.analogies import AnalogyParams
-    from app.recipes.analogies import style_target_map
-
-    params = method_params(args, AnalogyParams, panel="Analogies")
-    options, named = analogy_style_options(args)
-    with user_paths(named):
-        style_target_map(options, {})
-    analogy_progressive(args, options, n_faces)
-    return params, options
-
-
-def _angles_to_targets(V, F, target_map) -> tuple[float, float]:
-    """(mean, max) degrees between the vertex normals and their targets (area-weighted mean)."""
-    from algorithms.deform.analogies import angles_to_targets
-    from algorithms.mesh.operators import mass_matrix, vertex_normals
-
-    N = vertex_normals(V, F)
-    return angles_to_targets(N, target_map(N), mass_matrix(V, F, "voronoi").diagonal())
-
-
-def cmd_analogy(args: argparse.Namespace) -> int:
-    from algorithms.deform.analogies import AnalogyParams
-    from algorithms.mesh import write_mesh
-    from app.recipes.analogies import style_target_map
-
-    params = method_params(args, AnalogyParams, panel="Analogies")
-    check_output(args.output, args.overwrite, args.mesh)
-    options, named = analogy_style_options(args)
-    cache: dict = {}  # the style's target map is built once, for the run and the figures
-    with user_paths(named):
-        target_map, what = style_target_map(options, cache)
-    data, _ = read_input(args, quiet=args.json or args.quiet)
-    state = input_state(args, data)
-    auto = analogy_progressive(args, options, len(data.F))
-    prog = options["progressive"]
-    before = _angles_to_targets(data.V, data.F, target_map)
-    recipe = method_recipe("analogies", "Analogies")
-    t0 = time.perf_counter()
-    last = None
-    with user_paths(named):
-        for last in recipe.steps(state, params, options, cache):
-            if not args.json and not args.quiet and "mean_angle_to_targets" in last.metrics:
-                print(f"  iteration {last.iteration}: mean angle to targets "
-                      f"{last.metrics['mean_angle_to_targets']:.2f}°", file=sys.stderr)
-    seconds = time.perf_counter() - t0
-    V = recipe.result(state, last, options).V
-    write_mesh(args.output, V, data.F)
-    after = _angles_to_targets(V, data.F, target_map)
-    if args.json:
-        print_json({"input": args.mesh, "output": args.output,
-                    "style": args.style if args.style is not None else options["style"],
-                    "style_map": what, "params": params_to_dict(params),
-                    "iterations": last.iteration, "seconds": seconds,
-                    "progressive_faces": None if prog is None else int(prog["target_faces"]),
-                    "progressive_auto": auto,
-                    "mean_angle_before": before[0], "max_angle_before": before[1],
-                    "mean_angle_after": after[0], "max_angle_after": after[1]})
-    else:
-        print(f"Stylized {args.mesh} after {what} in {seconds:.2f} s ({last.iteration} "
-              f"iterations); mean angle to the target normals {before[0]:.1f}° -> "
-              f"{after[0]:.1f}°; wrote {args.output}.")
-    return 0
-
-
 def _add_progressive_arguments(s: argparse.ArgumentParser) -> None:
     from algorithms.deform.progressive import AUTO_PROGRESSIVE_FACES
 
@@ -377,9 +257,7 @@ def _add_progressive_arguments(s: argparse.ArgumentParser) -> None:
 
 
 def add_parsers(sub) -> None:
-    from algorithms.deform.analogies import AnalogyParams
     from algorithms.deform.cubic import CubicParams
-    from algorithms.deform.targets import PRIMITIVES, STYLE_MAP_MODES
 
     s = sub.add_parser("cubic", help="cubic stylization (thesis ch. 5)",
                        description="Cubic stylization (thesis ch. 5). On a project (.s3d) it "
@@ -412,29 +290,3 @@ def add_parsers(sub) -> None:
                            "factorizations and progressive meshes are built once.")
     s.set_defaults(func=cmd_cubic)
 
-    s = sub.add_parser("analogy", help="normal-driven shape analogy (thesis ch. 6)",
-                       description="Normal-driven shape analogy (thesis ch. 6). On a project "
-                                   "(.s3d) it uses the Analogies panel's saved settings and "
-                                   "style (a style file or the painted capture sphere saved "
-                                   "with it); flags given here win.")
-    s.add_argument("mesh", help=MESH_HELP)
-    s.add_argument("-o", "--output", required=True, help="where to write the stylized mesh")
-    s.add_argument("--style",
-                   help=f"a primitive ({', '.join(PRIMITIVES)}), a normal-capture .json file, or "
-                        "a style mesh file; on a project, 'capture sphere' is its painted "
-                        "capture sphere. Default: cube (or the project's saved style).")
-    s.add_argument("--style-map", choices=STYLE_MAP_MODES,
-                   help="for a style mesh: closest face normals (convex meshes) or a spherical "
-                        "parameterization (any closed genus-0 mesh); auto picks. Default: auto "
-                        "(or the project's saved choice).")
-    s.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
-    s.add_argument("--json", action="store_true",
-                   help="print iterations, time, and the mean/max angle to the targets before "
-                        "and after, as JSON")
-    s.add_argument("--quiet", action="store_true", help="no per-iteration progress")
-    s.add_argument("--clean", action="store_true",
-                   help="clean the mesh first when it has fixable problems (says what it fixed)")
-    _add_progressive_arguments(s)
-    add_params_file_argument(s)
-    add_params_arguments(s, AnalogyParams)
-    s.set_defaults(func=cmd_analogy)
