@@ -274,8 +274,11 @@ def suspects(a) -> int:
     P = spec.params
     print(f"load average {os.getloadavg()[0]:.2f}; guided filter suspects; "
           f"{a.iterations} iterations", flush=True)
-    settings = {"old (r 15, eps 1e-8)": P(radius=15, epsilon=1e-8),
-                "thesis (r 4, eps 0.02)": P(radius=4, epsilon=0.02)}
+    # (Params, learning rate, remeshing's crease angle) of each setting compared
+    settings = {"old (r 15, eps 1e-8, s 4)": (P(radius=15, epsilon=1e-8, subsample=4), 5e-5, 0.0),
+                "thesis (r 4, eps 0.02, s 4)": (P(radius=4, epsilon=0.02, subsample=4), 5e-5,
+                                                0.0),
+                "today's defaults": (P(), spec.learning_rate, spec.crease_angle)}
     for mesh in a.meshes:
         got = load(mesh)
         if got is None:
@@ -287,34 +290,42 @@ def suspects(a) -> int:
         px = probe.edge_length / probe.width * probe.resolution
         print(f"\n{mesh}: {len(V):,} vertices; mean edge {probe.edge_length:.4f} "
               f"(shape in a cube of side 2) = {px:.1f} px at {probe.resolution} px, view "
-              f"{probe.width}; radius {P().radius} px = {P().radius / px:.2f} edges "
-              f"(subsampling {P().subsample}: windows of {max(1, round(P().radius / P().subsample))}"
-              f" coarse pixels)")
-        for label, fp in settings.items():
-            run = Paparazzi(V, F, spec, fp, PaparazziParams(iterations=1))
-            rms, want, lr = _step_against_change(run, V, F)
-            print(f"  {label:<24} colour change per view {rms:.3g} (rms per pixel) -> asks for "
-                  f"{want:.3g} per step; NAdam step ~{lr:.3g} ({lr / want:.3g} x what it asks)")
-        ctl = control_spec(spec)
-        pp = PaparazziParams(iterations=a.iterations)
-        _, _, _, clast = _remesh_effect(V, F, ctl, P(), pp)
-        print(f"  control (remeshing alone): bending {bending_energy(V, F):.4g} -> "
-              f"{bending_energy(clast.V, clast.F):.4g}, crease5 "
-              f"{crease_fraction(V, F, clast.V, clast.F):.3f}")
-        rows = [(label, fp, pp) for label, fp in settings.items()]
-        rows += [(f"thesis, lr {lr:g}", P(radius=4, epsilon=0.02),
-                  PaparazziParams(iterations=a.iterations, learning_rate=lr))
-                 for lr in (2e-5, 1e-4, 2e-4)]
-        rows += [(f"thesis, {res} px", P(radius=4, epsilon=0.02),
-                  PaparazziParams(iterations=a.iterations, resolution=res)) for res in (64, 256)]
-        rows += [(f"thesis, radius {r}", P(radius=r, epsilon=0.02), pp) for r in (8, 15)]
-        rows += [(f"eps {e:g}, r 4", P(radius=4, epsilon=e), pp) for e in (1e-4, 1e-3, 0.1)]
-        rows += [("thesis, no remeshing", P(radius=4, epsilon=0.02),
-                  PaparazziParams(iterations=a.iterations, remesh_every=0))]
-        for label, fp, params in rows:
-            e0, e1, jumps, last = _remesh_effect(V, F, spec, fp, params)
+              f"{probe.width}")
+        for label, (fp, lr, crease) in settings.items():
+            variant = dataclasses.replace(spec, learning_rate=lr, crease_angle=crease)
+            run = Paparazzi(V, F, variant, fp, PaparazziParams(iterations=1))
+            rms, want, step = _step_against_change(run, V, F)
+            print(f"  {label:<28} radius {fp.radius} px = {fp.radius / px:.2f} edges; colour "
+                  f"change per view {rms:.3g} (rms per pixel) -> asks for {want:.3g} per step; "
+                  f"NAdam step ~{step:.3g} ({step / want:.3g} x what it asks)")
+        rows = []
+        for label, (fp, lr, crease) in settings.items():
+            rows.append((label, fp, lr, crease, {}))
+        old_t = settings["thesis (r 4, eps 0.02, s 4)"]
+        rows += [(f"thesis, lr {lr:g}", old_t[0], lr, 0.0, {}) for lr in (2e-5, 1e-4, 2e-4)]
+        rows += [(f"thesis, {res} px", old_t[0], 5e-5, 0.0, {"resolution": res})
+                 for res in (64, 256)]
+        rows += [(f"thesis, radius {r}", P(radius=r, epsilon=0.02, subsample=4), 5e-5, 0.0, {})
+                 for r in (8, 15)]
+        rows += [("thesis, no remeshing", old_t[0], 5e-5, 0.0, {"remesh_every": 0}),
+                 ("thesis, creases kept", old_t[0], 5e-5, 45.0, {})]
+        rows += [(f"s 1, eps {e:g}, creases kept", P(radius=4, epsilon=e, subsample=1),
+                  spec.learning_rate, 45.0, {}) for e in (1e-3, 5e-3)]
+        rows += [("today's, creases free", P(), spec.learning_rate, 0.0, {}),
+                 ("today's, lr 2e-5", P(), 2e-5, spec.crease_angle, {})]
+        for crease in sorted({r[3] for r in rows}):
+            ctl = dataclasses.replace(control_spec(spec), crease_angle=crease)
+            _, _, _, clast = _remesh_effect(V, F, ctl, P(),
+                                            PaparazziParams(iterations=a.iterations))
+            print(f"  control (remeshing alone, creases {'kept' if crease else 'free'}): "
+                  f"bending {bending_energy(V, F):.4g} -> {bending_energy(clast.V, clast.F):.4g},"
+                  f" crease5 {crease_fraction(V, F, clast.V, clast.F):.3f}", flush=True)
+        for label, fp, lr, crease, extra in rows:
+            variant = dataclasses.replace(spec, learning_rate=lr, crease_angle=crease)
+            e0, e1, jumps, last = _remesh_effect(
+                V, F, variant, fp, PaparazziParams(iterations=a.iterations, **extra))
             up = sum(j[1] - j[0] for j in jumps)
-            print(f"  {label:<24} E16 {e0:.4g} -> {e1:.4g} ({100 * (e1 - e0) / e0:+.1f} %); "
+            print(f"  {label:<28} E16 {e0:.4g} -> {e1:.4g} ({100 * (e1 - e0) / e0:+.1f} %); "
                   f"remeshings changed it by {up:+.4g} in all ({len(jumps)} of them); bending "
                   f"{bending_energy(last.V, last.F):.4g}; crease5 "
                   f"{crease_fraction(V, F, last.V, last.F):.3f}", flush=True)
