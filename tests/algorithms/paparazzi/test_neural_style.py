@@ -110,7 +110,8 @@ def test_a_short_run_lowers_the_monitor_views_gram_loss_and_stays_manifold(bumpy
     params = PaparazziParams(iterations=60, learning_rate=2e-3, resolution=64, view_width=1.0,
                              sigma=0.3, remesh_every=20, monitor_every=0, seed=0)
     pz = Paparazzi(V, F, "neural-style", fp, params)
-    cam = pz.camera(np.random.default_rng([params.seed, 1]))   # the optimizer's monitor view
+    cam = pz.camera(np.random.default_rng([params.seed, 1]))   # one fixed view (where the
+    # first of the optimizer's 16 monitor views is, another roll)
 
     def gram(Vopt, Fo):
         R = render(Vopt, Fo, cam, pz.shading).image[..., 0]
