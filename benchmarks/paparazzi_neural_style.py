@@ -102,7 +102,8 @@ def run(mesh: str, iterations: int, style: int, control: int, upsample: int = 0,
             print(f"  it {last.iteration:5d}: Gram(R, f(R)) {g[0]:9.2f} ({g[0] / first[0]:.3f})  "
                   f"Gram(R, f(R0)) {g[1]:9.2f} ({g[1] / first[1]:.3f})  "
                   f"Gram(R, style {control}) {g[2]:9.2f} ({g[2] / first[2]:.3f})  "
-                  f"monitor (16 views) 1/2|f(R)-R|^2 {last.metrics['monitor_energy']:.2f}", flush=True)
+                  f"monitor (16 views) 1/2|f(R)-R|^2 "
+                  f"{last.metrics['monitor_energy']:.2f}", flush=True)
     secs = time.perf_counter() - t1
     V = (last.V - pz.center) / pz.scale
     split = ", ".join(f"{k} {v / iterations * 1e3:.1f}" for k, v in last.seconds.items())
