@@ -162,8 +162,25 @@ class _TimedInteractor(QtInteractor):
         vp = self.viewport
         if vp is not None:
             vp._before_paint()
+        # A paint that only follows a render VTK already did (the camera interactor renders on
+        # every mouse move, then asks Qt for this paint) shows that frame: pyvistaqt renders
+        # every paint again, which halved the frame rate while turning the view. Paints we
+        # asked for (Viewport.render), and Qt's own (expose, resize), render as before.
+        skip = (vp is not None and vp._vtk_frame_ready and not vp._paint_asked
+                and not getattr(self, "_in_paint", False))
+        if vp is not None:
+            vp._vtk_frame_ready = False
+            vp._in_our_paint = True
         t0 = time.perf_counter()
-        super().paintGL()
+        if skip:
+            self._in_paint = True  # pyvistaqt's own guard: blit the finished frame only
+        try:
+            super().paintGL()
+        finally:
+            if skip:
+                self._in_paint = False
+            if vp is not None:
+                vp._in_our_paint = False
         if vp is not None:
             vp._after_paint(t0, time.perf_counter())
 
@@ -216,6 +233,13 @@ class Viewport(QWidget):
         self._picker.PickFromListOn()
         self._mouse_filter = _MouseFilter(self)
         self.plotter.interactor.installEventFilter(self._mouse_filter)
+        # a render VTK did by itself (the interactor, on a camera move), not in one of our
+        # paints: the next paint only shows it (see _TimedInteractor.paintGL)
+        self._vtk_frame_ready = False
+        self._in_our_paint = False
+        rw = self.plotter.ren_win
+        if rw is not None:
+            rw.AddObserver("EndEvent", self._on_vtk_render_end)
         # the camera moving (see begin_interaction)
         self.interacting = False
         self._proxy = None             # app.lod.Proxy of the shown mesh
@@ -675,6 +699,10 @@ class Viewport(QWidget):
         if rw is not None and rw.GetMultiSamples() != samples:
             rw.SetMultiSamples(samples)
             self.render()
+
+    def _on_vtk_render_end(self, *_args) -> None:
+        if not self._in_our_paint:
+            self._vtk_frame_ready = True
 
     # -- the camera moving: a light stand-in --------------------------------------------------
     def begin_interaction(self) -> None:
