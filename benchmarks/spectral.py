@@ -20,6 +20,19 @@ triangles, which leaves slivers; bob with its top sliced off) and a CAD-like mod
 ``--balance-iterations 0`` gives the thesis's optimizer alone for comparison.
 
     .venv/bin/python benchmarks/spectral.py --table [--m 300] [--k 60] [--balance-iterations 0]
+
+``--kernels`` times one energy evaluation (energy + gradient) of the optimizer on the same
+30k -> 500, k 100 problem: the fixed-pattern path with the compiled kernels
+(``algorithms.spectral.coarsen._Energy``) against the reference
+``energy_and_gradient`` (SciPy sparse products and per-cluster matrix products, the code of
+before issue 25), medians of 5 in CPU and wall seconds, with the machine's load.
+
+``--estimate`` runs the recipe (the panel's Run: child process, both baselines, the panel's
+default m = min(500, n/8)) on the bundled samples and armadillo and prints each stage's
+measured seconds next to the cost model's (app.recipes.spectral.estimate_seconds).
+
+    .venv/bin/python benchmarks/spectral.py --kernels
+    .venv/bin/python benchmarks/spectral.py --estimate [MESH ...]
 """
 
 from __future__ import annotations
@@ -70,9 +83,17 @@ def main(argv=None) -> int:
     ap.add_argument("--balance-iterations", type=int, default=200)
     ap.add_argument("--balance", type=float, default=1.0)
     ap.add_argument("--table", action="store_true", help="the issue-10 per-mesh table")
+    ap.add_argument("--kernels", action="store_true",
+                    help="one energy evaluation: fixed-pattern kernels vs the reference")
+    ap.add_argument("--estimate", nargs="*", default=None,
+                    help="recipe runs: measured stage seconds vs the cost model")
     a = ap.parse_args(argv)
     if a.table:
         return table(a)
+    if a.kernels:
+        return kernels(a)
+    if a.estimate is not None:
+        return estimate(a)
     md = read_mesh(a.mesh)
     t = time.perf_counter()
     V, F = _decimate(md.V, md.F, a.n)
@@ -239,6 +260,90 @@ def table(a) -> int:
               f"{'yes' if we else 'NO':>4s} | {t[0]:5.1f} {t[1]:5.1f} {t[2]:5.1f}", flush=True)
     print(f"ours beats both on C diag: {wins_c}/{total}; on mean eigenvalue error: "
           f"{wins_e}/{total} (target: all, and at least two thirds)")
+    return 0
+
+
+def _load_avg() -> str:
+    import os
+    return "load average " + ", ".join(f"{x:.1f}" for x in os.getloadavg())
+
+
+def kernels(a) -> int:
+    """Per-evaluation time: _Energy (fixed patterns, compiled kernels) vs energy_and_gradient."""
+    import importlib
+
+    import scipy.sparse as sp  # noqa: F401
+
+    from algorithms.spectral.coarsen import (_cluster_blocks, cluster_sparsity,
+                                             energy_and_gradient, generalized_eigs,
+                                             kmedoids_clustering)
+    from algorithms.spectral.operators import build_operator
+    C = importlib.import_module("algorithms.spectral.coarsen")
+    md = read_mesh(a.mesh)
+    V, F = _decimate(md.V, md.F, a.n)
+    L, M, _, _ = build_operator(V, F, "cotangent")
+    mass = M.diagonal()
+    lam, phi = generalized_eigs(L, M, a.k)
+    cl = kmedoids_clustering(L, mass, a.m)
+    G = cluster_sparsity(L, cl.K)
+    G.data = np.random.default_rng(0).standard_normal(G.nnz)
+    A = cl.P @ ((L @ phi) / mass[:, None])
+    B = cl.P @ phi
+    mt = np.asarray(cl.K @ mass).ravel()
+    Phi0 = np.ones((L.shape[0], 1))
+    ev = C._Energy(G, L, A, B, mt, cl.P @ Phi0, Phi0)
+    blocks = _cluster_blocks(G, cl.labels)
+    ev(G.data)                                   # compile / load the kernels
+    print(f"n = {L.shape[0]}, m = {a.m}, k = {a.k}: nnz(G) = {G.nnz}, nnz(L G) = "
+          f"{len(ev.Y_indices) if ev.kernels is not None else 'n/a'}; {_load_avg()}")
+
+    def med(f, reps=5):
+        wall, cpu = [], []
+        for _ in range(reps):
+            t, c = time.perf_counter(), time.process_time()
+            f()
+            wall.append(time.perf_counter() - t)
+            cpu.append(time.process_time() - c)
+        return float(np.median(wall)), float(np.median(cpu))
+    new = med(lambda: ev(G.data))
+    ref = med(lambda: energy_and_gradient(G, L, A, B, mt, blocks=blocks))
+    print(f"  fixed patterns + kernels: wall {1e3 * new[0]:7.1f} ms, CPU {1e3 * new[1]:7.1f} ms")
+    print(f"  reference (SciPy)       : wall {1e3 * ref[0]:7.1f} ms, CPU {1e3 * ref[1]:7.1f} ms")
+    print(f"  ratio reference / new   : wall x{ref[0] / new[0]:.2f}, CPU x{ref[1] / new[1]:.2f}"
+          f"   ({_load_avg()})")
+    return 0
+
+
+def estimate(a) -> int:
+    """The panel's default run on meshes, stage by stage, against the cost model."""
+    from algorithms.spectral.coarsen import CoarsenParams, suggested_coarse_size
+    from app.document import MeshState
+    from app.recipes import get_recipe
+    from app.recipes.spectral import STAGE_LABELS, STAGES, estimate_seconds
+    paths = a.estimate or sorted(str(p) for p in (ROOT / "resources" / "samples").glob("*.obj"))
+    if not a.estimate:
+        paths.append(str(ROOT / "tests" / "data" / "armadillo.obj"))
+    r = get_recipe("coarsen")
+    opts = {"isolated": True}
+    print(f"{'mesh':16s} {'n':>6s} {'m':>4s} | " + " ".join(f"{s[:5]:>11s}" for s in
+          ("start",) + STAGES) + f" | {'total':>11s}   (measured/model s)")
+    for path in paths:
+        md = read_mesh(path)
+        n = len(md.V)
+        p = CoarsenParams(m=suggested_coarse_size(n))
+        est = estimate_seconds(n, p, opts)
+        seen: dict[str, float] = {}
+        t0 = time.perf_counter()
+        for st in r.steps(MeshState.make(md.V, md.F), p, opts, {}):
+            label = next((s for s in STAGES if st.message.startswith(STAGE_LABELS[s])), None)
+            if label is not None and label not in seen:
+                seen[label] = time.perf_counter() - t0
+        total = time.perf_counter() - t0
+        marks = [("start", 0.0)] + [(s, seen.get(s, total)) for s in STAGES] + [("end", total)]
+        took = {s: marks[i + 1][1] - marks[i][1] for i, (s, _) in enumerate(marks[:-1])}
+        cells = " ".join(f"{took[s]:5.1f}/{est[s]:<5.1f}" for s in ("start",) + STAGES)
+        print(f"{Path(path).name:16s} {n:6d} {p.m:4d} | {cells} | {total:5.1f}/"
+              f"{sum(est.values()):<5.1f}   ({_load_avg()})", flush=True)
     return 0
 
 

@@ -250,7 +250,8 @@ def _generalized_eigs(L, M, k, sigma, progress):
         import scipy.linalg as sla
         try:
             kk = int(min(k, n))
-            if abs(Ms - sp.diags(mass)).max() == 0 if Ms.nnz else True:
+            Mc = sp.csr_matrix(Ms)
+            if (Mc - sp.diags(Mc.diagonal())).count_nonzero() == 0:
                 # diagonal M: the standard problem of D^-1 L D^-1 (D = M^1/2), first k only
                 dinv = 1.0 / np.sqrt(mass)
                 Cd = Ld.toarray() * dinv[:, None] * dinv[None, :]

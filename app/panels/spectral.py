@@ -115,6 +115,18 @@ class SpectralPanel(MethodPanel):
         self.eig_index.valueChanged.connect(lambda _i: self.show_result())
         window.mesh_shown.connect(self._fit_size_to_mesh)
         window.document.subscribe(self._on_doc)
+        # what a run with these settings will take, said before it starts (issue 24 item 1)
+        self.estimate_label = QLabel("")
+        self.estimate_label.setWordWrap(True)
+        self.estimate_label.setToolTip(
+            "An estimate from a simple cost model of the stages (eigenvectors of the mesh's "
+            "operator, clustering, optimizing, balancing, comparing with QSlim and AMG): "
+            "larger m, k or iteration counts take longer.")
+        fl = self.footer.layout()
+        fl.insertWidget(1, self.estimate_label)
+        self.form.changed.connect(lambda _p: self.update_estimate())
+        self.operator_combo.currentIndexChanged.connect(lambda _i: self.update_estimate())
+        window.mesh_shown.connect(self.update_estimate)
         # the base's tooltip promises an undo: an analysis changes nothing to undo
         self.run_button.setToolTip("Coarsen the operator and compare with the baselines. The "
                                    "mesh is not changed; the results appear below.")
@@ -142,6 +154,30 @@ class SpectralPanel(MethodPanel):
         else:
             self.status_label.setText(f"Coarse size m = {current} (your choice) for this "
                                       f"{n:,}-vertex mesh; Defaults suggests {m}.")
+
+    def update_estimate(self) -> None:
+        """Say next to Run about how long a run with the form's settings will take on the
+        open mesh (app.recipes.spectral.estimate_text)."""
+        doc = self.window_.document
+        if doc.is_empty:
+            self.estimate_label.setText("")
+            return
+        try:
+            text = recipe_mod.estimate_text(len(doc.V), self.form.params(), self.job_options())
+        except Stylize3DError:
+            text = ""
+        self.estimate_label.setText(text)
+
+    def _on_preview(self, step) -> None:
+        """The run's one progress: the stage with its step of total, the time so far and
+        what is left (the same words as the status bar's)."""
+        if not self._mine():
+            return
+        import time
+
+        elapsed = time.perf_counter() - self.window_.runner.started_at
+        self.status_label.setText(f"{step.message} ({elapsed:.0f} s so far, "
+                                  f"{step.iteration} % done)")
 
     # -- the job ---------------------------------------------------------------------------------
     def job_options(self) -> dict:
@@ -176,7 +212,7 @@ class SpectralPanel(MethodPanel):
         self.last_request = {"params": params, "options": self._run_options, "input": state,
                              "recipe": self._run_recipe}
         self.plot.clear()
-        self.status_label.setText("Eigenvectors of the fine operator…")
+        self.status_label.setText("Starting: " + (self.estimate_label.text() or "…"))
         self.window_.start_analysis_job(self.title, self.job_factory(state, params))
 
     def _on_finished(self, step) -> None:

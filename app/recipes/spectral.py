@@ -227,7 +227,10 @@ def spectral_steps(state, params, options: dict | None = None, cache: dict | Non
                 detail = f"Lanczos step {hit[1]} of about {hit[2]}" if hit else ""
                 pct, text = prog.step(stage, cs.iteration / 1000.0, detail)
             elif stage in ("clustering", "comparing"):
-                detail = cs.message.replace("Comparing ", "") if stage == "comparing" else ""
+                detail = ""
+                if stage == "comparing":     # "with QSlim", "with AMG", "scoring ours"
+                    detail = cs.message.replace("Comparing ", "")
+                    detail = detail[:1].lower() + detail[1:]
                 pct, text = prog.step(stage, 0.0, detail)
             elif stage == "balancing":
                 it = int(cs.metrics.get("balancing_iteration", 0))

@@ -266,3 +266,54 @@ def test_overlay_leaves_with_the_panel_and_with_the_mesh(window, dialogs, qtbot)
     panel.raise_()  # the result no longer fits the mesh: nothing is drawn
     qtbot.wait(200)
     assert "markers" not in vp.plotter.actors and vp._field_name != "clusters"
+
+
+# ---------------------------------------------------------------------------- issue 24 item 1
+def test_estimate_is_shown_next_to_run_and_follows_m(window, dialogs, qtbot):
+    """Before a run the panel says about how long it will take; a larger m says more."""
+    import re
+
+    assert window.open_path(SAMPLES / "blob.obj")
+    panel = window.panels["Spectral coarsening"]
+    label = panel.estimate_label
+    assert label.isVisibleTo(panel) and label.text().startswith("Estimated time: about")
+
+    def seconds():
+        m = re.search(r"about (\d+) (s|min)", label.text())
+        assert m, label.text()
+        return int(m[1]) * (60 if m[2] == "min" else 1)
+    before, text = seconds(), label.text()
+    panel.form.editors["m"].spin.setValue(2000)           # as typed: the form says it changed
+    assert label.text() != text and seconds() > before
+    panel.form.editors["m"].spin.setValue(100)
+    assert seconds() <= before
+
+
+def test_progress_in_the_panel_and_the_status_bar_agree(window, dialogs, qtbot):
+    """One progress: the panel's text is the status bar's stage with the time so far; never
+    'Iteration i/total'; the status bar's stage text fits its 60 characters."""
+    assert window.open_path(SAMPLES / "blob.obj")
+    panel = window.panels["Spectral coarsening"]
+    for name, v in (("m", 60), ("k", 15), ("max_iterations", 30), ("balance_iterations", 10)):
+        panel.form.editors[name].setValue(v)
+    seen = []
+
+    def record(it, total, message):
+        seen.append((it, total, message, panel.status_label.text()))
+    window.runner.progress.connect(record)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.run_button.click()
+    window.runner.progress.disconnect(record)
+    qtbot.waitUntil(lambda: panel.outcome is not None, timeout=5000)
+    assert seen
+    for it, total, message, _ in seen:
+        assert total == 100 and 0 <= it <= 100 and len(message) <= 60
+        assert not message.startswith("Iteration")
+    # the runner passes on the latest step at its own pace: some stages may be skipped
+    stages = {m.split(":")[0].split(" ·")[0] for _, _, m, _ in seen}
+    assert stages <= {"Eigenvectors", "Clustering the vertices", "Optimizing", "Balancing",
+                      "Comparing", "done"} and len(stages) >= 2
+    pct = [it for it, _, _, _ in seen]
+    assert pct == sorted(pct)
+    qtbot.waitUntil(lambda: "Done" in panel.status_label.text()
+                    or "C diag" in panel.status_label.text(), timeout=5000)

@@ -103,11 +103,13 @@ def test_kernels_give_the_same_bits_serial_and_parallel(problem, monkeypatch):
                     kn.pattern_dots(ip, ix, Ys @ X, X, Ys @ X, X),
                     kn.spgemm_fixed(L.indptr.astype(np.int64), L.indices.astype(np.int64),
                                     L.data, ip, ix, G.data, yp, yi, G.shape[1]),
-                    kn.pattern_rowdot(ip, ix, yp, yi, Ys.data, Z))
+                    kn.pattern_rowdot(ip, ix, yp, yi, Ys.data, Z),
+                    kn.sym_outer(Z[:, :7], X))
     for a, b in zip(out[True], out[False]):
         assert a.tobytes() == b.tobytes()
     np.testing.assert_allclose(out[True][0], G @ X, atol=1e-12)
     np.testing.assert_allclose(out[True][2], Ys.data, atol=1e-12 * abs(Ys.data).max())
+    np.testing.assert_allclose(out[True][4], Z[:, :7] @ X.T + X @ Z[:, :7].T, atol=1e-12)
     YZ = np.asarray(Ys @ Z.T)
     np.testing.assert_allclose(out[True][3], YZ[np.repeat(np.arange(G.shape[0]), np.diff(ip)),
                                                ix], atol=1e-10)
