@@ -103,9 +103,23 @@ TYPICAL_NADAM_ITERATIONS = 160
 #: eigenvectors ``eig * n * ke^2`` (ARPACK's shift-invert Lanczos, ke = k + parts),
 #: clustering ``cluster * n``, one energy evaluation ``eval_n * n + eval_mmk * m^2 k``,
 #: QSlim ``qslim * n``, AMG ``amg * n``, scoring ``score * m^2 k`` per method, and the child
-#: process's start ``start``.
+#: process's start ``start`` plus loading Numba's kernels there ``kernels``. On a busy machine
+#: the text multiplies the total by :func:`machine_slowdown`.
 COST = {"eig": 1.3e-8, "cluster": 3.0e-5, "eval_n": 8.0e-7, "eval_mmk": 2.0e-10,
-        "qslim": 6.0e-5, "amg": 4.0e-5, "score": 8.0e-9, "start": 1.4}
+        "qslim": 6.0e-5, "amg": 4.0e-5, "score": 8.0e-9, "start": 1.4, "kernels": 1.5}
+
+
+def machine_slowdown() -> float:
+    """How much slower than on an idle machine a run goes now: ``0.7 load / cores`` when the
+    1-minute load average exceeds the cores, else 1 (measured here: the panel's default on the
+    blob took 5.3x the model at load 15 on 2 cores, armadillo 4.8x at load 13)."""
+    import os
+
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return 1.0
+    return max(1.0, 0.7 * load / max(1, os.cpu_count() or 1))
 
 
 def estimate_seconds(n: int, params, options: dict | None = None, parts: int = 1
@@ -123,7 +137,8 @@ def estimate_seconds(n: int, params, options: dict | None = None, parts: int = 1
     compare = c["score"] * m * m * k
     for name in o["compare"]:
         compare += c[name] * n + c["score"] * m * m * k
-    return {"start": c["start"] if o["isolated"] else 0.0,
+    # a fresh child process: its start, then loading Numba and the compiled kernels
+    return {"start": c["start"] + c["kernels"] if o["isolated"] else 0.0,
             "eigenvectors": c["eig"] * n * ke * ke,
             "clustering": c["cluster"] * n * min(1.0, params.clustering_iterations / 20),
             "optimizing": per_eval * (evals + 1),
@@ -143,12 +158,14 @@ def format_seconds(seconds: float) -> str:
 def estimate_text(n: int, params, options: dict | None = None, parts: int = 1) -> str:
     """What a run will take, said before it starts (the panel shows it next to Run)."""
     est = estimate_seconds(n, params, options, parts)
-    total = sum(est.values())
+    slow = machine_slowdown()
+    total = sum(est.values()) * slow
     big = max(STAGES, key=lambda s: est[s])
     what = {"eigenvectors": "the eigenvectors", "clustering": "the clustering",
             "optimizing": "the optimization", "balancing": "the balancing",
             "comparing": "the comparison"}[big]
-    return (f"Estimated time: about {format_seconds(total)} on this {n:,}-vertex mesh "
+    busy = " while the computer is this busy" if slow > 1.5 else ""
+    return (f"Estimated time: about {format_seconds(total)} on this {n:,}-vertex mesh{busy} "
             f"(mostly {what}).")
 
 
