@@ -120,8 +120,12 @@ def test_subdivide_is_the_recipe_run_on_a_mesh(trained, tmp_path, capsys):
     _torch, w, _ref = trained
     hand = _state(HAND)
     cases = [(["--method", "loop", "--levels", "1"], {"method": "loop", "levels": 1}, {}),
-             (["--levels", "1"], {"levels": 1}, {}),
-             (["--levels", "1", "--weights", str(w)], {"levels": 1},
+             # the hand is denser than the networks were trained for: "scale" makes both run
+             # the network (the default falls back to Loop), so the weights file shows
+             (["--levels", "1", "--dense-input", "scale"], {"levels": 1, "dense_input": "scale"},
+              {}),
+             (["--levels", "1", "--weights", str(w), "--dense-input", "scale"],
+              {"levels": 1, "dense_input": "scale"},
               {"weights": "file", "weights_file": weights_blob_from_file(w)}),
              (["--levels", "1", "--coarsen-first", "400", "--method", "butterfly"],
               {"levels": 1, "coarsen_first": 400, "method": "butterfly"}, {})]
@@ -141,7 +145,8 @@ def test_subdivide_on_a_project_uses_its_saved_weights(trained, tmp_path, capsys
     from app.recipes.subdivision import weights_blob_from_file
 
     _torch, w, _ref = trained
-    panels = {"Subdivision": {"params": {"method": "neural", "levels": 1, "coarsen_first": 0},
+    panels = {"Subdivision": {"params": {"method": "neural", "levels": 1, "coarsen_first": 0,
+                                         "dense_input": "scale"},
                               "options": {"weights": "file",
                                           "weights_file": weights_blob_from_file(w),
                                           "training": {"coarse_meshes": 3, "epochs": 2}}}}
@@ -154,7 +159,8 @@ def test_subdivide_on_a_project_uses_its_saved_weights(trained, tmp_path, capsys
         project = read_project(path)
         ref = app.recipes.run("subdivide", project)  # its saved params and options
         _same_mesh_file(out, ref.state, tmp_path)
-        shipped = app.recipes.run("subdivide", project.state, {"levels": 1}, {}).state
+        shipped = app.recipes.run("subdivide", project.state,
+                                  {"levels": 1, "dense_input": "scale"}, {}).state
         assert not np.array_equal(ref.state.V, shipped.V)
         # --weights shipped wins over the saved choice
         out2 = tmp_path / "shipped.obj"
