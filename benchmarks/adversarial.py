@@ -420,7 +420,7 @@ def contact_sheet(args, out: Path):
             if c == 0:
                 ax.set_ylabel(f"{'ATTACKED' if i in pick else 'unseen'}\naz {v.azimuth:.0f} el "
                               f"{v.elevation:.0f}", fontsize=8)
-    fig.suptitle(f"{name}: {mode} adversary on {n_att} views ({res.iterations} iterations, "
+    fig.suptitle(f"{name}: {mode} adversary on {n_att} views ({res.iterations} iteration(s), "
                  f"{args.formation}, background {args.background:g}); red = fooled", fontsize=9)
     fig.tight_layout()
     fig.savefig(out, dpi=80)
