@@ -874,7 +874,9 @@ class MainWindow(QMainWindow):
         if total:
             self.progress_bar.setRange(0, int(total))
             self.progress_bar.setValue(int(it))
-            self.progress_bar.setFormat(f"{self.runner.name}: %v/%m")
+            # steps counted in per cent (spectral coarsening's stages) read as per cent
+            self.progress_bar.setFormat(f"{self.runner.name}: %p %" if int(total) == 100
+                                        else f"{self.runner.name}: %v/%m")
         else:
             self.progress_bar.setRange(0, 0)
             self.progress_bar.setFormat(f"{self.runner.name}: {it}")
