@@ -21,6 +21,25 @@ views, against a random perturbation on the same unseen views.
     OMP_NUM_THREADS=1 nice -n 19 .venv/bin/python benchmarks/adversarial.py [--quick]
         [--skip-speed] [--skip-unseen] [--shapes orange "golf ball" ...]
 
+Table 3.4 protocol (issue 23; :mod:`algorithms.adversarial.transfer`): ``--table34`` samples,
+per subject, random views (azimuth 0-360, elevation 0-60 degrees, view width 1.3-1.9) until 100
+are correctly classified, attacks 1 and 5 random ones of them (``--draws`` draws each), and
+classifies the light on all the other views, against ``--random`` random corners of the same
+L-inf ball on the same views; options switch one suspect at a time (``--formation radiance``,
+``--background``, ``--width``, ``--elevation``, ``--environment``, ``--direction sign``,
+``--all-iterations``). ``--pictures PNG`` writes the contact sheet of one 5-view attack
+(before / adversarial / random per view) instead.
+
+    OMP_NUM_THREADS=1 nice -n 10 .venv/bin/python benchmarks/adversarial.py --table34 \
+        --draws 2 --random 1 [--formation radiance] [--background 0.5] [--shapes ...]
+
+Measured (2-core machine shared with other work, load 3-14; 8 subjects x 100 views, 2 draws,
+37 min): the thesis's set-up fools 22.2 % (351/1584) of unseen views from 1 attacked view and
+36.8 % (560/1520) from 5, random lights 18.1 % and 17.8 % (thesis: 29.4 % and 64.2 %); orange
+44 % / 81 %, jack-o'-lantern 22 % / 72 %, golf ball 25 % / 64 %, coffee mug, bucket and water
+bottle <= 8 %. Options on the full protocol and the one-suspect-at-a-time table (3 subjects x 30
+views): docs/adversarial_lighting.md.
+
 Measured (busy 2-core machine, --skip-speed: 8 min): lighting 38/64 views vs random 12/64
 (better on 5 of 8 shapes: orange, wine bottle, jack-o'-lantern, golf ball, candle; 0 vs 0 on
 the confidently recognized coffee mug, bucket, water bottle), geometry 56/64 vs 5/64 (better on
