@@ -98,7 +98,7 @@ METHODS: dict[str, MethodSpec] = {
                         bytes_per_face=10_000.0,
                         option_defaults={"plane_axis": 0, "progressive": None,
                                          "multigrid": False}),
-    "analogy": MethodSpec("analogy", "deform", ("Analogies",), _analogy, sized=True,
+    "analogy": MethodSpec("analogy", "analogy", ("Analogies",), _analogy, sized=True,
                           bytes_per_face=10_000.0,
                           option_defaults={"style": "cube", "style_map": "auto"}),
     "smooth": MethodSpec("smooth", "smooth", ("Smooth", "Multigrid smoothing"), _smooth,
