@@ -37,8 +37,10 @@ Measured (2-core machine shared with other work, load 3-14; 8 subjects x 100 vie
 37 min): the thesis's set-up fools 22.2 % (351/1584) of unseen views from 1 attacked view and
 36.8 % (560/1520) from 5, random lights 18.1 % and 17.8 % (thesis: 29.4 % and 64.2 %); orange
 44 % / 81 %, jack-o'-lantern 22 % / 72 %, golf ball 25 % / 64 %, coffee mug, bucket and water
-bottle <= 8 %. Options on the full protocol and the one-suspect-at-a-time table (3 subjects x 30
-views): docs/adversarial_lighting.md.
+bottle <= 8 %. Same protocol, other set-ups: sign steps + all 30 iterations 28.8 % / 44.1 %
+(random 18 %); radiance formation 24.6 % / 48.7 % (random 25 %); radiance + sign + all
+iterations 40.7 % / 59.3 % (random 25 %); grey background (1 draw) 21.3 % / 28.7 % (random
+15 %). The one-suspect-at-a-time table (3 subjects x 30 views): docs/adversarial_lighting.md.
 
 Measured (busy 2-core machine, --skip-speed: 8 min): lighting 38/64 views vs random 12/64
 (better on 5 of 8 shapes: orange, wine bottle, jack-o'-lantern, golf ball, candle; 0 vs 0 on
