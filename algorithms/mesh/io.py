@@ -797,20 +797,7 @@ def ply_colors(data: bytes) -> tuple[str, np.ndarray] | None:
     each of its triangles); values in [0, 1] (0-255 integers scaled). None when it has none
     or cannot be parsed."""
     try:
-        fmt, elements, start = _ply_header(data)
-        results: dict[str, dict] = {}
-        if fmt == "ascii":
-            tokens = np.array(data[start:].decode("ascii", errors="replace").split())
-            pos = 0
-            for el in elements:
-                res, pos = _ply_ascii_element(tokens, pos, el)
-                results.setdefault(el.name, res)
-        else:
-            endian = "<" if fmt == "binary_little_endian" else ">"
-            pos = start
-            for el in elements:
-                res, pos = _ply_binary_element(data, pos, el, endian)
-                results.setdefault(el.name, res)
+        elements, results = _ply_elements(data)
     except (_ParseError, ValueError):
         return None
     types = {(e.name, p.name): p.dtype for e in elements for p in e.props}
@@ -832,15 +819,13 @@ def ply_colors(data: bytes) -> tuple[str, np.ndarray] | None:
     return None
 
 
-def _parse_ply(data: bytes) -> tuple[np.ndarray, np.ndarray, list[str]]:
+def _ply_elements(data: bytes) -> tuple[list[_PlyElement], dict[str, dict]]:
+    """The header's elements and each element's properties read (ASCII or binary): the one
+    reader behind :func:`read_mesh`'s PLY and :func:`ply_colors`."""
     fmt, elements, start = _ply_header(data)
-    names = [e.name for e in elements]
-    if "vertex" not in names:
-        raise _ParseError("it has no 'vertex' element")
     results: dict[str, dict] = {}
     if fmt == "ascii":
-        body = data[start:].decode("ascii", errors="replace")
-        tokens = np.array(body.split())
+        tokens = np.array(data[start:].decode("ascii", errors="replace").split())
         pos = 0
         for el in elements:
             res, pos = _ply_ascii_element(tokens, pos, el)
@@ -851,6 +836,13 @@ def _parse_ply(data: bytes) -> tuple[np.ndarray, np.ndarray, list[str]]:
         for el in elements:
             res, pos = _ply_binary_element(data, pos, el, endian)
             results.setdefault(el.name, res)
+    return elements, results
+
+
+def _parse_ply(data: bytes) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    elements, results = _ply_elements(data)
+    if "vertex" not in results:
+        raise _ParseError("it has no 'vertex' element")
     vert = results["vertex"]
     missing = [k for k in ("x", "y", "z") if k not in vert]
     if missing:
