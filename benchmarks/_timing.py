@@ -6,6 +6,18 @@ import statistics
 import time
 
 
+def bumpy20k():
+    """The procedural 20,000-vertex benchmark mesh: organic_sample("bumpy") after one Loop
+    subdivision (23,714 vertices), QSlim-decimated to exactly 20,000 vertices (39,996
+    triangles, closed, genus 0; about 0.5 s). Issue 25's "per iteration at 20k vertices"."""
+    from algorithms.mesh import loop_subdivide, organic_sample
+    from algorithms.mesh.decimate import decimate
+
+    V, F = loop_subdivide(*organic_sample("bumpy"), 1)
+    d = decimate(V, F, 2 * 20000 - 4)
+    return d.V, d.F
+
+
 def median_seconds(fn, repeat: int) -> float:
     """Median wall time of ``repeat`` calls of ``fn()``."""
     ts = []

@@ -1,8 +1,8 @@
 """Normal-driven shape analogies: iterations per second per regularizer, libigl's ARAP as the peer.
 
-Meshes (default): armadillo (tests/data, 14,587 vertices) and a procedural ~20k-vertex mesh
-("bumpy20k": organic_sample("bumpy") after one Loop subdivision; 19,722 vertices when
-this was written, 23,714 since organic_sample changed; the benchmark prints the count). For
+Meshes (default): armadillo (tests/data, 14,587 vertices) and a procedural 20,000-vertex mesh
+("bumpy20k": organic_sample("bumpy") after one Loop subdivision, QSlim-decimated to exactly
+20,000 vertices; _timing.bumpy20k). For
 each mesh and regularizer (arap, farap, acap), cube style, λ = 1, fixed and dynamic targets, a fixed
 number of iterations (the stopping rule off):
 
@@ -50,7 +50,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from _threads import child_report, threads_section  # noqa: E402
-from _timing import median_seconds, mesh_path  # noqa: E402
+from _timing import bumpy20k, median_seconds, mesh_path  # noqa: E402
 
 import igl  # noqa: E402
 from algorithms.deform.analogies import (  # noqa: E402
@@ -66,7 +66,7 @@ from algorithms.deform.arap import (  # noqa: E402
     set_compiled_kernels,
 )
 from algorithms.deform.targets import ClosestNormals  # noqa: E402
-from algorithms.mesh import loop_subdivide, organic_sample, read_mesh  # noqa: E402
+from algorithms.mesh import read_mesh  # noqa: E402
 
 DEFAULT = ["armadillo.obj", "bumpy20k"]
 CUBE = ClosestNormals.primitive("cube")
@@ -74,8 +74,7 @@ CUBE = ClosestNormals.primitive("cube")
 
 def load(name: str):
     if name == "bumpy20k":
-        V, F = organic_sample("bumpy")
-        return loop_subdivide(V, F, 1)
+        return bumpy20k()
     path = mesh_path(name)
     if not path.exists():
         return None

@@ -1,9 +1,9 @@
 """Cubic stylization: ms per local-global iteration, local/global split, libigl's ARAP as the peer.
 
 Meshes (default): spot_lowres, bob, rocker-arm, armadillo (tests/data) and a procedural
-~20k-vertex mesh ("bumpy20k": organic_sample("bumpy") after one Loop subdivision; 19,722
-vertices when this was written, 23,714 since organic_sample changed; the benchmark
-prints the count). For each mesh, with the thesis defaults (lambda 0.2, stop at relative move 3e-3):
+20,000-vertex mesh
+("bumpy20k": organic_sample("bumpy") after one Loop subdivision, QSlim-decimated to exactly
+20,000 vertices; _timing.bumpy20k). For each mesh, with the thesis defaults (lambda 0.2, stop at relative move 3e-3):
 
   V, its        vertices, and local-global iterations the stopping rule gives
   run s         a whole run of CubicStylizer.steps (construction excluded; precompute column)
@@ -56,7 +56,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from _threads import child_report, threads_section  # noqa: E402
-from _timing import median_seconds, mesh_path  # noqa: E402
+from _timing import bumpy20k, median_seconds, mesh_path  # noqa: E402
 
 import igl  # noqa: E402
 from algorithms.deform.arap import (  # noqa: E402
@@ -70,15 +70,14 @@ from algorithms.deform.cubic import (  # noqa: E402
     CubicStylizer,
     admm_local_step,
 )
-from algorithms.mesh import loop_subdivide, organic_sample, read_mesh  # noqa: E402
+from algorithms.mesh import read_mesh  # noqa: E402
 
 DEFAULT = ["spot_lowres.obj", "bob.obj", "rocker-arm.obj", "armadillo.obj", "bumpy20k"]
 
 
 def load(name: str):
     if name == "bumpy20k":
-        V, F = organic_sample("bumpy")
-        return loop_subdivide(V, F, 1)
+        return bumpy20k()
     path = mesh_path(name)
     if not path.exists():
         return None

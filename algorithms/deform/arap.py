@@ -393,7 +393,7 @@ class ArapSystem:
         self.K.sum_duplicates()
         self._KT = self.K.T.tocsr()
         self._blocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self._tblocks: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._tblocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
         # C_i = sum_{t in cell i} w d d^T
         outer = (wd[:, :, None] * d[:, None, :]).reshape(T, 9)
@@ -517,16 +517,18 @@ class ArapSystem:
                             np.ascontiguousarray(val))
         return self._blocks
 
-    def _kt_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The same blocks listed by column, for the gather of :meth:`rhs`: blocks
-        ``tk[tptr[j]:tptr[j+1]]`` have column j (increasing block index), ``kcell[k]`` is the
-        cell of block k; and ``val``."""
+    def _kt_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The same blocks in column order, for the gather of :meth:`rhs`: entries
+        ``tptr[j]:tptr[j+1]`` are the blocks of column j (in increasing block index, so in
+        increasing cell), ``tcell`` their cells and ``tval`` their values (contiguous copies,
+        so the gather reads them sequentially)."""
         if self._tblocks is None:
             ptr, col, val = self._k_blocks()
             tk = np.argsort(col, kind="stable").astype(np.int64)
             tptr = np.concatenate([[0], np.cumsum(np.bincount(col, minlength=self.n))])
             kcell = np.repeat(np.arange(self.n_cells, dtype=np.int64), np.diff(ptr))
-            self._tblocks = (tptr.astype(np.int64), tk, kcell, val)
+            self._tblocks = (tptr.astype(np.int64), np.ascontiguousarray(kcell[tk]),
+                             np.ascontiguousarray(val[tk]))
         return self._tblocks
 
     def rotations(self, U: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
@@ -606,9 +608,9 @@ class ArapSystem:
         kern = compiled_kernels()
         if kern is None:
             return np.asarray(self._KT @ R.transpose(0, 2, 1).reshape(3 * self.n_cells, 3))
-        tptr, tk, kcell, val = self._kt_blocks()
+        tptr, tcell, tval = self._kt_blocks()
         b = np.empty((self.n, 3))
-        kern.block_rhs(tptr, tk, kcell, val, np.ascontiguousarray(R), b)
+        kern.block_rhs(tptr, tcell, tval, np.ascontiguousarray(R), b)
         return b
 
     def solve(self, rhs: np.ndarray, fixed_values: np.ndarray | None = None,

@@ -135,6 +135,7 @@ __all__ = [
     "CubicParams",
     "CubicStylizer",
     "AdmmState",
+    "admm_vertices",
     "L1Prox",
     "shrinkage",
     "rotation_from_degrees",
@@ -507,9 +508,16 @@ class AdmmState:
         return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, float(rho0)))
 
 
+def admm_vertices(lam_a: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(n,) bool: the vertices whose local step runs ADMM (``lam_a > 0`` and a non-zero normal);
+    the others take the plain ARAP rotation."""
+    return (lam_a > 0) & (np.abs(normals).sum(axis=1) > 0)
+
+
 def admm_local_step(S: np.ndarray, normals: np.ndarray, lam_a: np.ndarray, prox: L1Prox,
                     state: AdmmState, params: CubicParams,
-                    frames: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    frames: np.ndarray | None = None,
+                    use: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The local step of cubic stylization for all vertices (thesis §5.3.1, Eq. 5.4-5.9).
 
     Parameters
@@ -524,6 +532,8 @@ def admm_local_step(S: np.ndarray, normals: np.ndarray, lam_a: np.ndarray, prox:
     frames : (n, 3, 3) rotations, optional, per-vertex local frames (columns = cube axes; see
         :func:`validate_frames`): the L1 term becomes ``||B Q_i^T R_i n_i||_1``. Not validated
         here.
+    use : (n,) bool, optional, :func:`admm_vertices` of ``lam_a`` and ``normals`` when the caller
+        has it (it does not change between iterations).
 
     Returns
     -------
@@ -541,7 +551,8 @@ def admm_local_step(S: np.ndarray, normals: np.ndarray, lam_a: np.ndarray, prox:
     iters = np.zeros(n, dtype=np.int64)
     if frames is not None:
         frames = np.ascontiguousarray(frames, dtype=np.float64)
-    use = (lam_a > 0) & (np.abs(normals).sum(axis=1) > 0)
+    if use is None:
+        use = admm_vertices(lam_a, normals)
     kern = compiled_kernels() if prox.diagonal is not None else None
     if kern is not None:
         # cube / per-axis: the compiled loop (the same updates per vertex, in waves)
@@ -882,6 +893,7 @@ class CubicStylizer:
         prox = self.style_prox(params, lam_axes=lam_axes, rotation=rotation,
                                style_matrix=style_matrix, frames=frames)
         lam_a = lam * self.areas
+        use = admm_vertices(lam_a, self.normals)
         system, known, Vn = self.system, self.known, self.V_normalized
         state = AdmmState.initial(n, params.rho0)
         U = Vn.copy()
@@ -893,7 +905,7 @@ class CubicStylizer:
         for it in range(1, params.max_iterations + 1):
             if not params.warm_start:
                 state = AdmmState.initial(n, params.rho0)
-            R, iters = admm_local_step(S, self.normals, lam_a, prox, state, params, frames)
+            R, iters = admm_local_step(S, self.normals, lam_a, prox, state, params, frames, use)
             Un = system.solve(system.rhs(R), known)
             for verts, w, dims in self._recenter:
                 shift = w @ (Vn[verts][:, dims] - Un[verts][:, dims])
@@ -917,14 +929,14 @@ class CubicStylizer:
                     if frames is not None:  # in the local frames
                         Rn = np.einsum("kba,kb->ka", frames, Rn)
                 e_l1 = float((lam_a * prox.norm(Rn)).sum())
-            ran = iters[iters > 0]
+            n_ran = np.count_nonzero(iters)  # vertices that ran ADMM (the others have 0)
             metrics = {
                 "energy": e_arap + e_l1,
                 "arap": e_arap,
                 "l1": e_l1,
                 "displacement": disp,
-                "admm_iterations": float(ran.mean()) if ran.size else 0.0,
-                "admm_iterations_max": float(ran.max()) if ran.size else 0.0,
+                "admm_iterations": float(iters.sum() / n_ran) if n_ran else 0.0,
+                "admm_iterations_max": float(iters.max()) if n_ran else 0.0,
             }
             yield Step(iteration=it, total=total, V=self._to_output(U),
                        metrics=metrics, message=f"iteration {it}, relative move {disp:.2e}")

@@ -735,15 +735,14 @@ def block_covariances(ptr, col, val, U, S):
 
 
 @njit(**_OPTS)
-def _rhs_rows(tptr, tk, kcell, val, R, b, lo, hi):
+def _rhs_rows(tptr, tcell, tval, R, b, lo, hi):
     for j in range(lo, hi):
         b0 = 0.0
         b1 = 0.0
         b2 = 0.0
         for t in range(tptr[j], tptr[j + 1]):
-            k = tk[t]
-            i = kcell[k]
-            k0, k1, k2 = val[k, 0], val[k, 1], val[k, 2]
+            i = tcell[t]
+            k0, k1, k2 = tval[t, 0], tval[t, 1], tval[t, 2]
             b0 += R[i, 0, 0] * k0 + R[i, 0, 1] * k1 + R[i, 0, 2] * k2
             b1 += R[i, 1, 0] * k0 + R[i, 1, 1] * k1 + R[i, 1, 2] * k2
             b2 += R[i, 2, 0] * k0 + R[i, 2, 1] * k1 + R[i, 2, 2] * k2
@@ -753,25 +752,27 @@ def _rhs_rows(tptr, tk, kcell, val, R, b, lo, hi):
 
 
 @njit(**_PAR)
-def _rhs_par(tptr, tk, kcell, val, R, b):
+def _rhs_par(tptr, tcell, tval, R, b):
     n = tptr.shape[0] - 1
     for c in prange((n + CHUNK - 1) // CHUNK):
-        _rhs_rows(tptr, tk, kcell, val, R, b, c * CHUNK, min(n, (c + 1) * CHUNK))
+        _rhs_rows(tptr, tcell, tval, R, b, c * CHUNK, min(n, (c + 1) * CHUNK))
 
 
 @njit(**_OPTS)
-def _rhs_ser(tptr, tk, kcell, val, R, b):
+def _rhs_ser(tptr, tcell, tval, R, b):
     n = tptr.shape[0] - 1
     for c in range((n + CHUNK - 1) // CHUNK):
-        _rhs_rows(tptr, tk, kcell, val, R, b, c * CHUNK, min(n, (c + 1) * CHUNK))
+        _rhs_rows(tptr, tcell, tval, R, b, c * CHUNK, min(n, (c + 1) * CHUNK))
 
 
-def block_rhs(tptr, tk, kcell, val, R, b):
-    """``b[j] = sum_{k: col[k] = j} R[kcell[k]] val[k]`` (the product K^T [R_1^T; ...]).
+def block_rhs(tptr, tcell, tval, R, b):
+    """``b[j] = sum_{t in tptr[j]:tptr[j+1]} R[tcell[t]] tval[t]`` (the product K^T [R_1^T; ...]).
 
     A gather per vertex ``j`` (no scatter-add, so vertices can run on threads without races):
-    ``tk[tptr[j]:tptr[j+1]]`` lists the blocks k of :func:`block_covariances`'s storage whose
-    column is j, in increasing k (so in increasing cell, the order of a serial scatter over the
-    cells: the same sums, term by term), ``kcell[k]`` is block k's cell. b: (n, 3) output.
+    entries ``tptr[j]:tptr[j+1]`` are the blocks of :func:`block_covariances`'s storage whose
+    column is j, copied into column order (``tcell``: the block's cell, ``tval``: its 3 values)
+    so the loop reads them sequentially and gathers only the rotations; they come in increasing
+    cell, the order of a serial scatter over the cells (the same sums, term by term).
+    b: (n, 3) output.
     """
-    (_rhs_par if _par(b.shape[0], CHUNK) else _rhs_ser)(tptr, tk, kcell, val, R, b)
+    (_rhs_par if _par(b.shape[0], CHUNK) else _rhs_ser)(tptr, tcell, tval, R, b)
