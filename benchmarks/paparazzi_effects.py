@@ -57,9 +57,20 @@ MIN_VERTICES = 5000
 SAMPLES = ROOT / "resources" / "samples"
 
 
+#: issue 23's noisy scans: Gaussian noise of this many mean edge lengths along the vertex
+#: normals, from this seed (``noisy:bob.obj``, ``noisy:fandisk.off``)
+NOISE, NOISE_SEED = 0.3, 0
+
+
 def load(name):
+    """``(V, F)`` of a mesh name (``noisy:NAME``: that mesh with :data:`NOISE`), or None."""
     from algorithms.mesh import loop_subdivide, read_mesh
 
+    if name.startswith("noisy:"):
+        from algorithms.paparazzi.measures import noisy_scan
+
+        got = load(name[len("noisy:"):])
+        return None if got is None else (noisy_scan(*got, NOISE, NOISE_SEED), got[1])
     p = SAMPLES / name if (SAMPLES / name).exists() else mesh_path(name)
     if not p.exists():
         return None
@@ -69,6 +80,12 @@ def load(name):
         while len(V) < MIN_VERTICES:
             V, F = loop_subdivide(V, F, 1)
     return V, F
+
+
+def clean_of(name):
+    """The clean mesh a ``noisy:`` name was made from (the reference of crease5 and of the
+    distance to the clean shape); the mesh itself otherwise."""
+    return load(name[len("noisy:"):] if name.startswith("noisy:") else name)
 
 
 def _gram_monitor(run, V, F):
@@ -158,7 +175,8 @@ def effects(a) -> int:
     from algorithms.mesh.topology import boundary_loops, euler_characteristic, is_manifold
     from algorithms.paparazzi import (PaparazziParams, count_self_intersections, filter_names,
                                       get_filter)
-    from algorithms.paparazzi.measures import crease_fraction
+    from algorithms.mesh.operators import signed_volume
+    from algorithms.paparazzi.measures import crease_fraction, surface_distance
 
     import os
     print(f"load average {os.getloadavg()[0]:.2f}; {a.iterations} iterations; 16 monitor views",
@@ -174,6 +192,8 @@ def effects(a) -> int:
             print(f"{mesh} not found; skipping")
             continue
         V, F = got
+        Vc, _ = clean_of(mesh)
+        noisy = mesh.startswith("noisy:")
         topo = (euler_characteristic(F), len(boundary_loops(F)))
         for name in a.filters:
             if name not in filter_names():
@@ -199,9 +219,25 @@ def effects(a) -> int:
             same = (euler_characteristic(Fo), len(boundary_loops(Fo))) == topo
             crossings = count_self_intersections(Vo, Fo)
             crease = ""
-            if name == "guided":
-                crease = (f"{crease_fraction(V, F, Vo, Fo):.3f} "
-                          f"(c {crease_fraction(V, F, clast.V, clast.F):.3f})")
+            if name == "guided":       # against the clean input's angles (a noisy scan's own
+                crease = (f"{crease_fraction(Vc, F, Vo, Fo):.3f} "      # are noise)
+                          f"(c {crease_fraction(Vc, F, clast.V, clast.F):.3f})")
+            if noisy and name == "guided":
+                diag = float(np.linalg.norm(Vc.max(0) - Vc.min(0)))
+                print(f"    {mesh} guided: distance to the clean mesh (mean, / diagonal) "
+                      f"{surface_distance(Vo, Fo, Vc, F) / diag:.5f} (control "
+                      f"{surface_distance(clast.V, clast.F, Vc, F) / diag:.5f}, noisy input "
+                      f"{surface_distance(V, F, Vc, F) / diag:.5f}); moved from the noisy "
+                      f"input {surface_distance(Vo, Fo, V, F) / diag:.5f}; volume change "
+                      f"{(signed_volume(Vo, Fo) - signed_volume(V, F)) / signed_volume(V, F):+.4f}",
+                      flush=True)
+            if a.save:
+                from algorithms.mesh import write_mesh
+
+                stem = mesh.replace(":", "_").rsplit(".", 1)[0]
+                Path(a.save).mkdir(parents=True, exist_ok=True)
+                write_mesh(Path(a.save) / f"{stem}_{name}.obj", Vo, Fo)
+                write_mesh(Path(a.save) / f"{stem}_{name}_control.obj", clast.V, clast.F)
             print(f"{mesh:<16}{name:<13}{len(V):>7}{len(Vo):>7}{sec:>7.1f}{csec:>7.1f}  "
                   f"{f'{e0:.4g} -> {e1:.4g}':<24}{'yes' if e1 < e0 else 'NO':<6}{label:<10}"
                   f"{before:>9.4g} -> {after:<9.4g}{ctl:>9.4g} {'yes' if beats else 'NO':<6}"
@@ -213,7 +249,7 @@ def effects(a) -> int:
                 rows = sheets.setdefault(name, [])   # keeps the rows it has
                 rows.append((f"{Path(mesh).stem}\n{len(V):,} V", view_picture(V, F),
                              view_picture(Vo, Fo), view_picture(clast.V, clast.F)))
-                out = ROOT / "docs" / "images" / f"paparazzi_{name}.png"
+                out = ROOT / "docs" / "images" / f"paparazzi_{name}{a.sheet_tag}.png"
                 contact_sheet(rows, out, f"Paparazzi, filter {name}: {a.iterations} "
                                          "iterations, command-line defaults")
     return 0
@@ -339,11 +375,18 @@ def main() -> int:
                     default=["guided", "quantize", "slic", "l0", "neural-style"])
     ap.add_argument("--iterations", type=int, default=1000)
     ap.add_argument("--no-sheets", action="store_true")
+    ap.add_argument("--sheet-tag", default="",
+                    help="docs/images/paparazzi_<filter><TAG>.png (e.g. _noisy)")
+    ap.add_argument("--save", default=None, help="write each output and control mesh here")
+    ap.add_argument("--noisy", action="store_true",
+                    help="the noisy scans: noisy:fandisk.off noisy:bob.obj")
     ap.add_argument("--suspects", action="store_true")
     a = ap.parse_args()
     if a.suspects:
         a.meshes = a.meshes or ["bob.obj", "fandisk.off"]
         return suspects(a)
+    if a.noisy:
+        a.meshes = a.meshes or ["noisy:fandisk.off", "noisy:bob.obj"]
     a.meshes = a.meshes or ["spot_lowres.obj", "bob.obj", "fandisk.off", "camelhead.off",
                             "blob.obj", "bumpy.obj", "pretzel.obj"]
     return effects(a)

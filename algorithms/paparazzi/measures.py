@@ -17,6 +17,11 @@
   output's normals there is compared with the input's dihedral angle. The output may have other
   triangles (Paparazzi remeshes), so it is measured on the surface, not per edge; a crease
   rounded over one ring of triangles puts both points on the rounding and fails.
+* :func:`noisy_scan` -- a mesh with Gaussian noise along its vertex normals (issue 23's noisy
+  scans: 0.3 mean edge lengths, a fixed seed), to test smoothing filters on.
+* :func:`surface_distance` -- mean distance of one mesh's vertices to another mesh's surface
+  (how far a result moved from its input, or how close it came back to a clean shape; works
+  across remeshing).
 * :func:`bending_energy` -- ``sum_i |(L V)_i|^2 / M_ii`` over the interior vertices (squared
   mean-curvature normal, cotangent Laplacian and barycentric mass of
   :mod:`algorithms.mesh.operators`; a discrete Willmore energy, invariant to scale; guided-filter
@@ -33,7 +38,7 @@ from ..mesh.topology import edge_flaps
 from .filters import icosahedron_face_normals
 
 __all__ = ["palette_fraction", "planar_area_fraction", "flat_edge_fraction",
-           "crease_fraction", "bending_energy"]
+           "crease_fraction", "bending_energy", "noisy_scan", "surface_distance"]
 
 
 def palette_fraction(V, F, degrees: float = 15.0, palette=None) -> float:
@@ -116,3 +121,31 @@ def crease_fraction(V0, F0, V1, F1, degrees: float = 5.0, sharp: float = 30.0) -
         out = np.degrees(np.arccos(np.clip((sides[0] * sides[1]).sum(1), -1, 1)))
         ok += (np.abs(out - ang) < degrees) / 3.0
     return float((L * ok).sum() / L.sum())
+
+
+def noisy_scan(V, F, amount: float = 0.3, seed: int = 0) -> np.ndarray:
+    """``V`` moved along its (area-weighted) vertex normals by Gaussian noise of standard
+    deviation ``amount`` mean edge lengths, from ``numpy.random.default_rng(seed)``; ``F``
+    unchanged. Boundary vertices move too."""
+    import igl
+
+    V = np.asarray(V, float)
+    F = np.asarray(F, np.int64)
+    from ..mesh.operators import vertex_normals
+
+    h = float(igl.edge_lengths(V, F).mean())
+    z = np.random.default_rng(seed).standard_normal(len(V))
+    return V + (amount * h * z)[:, None] * vertex_normals(V, F)
+
+
+def surface_distance(V, F, V_ref, F_ref) -> float:
+    """Mean distance of the vertices ``V`` (``F``: only its referenced vertices count) to the
+    surface ``(V_ref, F_ref)`` (libigl's point-to-mesh distance)."""
+    import igl
+
+    V = np.asarray(V, float)
+    used = np.unique(np.asarray(F, np.int64))
+    d2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(V[used]),
+                                               np.ascontiguousarray(V_ref, float),
+                                               np.ascontiguousarray(F_ref, np.int64))
+    return float(np.sqrt(np.maximum(d2, 0.0)).mean())
