@@ -25,7 +25,7 @@ from app.commands import StateCommand
 from app.document import Document
 from app.jobs import JobRunner
 from app.viewport import Viewport
-from app.widgets import MessageLog, plural
+from app.widgets import MessageLog, dock_view_action, plural
 
 APP_NAME = "Stylize3D"
 MAX_RECENT = 8
@@ -77,6 +77,11 @@ class MainWindow(QMainWindow):
     mesh_shown = Signal()
     #: (job name, the document state the job's result created) after a job's command is pushed
     job_committed = Signal(str, object)
+    #: (the triangles checked, their MeshReport or the exception) from the background check
+    _report_ready = Signal(object, object)
+    #: triangles above which a changed mesh is checked (validate_mesh) off the GUI thread: about
+    #: 0.1 s at 100k triangles, 1 s at 467k (a subdivided armadillo), which would freeze the window
+    ASYNC_VALIDATE_FACES = 100_000
 
     def __init__(self, settings: QSettings | None = None):
         super().__init__()
@@ -124,6 +129,7 @@ class MainWindow(QMainWindow):
         if state is not None:  # a layout saved with another set of panels is ignored
             self._layout_restored = bool(self.restoreState(state, self._layout_version()))
         self._panel_tabs_fitted = False
+        self._report_ready.connect(self._on_report_ready)
         self._update_title()
         self._update_stats()
 
@@ -289,7 +295,7 @@ class MainWindow(QMainWindow):
         self.messages_dock.setWidget(self.message_log)
         self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, self.messages_dock)
         self.messages_dock.hide()
-        self.view_menu.addAction(self.messages_dock.toggleViewAction())
+        self.view_menu.addAction(dock_view_action(self.messages_dock))
         self.details_button = QPushButton("Details…")
         self.details_button.setFlat(True)
         self.details_button.setToolTip("Show every message of this session in full (the status "
@@ -356,7 +362,7 @@ class MainWindow(QMainWindow):
             panel = cls(self)
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, panel)
             self.panels[cls.title] = panel
-            self.panels_menu.addAction(panel.toggleViewAction())
+            self.panels_menu.addAction(dock_view_action(panel))
         docks = list(self.panels.values())
         for other in docks[1:]:
             self.tabifyDockWidget(docks[0], other)
@@ -950,12 +956,46 @@ class MainWindow(QMainWindow):
             self._update_stats()
             self.mesh_shown.emit()
         elif what == "topology":
-            doc.report = validate_mesh(doc.V, doc.F)
+            self._validate(doc)
             self.viewport.set_mesh(doc.V, doc.F, reset_camera=False)
             self._update_stats()
         elif what == "positions":
             self.viewport.update_points(doc.V)
         self._update_title()
+
+    def _validate(self, doc) -> None:
+        """The report (stats line, problems) of a mesh whose triangles changed: at once for a
+        small mesh, on a worker thread for a big one (the stats line says "checking…" meanwhile;
+        the report lands only if the triangles are still the same)."""
+        if len(doc.F) <= self.ASYNC_VALIDATE_FACES:
+            doc.report = validate_mesh(doc.V, doc.F)
+            return
+        import threading
+
+        V, F = doc.V, doc.F  # immutable snapshots (MeshState)
+        signal = self._report_ready
+
+        def work() -> None:
+            try:
+                result = validate_mesh(V, F)
+            except Exception as exc:  # noqa: BLE001 - shown as a stats-line problem
+                result = exc
+            try:
+                signal.emit(F, result)
+            except RuntimeError:  # the window was closed meanwhile
+                pass
+
+        threading.Thread(target=work, name="validate-mesh", daemon=True).start()
+
+    def _on_report_ready(self, F, result) -> None:
+        doc = self.document
+        if doc.is_empty or doc.F is not F:  # another edit came first: its own check follows
+            return
+        if isinstance(result, Exception):
+            self.report(f"Could not check the mesh: {result}", "error")
+            return
+        doc.report = result
+        self._update_stats()
 
     def _on_clean_changed(self, clean: bool) -> None:
         self.document.modified = not clean
@@ -970,8 +1010,14 @@ class MainWindow(QMainWindow):
 
     def _update_stats(self) -> None:
         r = self.document.report
-        if self.document.is_empty or r is None:
+        if self.document.is_empty:
             self.stats_label.setText("No mesh open — File > Open or drop a mesh file here.")
+            return
+        if r is None:  # being checked (a big mesh whose triangles just changed)
+            doc = self.document
+            self.stats_label.setText(f"V {len(doc.V):,}   F {len(doc.F):,}   checking the mesh…")
+            self.stats_label.setToolTip("Boundary loops, genus, components and problems follow "
+                                        "in a moment")
             return
         s = r.stats
         genus = "—" if s.get("genus") is None else s["genus"]

@@ -9,6 +9,24 @@ from PySide6.QtGui import QColor, QFont, QPainter, QPainterPath, QPen
 from PySide6.QtWidgets import QSizePolicy, QToolButton, QVBoxLayout, QWidget
 
 
+def dock_view_action(dock):
+    """``dock.toggleViewAction()``, guarded against a PySide6 stale wrapper.
+
+    Shiboken maps C++ addresses to Python wrappers; a wrapper of a non-QObject that Qt deleted
+    behind its back (a ``QSurface`` was seen once in CI) can be handed back for a new QAction at
+    the same address. Such a wrapper is detached (``shiboken6.invalidate``; nothing is deleted)
+    and the action asked for again."""
+    from PySide6.QtGui import QAction
+
+    action = dock.toggleViewAction()
+    if not isinstance(action, QAction):
+        import shiboken6
+
+        shiboken6.invalidate(action)
+        action = dock.toggleViewAction()
+    return action
+
+
 def plural(n: int, singular: str, plural_form: str | None = None) -> str:
     """ "1 iteration", "2 iterations", "1,024 vertices" (``plural_form`` when not singular + s)."""
     word = singular if n == 1 else (plural_form or singular + "s")

@@ -34,6 +34,7 @@ from PySide6.QtWidgets import (QButtonGroup, QComboBox, QDialog, QDialogButtonBo
 
 from algorithms.errors import Stylize3DError
 from algorithms.params import params_to_dict
+from app.widgets import dock_view_action
 
 from .log import LogData, SessionLog, state_hash
 from .protocol import Protocol, StudyError, Task, check_against_panels
@@ -466,7 +467,7 @@ class StudySession(QObject):
         for title, panel in self.window.panels.items():
             allowed = setup.panels is None or title in setup.panels or title in setup.locked_panels
             locked = title in setup.locked_panels
-            panel.toggleViewAction().setEnabled(allowed)
+            dock_view_action(panel).setEnabled(allowed)
             panel.setVisible(allowed)
             body = panel.widget()
             if body is not None:
@@ -498,7 +499,7 @@ class StudySession(QObject):
     def _unlock(self) -> None:
         self._locked = {}
         for panel in self.window.panels.values():
-            panel.toggleViewAction().setEnabled(True)
+            dock_view_action(panel).setEnabled(True)
             if panel.widget() is not None:
                 panel.widget().setEnabled(True)
             form = getattr(panel, "form", None)
