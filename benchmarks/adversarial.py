@@ -288,6 +288,13 @@ def _subject_scene(name, args):
     return scene
 
 
+def _view_seed(seed: int, args) -> int:
+    """The seed of a subject's views: ``--view-seed 0`` (the default) gives the evaluation
+    views of the tables; another value gives other views of the same subjects (the set-up's
+    choices are made on those, not on the evaluation views)."""
+    return seed if args.view_seed == 0 else seed + 1_000_003 * args.view_seed
+
+
 def table34(args):
     """Table 3.4 on the procedural subjects: per subject, random correctly classified views
     (azimuth, elevation and view width drawn at random), adversaries on 1 and 5 of them (several
@@ -302,14 +309,16 @@ def table34(args):
     radius = DEFAULT_RADIUS[mode]
     params = AdversaryParams(mode=mode, iterations=args.iterations, step=args.step,
                              direction=args.direction, until_fooled=not args.all_iterations,
-                             formation=args.formation)
+                             formation=args.formation, aggregate=args.aggregate,
+                             jitter=args.jitter)
     print(f"\n== Table 3.4 ({mode}): load average {os.getloadavg()[0]:.1f} on "
           f"{os.cpu_count()} cores ==")
     print(f"set-up: environment {args.environment}, background {args.background}, formation "
           f"{args.formation}, elevation {args.elevation[0]:g}-{args.elevation[1]:g} deg, view "
           f"width {args.width[0]:g}-{args.width[1]:g} x the shape; attack: L-inf {radius}, step "
           f"{args.step} ({args.direction}), <= {args.iterations} iterations"
-          f"{' (all of them)' if args.all_iterations else ' (stop once fooled)'}; "
+          f"{' (all of them)' if args.all_iterations else ' (stop once fooled)'}, views' cost "
+          f"{args.aggregate}, view jitter {args.jitter:g} deg; view seed {args.view_seed}; "
           f"{args.draws} draws of the attacked views per subset size {args.subsets}; random: "
           f"{args.random} corners of the ball")
     clf = default_classifier()
@@ -325,7 +334,8 @@ def table34(args):
         views, tried = sample_views(scene, clf, k, wanted=args.views,
                                     max_candidates=args.max_candidates,
                                     elevation=tuple(args.elevation), width=tuple(args.width),
-                                    seed=seed, formation=args.formation)
+                                    seed=_view_seed(seed, args),
+                                    formation=args.formation)
         print(f"{name}: {len(scene.V)} vertices; {len(views)} correctly classified views of "
               f"{tried} random candidates ({time.perf_counter() - t0:.0f} s)", flush=True)
         if len(views) < max(args.subsets) + 2:
@@ -401,13 +411,15 @@ def contact_sheet(args, out: Path):
     views, tried = sample_views(scene, clf, k, wanted=args.views,
                                 max_candidates=args.max_candidates,
                                 elevation=tuple(args.elevation), width=tuple(args.width),
-                                seed=seed, formation=args.formation)
+                                seed=_view_seed(seed, args),
+                                    formation=args.formation)
     n_att = min(args.subsets[-1], len(views) - 1)
     rng = np.random.default_rng([args.seed, seed])
     pick = np.sort(rng.choice(len(views), n_att, replace=False))
     params = AdversaryParams(mode=mode, iterations=args.iterations, step=args.step,
                              direction=args.direction, until_fooled=not args.all_iterations,
-                             formation=args.formation)
+                             formation=args.formation, aggregate=args.aggregate,
+                             jitter=args.jitter)
     res = attack(scene, clf, [view_camera(views[i]) for i in pick], params, decrease=k)
     x_adv = res.lighting if mode == "lighting" else (res.V - scene.center) / scene.scale
     x_rnd = random_perturbation(scene, mode, radius, seed=seed)
@@ -471,6 +483,13 @@ def main():
     t34.add_argument("--direction", choices=("gradient", "sign"), default="gradient")
     t34.add_argument("--all-iterations", action="store_true",
                      help="do not stop once the attacked views are fooled")
+    t34.add_argument("--aggregate", choices=("sum", "max"), default="sum",
+                     help="views' cost: sum (Eq. 3.5) or the worst view's")
+    t34.add_argument("--jitter", type=float, default=0.0,
+                     help="degrees of random view jitter per step (0: none, the thesis)")
+    t34.add_argument("--view-seed", type=int, default=0,
+                     help="0: the evaluation views; other: other views of the same subjects, "
+                          "to choose a set-up on")
     t34.add_argument("--formation", choices=("irradiance", "radiance"), default="irradiance")
     t34.add_argument("--environment", default="Grace Cathedral")
     t34.add_argument("--background", type=float, default=0.0)

@@ -60,7 +60,8 @@ from .labels import resolve_label, short_name
 __all__ = ["AdversaryParams", "Scene", "prepare_scene", "orbit_cameras", "render_views",
            "classify", "find_recognized_views", "attack_iter", "attack", "AttackStep",
            "AttackResult", "random_perturbation", "evaluate", "DEFAULT_RADIUS", "ViewResult",
-           "cost_image_gradients", "RadianceSHShading", "FORMATIONS", "shading_for"]
+           "cost_image_gradients", "RadianceSHShading", "FORMATIONS", "shading_for",
+           "jittered_cameras"]
 
 #: the thesis's L-infinity norm balls (Fig. 3.10)
 DEFAULT_RADIUS = {"lighting": 0.1, "geometry": 0.002}
@@ -103,7 +104,9 @@ class AdversaryParams:
                               tooltip="Width of the orthographic view in units of the shape's "
                                       "longest side.")
     seed: int = param(0, label="Random seed", minimum=0, maximum=2**31 - 1, step=1,
-                      advanced=True, tooltip="Seed of the random baseline perturbation.")
+                      advanced=True,
+                      tooltip="Seed of the random baseline perturbation and of the view "
+                              "jitter.")
     until_fooled: bool = param(True, label="Stop once fooled", advanced=True,
                                tooltip="Stop as soon as every attacked view is fooled (thesis "
                                        "App. 3.7.6). Off: run all the iterations (a stronger "
@@ -115,6 +118,17 @@ class AdversaryParams:
                                    "do not shade). radiance: the light looked up along the "
                                    "normal, every degree shades (not the thesis's; an "
                                    "experiment).")
+    aggregate: str = param("sum", label="Views' cost", choices=("sum", "max"), advanced=True,
+                           tooltip="sum: the views' costs added (thesis Eq. 3.5); max: each "
+                                   "step lowers the cost of the view the classifier is still "
+                                   "surest of (the worst case of the views).")
+    jitter: float = param(0.0, label="View jitter", minimum=0.0, maximum=45.0, step=1.0,
+                          decimals=1, advanced=True,
+                          tooltip="0: every step looks at the views as given (thesis). J > 0: "
+                                  "each step turns every view by a random angle of up to J "
+                                  "degrees around the vertical and tilts it by up to J / 2 "
+                                  "degrees (Random seed), so the perturbation also fools views "
+                                  "near them.")
 
     def ball(self) -> float:
         return float(self.radius) if self.radius > 0 else DEFAULT_RADIUS[self.mode]
@@ -267,10 +281,13 @@ def classify(classifier, images: np.ndarray) -> np.ndarray:
 
 
 def cost_image_gradients(classifier, images: np.ndarray, decrease: Sequence[int | None],
-                         increase: Sequence[int | None]):
-    """Eq. 3.1 summed over the views and its gradient w.r.t. the images.
+                         increase: Sequence[int | None], aggregate: str = "sum"):
+    """Eq. 3.1 summed over the views (Eq. 3.5; ``aggregate="max"``: the largest of the views'
+    costs, the worst case) and its gradient w.r.t. the images.
 
     Returns ``(cost, dC/dI (B, S, S, 3), probabilities (B, K))``."""
+    if aggregate not in ("sum", "max"):
+        raise ParameterError(f"Unknown views' cost {aggregate!r}: use sum or max.")
     torch = _torch()
     dtype = getattr(classifier, "dtype", torch.float32)
     x = torch.from_numpy(np.ascontiguousarray(images.transpose(0, 3, 1, 2),
@@ -278,15 +295,45 @@ def cost_image_gradients(classifier, images: np.ndarray, decrease: Sequence[int 
     x.requires_grad_(True)
     logits = classifier.logits(x)
     logp = torch.log_softmax(logits, dim=1)
-    cost = logits.new_zeros(())
+    per_view = []
     for b in range(len(images)):
+        c = logits.new_zeros(())
         if decrease[b] is not None:
-            cost = cost + logp[b, int(decrease[b])]          # -CE(f(I), L_d) = log p_d
+            c = c + logp[b, int(decrease[b])]                # -CE(f(I), L_d) = log p_d
         if increase[b] is not None:
-            cost = cost - logp[b, int(increase[b])]          # +CE(f(I), L_i) = -log p_i
+            c = c - logp[b, int(increase[b])]                # +CE(f(I), L_i) = -log p_i
+        per_view.append(c)
+    per_view = torch.stack(per_view)
+    cost = per_view.sum() if aggregate == "sum" else per_view.max()
     cost.backward()
     g = x.grad.numpy().transpose(0, 2, 3, 1).astype(np.float64)
     return float(cost.detach()), g, torch.exp(logp.detach()).double().numpy()
+
+
+def _rotation(axis, angle: float) -> np.ndarray:
+    """Rotation matrix of ``angle`` radians about the unit ``axis`` (Rodrigues)."""
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def jittered_cameras(cameras: Sequence[Camera], degrees: float, rng: np.random.Generator
+                     ) -> list[Camera]:
+    """Each camera turned about the origin (the unit-box shape's centre) by a random angle in
+    ``[-degrees, degrees]`` around the vertical (+y) and tilted by one in ``[-degrees / 2,
+    degrees / 2]`` around its own horizontal axis: views near the given ones, for the option
+    ``jitter`` (an expectation over nearby views, as in expectation-over-transformation
+    attacks)."""
+    out = []
+    for c in cameras:
+        right = np.cross(c.direction, c.up)
+        tilt = math.radians(rng.uniform(-degrees / 2, degrees / 2))
+        turn = math.radians(rng.uniform(-degrees, degrees))
+        R = _rotation((0.0, 1.0, 0.0), turn) @ _rotation(right, tilt)
+        out.append(Camera(R @ c.position, R @ c.direction, R @ c.up, c.projection, c.width,
+                          c.fov, c.resolution, c.near))
+    return out
 
 
 def _parameter_gradient(scene, renders, V, raw, gI, mode, supersample):
@@ -339,6 +386,14 @@ class AttackResult:
     @property
     def success_rate(self) -> float:
         return float(np.mean([v.success for v in self.views])) if self.views else 0.0
+
+
+def _cost_of(probs, decrease, increase, aggregate="sum") -> float:
+    """Eq. 3.1's cost of the views from their probabilities (as :func:`cost_image_gradients`)."""
+    lp = np.log(np.maximum(probs, 1e-300))
+    c = [(lp[b, decrease[b]] if decrease[b] is not None else 0.0)
+         - (lp[b, increase[b]] if increase[b] is not None else 0.0) for b in range(len(probs))]
+    return float(np.sum(c) if aggregate == "sum" else np.max(c))
 
 
 def _top5(p, names):
@@ -407,9 +462,15 @@ def attack_iter(scene: Scene, classifier, cameras: Sequence[Camera],
     dec = [None if d is None else resolve_label(d, names) if isinstance(d, str) else int(d)
            for d in dec]
     images_before = images.astype(np.float32)
+    rng = np.random.default_rng(params.seed)
     it = 0
     while True:
-        cost, gI, probs = cost_image_gradients(classifier, images, dec, inc)
+        if params.jitter > 0:      # the step's gradient comes from jittered views (below)
+            probs = classify(classifier, images)
+            cost = _cost_of(probs, dec, inc, params.aggregate)
+        else:
+            cost, gI, probs = cost_image_gradients(classifier, images, dec, inc,
+                                                   params.aggregate)
         fooled = _fooled(probs, dec, inc)
         conf_d = float(np.mean([probs[b, dec[b]] for b in range(B) if dec[b] is not None])) \
             if any(d is not None for d in dec) else 0.0
@@ -424,7 +485,16 @@ def attack_iter(scene: Scene, classifier, cameras: Sequence[Camera],
                          top5=[_top5(probs[b], names) for b in range(B)], fooled=fooled)
         if (params.until_fooled and all(fooled)) or it >= params.iterations:
             break
-        g = _parameter_gradient(scene, renders, V, raw, gI, mode, params.supersample)
+        if params.jitter > 0:
+            jc = jittered_cameras(cameras, params.jitter, rng)
+            _, jrenders, jraw = render_views(scene, jc, V=V, lighting=U,
+                                             supersample=params.supersample,
+                                             check_visible=False, formation=params.formation)
+            _, gI, _ = cost_image_gradients(classifier, np.clip(jraw, 0.0, 1.0), dec, inc,
+                                            params.aggregate)
+            g = _parameter_gradient(scene, jrenders, V, jraw, gI, mode, params.supersample)
+        else:
+            g = _parameter_gradient(scene, renders, V, raw, gI, mode, params.supersample)
         step = np.sign(g) if params.direction == "sign" else g
         x = np.clip(x - gamma * step, x0 - r, x0 + r)
         it += 1

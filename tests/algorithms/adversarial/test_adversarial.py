@@ -126,6 +126,64 @@ def test_chain_rule_through_renderer_and_classifier_matches_finite_differences(m
     assert fd == pytest.approx(float((g * D).sum()), rel=1e-4)
 
 
+def test_worst_view_cost_is_the_largest_view_cost_and_matches_finite_differences():
+    """aggregate="max": the cost is the largest of the views' Eq. 3.1 costs, its gradient only
+    that view's (zero on the others), and it agrees with central differences."""
+    clf = _toy(torch.float64)
+    rng = np.random.default_rng(2)
+    images = rng.random((3, 32, 32, 3))
+    dec, inc = [1, 2, 0], [None, 3, None]
+    x = torch.tensor(images.transpose(0, 3, 1, 2))
+    logp = torch.log_softmax(clf.logits(x), 1).detach().numpy()
+    per_view = [logp[0, 1], logp[1, 2] - logp[1, 3], logp[2, 0]]
+    cost, g, _ = cost_image_gradients(clf, images, dec, inc, aggregate="max")
+    worst = int(np.argmax(per_view))
+    assert cost == pytest.approx(max(per_view), rel=1e-10)
+    assert all(np.abs(g[b]).max() == 0 for b in range(3) if b != worst)
+    assert np.abs(g[worst]).max() > 0
+    D = rng.standard_normal(images.shape)
+    eps = 1e-6
+    fd = (cost_image_gradients(clf, images + eps * D, dec, inc, aggregate="max")[0]
+          - cost_image_gradients(clf, images - eps * D, dec, inc, aggregate="max")[0]) / (2 * eps)
+    assert fd == pytest.approx(float((g * D).sum()), rel=1e-6)
+    with pytest.raises(ParameterError, match="Unknown views' cost"):
+        cost_image_gradients(clf, images, dec, inc, aggregate="mean")
+
+
+@pytest.mark.parametrize("mode", ["lighting", "geometry"])
+def test_jittered_views_max_cost_chain_rule_matches_finite_differences(mode):
+    """The options jitter and aggregate="max" together: the step's gradient (taken on views
+    turned by jittered_cameras) is the derivative of the worst jittered view's cost."""
+    from algorithms.adversarial.attack import jittered_cameras
+
+    V, F, A = SUBJECTS["orange"]()
+    scene = prepare_scene(V, F, albedo=A)
+    scene.lighting = scene.lighting + 0.05 * np.random.default_rng(7).standard_normal((49, 3))
+    base = orbit_cameras([20.0, 200.0], resolution=64)
+    cams = jittered_cameras(base, 15.0, np.random.default_rng(4))
+    for c, b in zip(cams, base):      # turned about the origin, still looking at it
+        assert np.linalg.norm(c.position) == pytest.approx(np.linalg.norm(b.position))
+        assert np.cross(c.direction, -c.position / np.linalg.norm(c.position)) == \
+            pytest.approx(np.zeros(3), abs=1e-12)
+        assert 0 < np.degrees(np.arccos(np.clip(c.direction @ b.direction, -1, 1))) <= 15 * 1.2
+    clf = _toy(torch.float64)
+
+    def cost_at(x):
+        kw = {"lighting": x} if mode == "lighting" else {"V": x}
+        images, renders, raw = render_views(scene, cams, supersample=2, formation="radiance",
+                                            **kw)
+        c, gI, _ = cost_image_gradients(clf, images, [1, 1], [2, None], aggregate="max")
+        return c, gI, renders, raw
+
+    x0 = scene.lighting if mode == "lighting" else scene.V
+    c, gI, renders, raw = cost_at(x0)
+    g = _parameter_gradient(scene, renders, scene.V, raw, gI, mode, 2)
+    D = np.random.default_rng(1).standard_normal(x0.shape)
+    eps = 1e-8 if mode == "geometry" else 1e-5
+    fd = (cost_at(x0 + eps * D)[0] - cost_at(x0 - eps * D)[0]) / (2 * eps)
+    assert fd == pytest.approx(float((g * D).sum()), rel=1e-4)
+
+
 def test_radiance_formation_shades_every_degree_and_irradiance_skips_odd_ones():
     """Eq. 3.24: A_3 = A_5 = 0, so degrees 3 and 5 do not change a diffuse image; looked up as
     radiance they do. With degree-0-2 light, the radiance of A_l U_l is the irradiance of U."""
