@@ -319,6 +319,10 @@ def _fused(torch):
     return ns
 
 
+def _torch_index(a):
+    return _torch().from_numpy(np.asarray(a, dtype=np.int64))
+
+
 def _normalize(torch, x):
     return x / torch.linalg.vector_norm(x, dim=1, keepdim=True).clamp_min(1e-12)
 
@@ -346,18 +350,24 @@ class SubdivisionNet:
     or ``set_compiled_kernels(False)`` selects the plain PyTorch path.
     """
 
-    def __init__(self, seed: int | None = 0):
+    def __init__(self, seed: int | None = 0, formulation: str = "stylize3d"):
         torch = _torch()
+        if formulation not in ("stylize3d", "author"):
+            raise ParameterError(f"Unknown network formulation {formulation!r} (use "
+                                 f"'stylize3d' or 'author').")
+        self.formulation = formulation
         self.fused = True  # use the compiled kernels where they are available
         if seed is not None:
             g = torch.random.fork_rng()
             g.__enter__()
             torch.manual_seed(int(seed))
+        # the author's V / E see no differential coordinates: 3 flap vectors + 4 x 29 features
+        fin = 3 * 3 + 4 * (FEATURES if formulation == "stylize3d" else FEATURES - 3)
         try:
             self.module = torch.nn.ModuleDict({
                 "I": _mlp(torch, 3 * 3 + 4 * 3),
-                "V": _mlp(torch, 3 * 3 + 4 * FEATURES),
-                "E": _mlp(torch, 3 * 3 + 4 * FEATURES)})
+                "V": _mlp(torch, fin),
+                "E": _mlp(torch, fin)})
         finally:
             if seed is not None:
                 g.__exit__(None, None, None)
@@ -396,18 +406,47 @@ class SubdivisionNet:
             ZW.reshape(-1, 4, HIDDEN), ijkl))
         return fused.Pool.apply(mlp[1:](h), R, dst, count.reshape(-1))
 
-    @staticmethod
-    def _first_layer(torch, lin, loc, Z, gather):
+    def _first_layer(self, torch, lin, loc, Z, gather):
         """The first layer's pre-activations: its geometric columns applied to every flap's
         ``loc``, its feature columns applied once per vertex (``Z @ wz``: (n, 4 * 32), the four
-        flap slots side by side) and summed over each flap's vertices by ``gather``."""
-        geo = loc.reshape(len(loc), 21)
+        flap slots side by side) and summed over each flap's vertices by ``gather``.
+
+        The author's formulation (V, E): the geometric columns are the 3 flap vectors only
+        (columns 0:9), the features follow (9:125, vertex by vertex)."""
         if Z is None:
-            return lin(geo)
+            return lin(loc.reshape(len(loc), 21))
         w = lin.weight
-        h = torch.nn.functional.linear(geo, w[:, _GEO_COLS], lin.bias)
-        wz = w[:, _Z_COLS].reshape(HIDDEN, 4, FEATURES - 3).transpose(0, 1)  # (4, 32, 29)
+        if self.formulation == "author":
+            h = torch.nn.functional.linear(loc[:, :3].reshape(len(loc), 9), w[:, :9], lin.bias)
+            wz = w[:, 9:].reshape(HIDDEN, 4, FEATURES - 3).transpose(0, 1)
+        else:
+            h = torch.nn.functional.linear(loc.reshape(len(loc), 21), w[:, _GEO_COLS], lin.bias)
+            wz = w[:, _Z_COLS].reshape(HIDDEN, 4, FEATURES - 3).transpose(0, 1)  # (4, 32, 29)
         return h + gather(Z @ wz.reshape(4 * HIDDEN, FEATURES - 3).T)
+
+    def author_state(self) -> dict:
+        """The weights in the thesis author's layout (``net_init`` / ``net_vertex`` /
+        ``net_edge``, layers ``layerIn``, ``hidden.0``, ``layerOut``; columns in the author's
+        order), for :func:`~algorithms.subdivision.inference.network_from_state` with
+        ``formulation="author"``. Only for networks of the author's formulation."""
+        if self.formulation != "author":
+            raise ParameterError("Only a network of the author's formulation has the author's "
+                                 "layout.")
+        # ours I: [e_ij, e_ik, e_il, d_i, d_j, d_k, d_l] -> [d_i, p_j, d_j, p_k, d_k, p_l, d_l]
+        perm_i = np.r_[9:12, 0:3, 12:15, 3:6, 15:18, 6:9, 18:21]
+        # ours V/E: [e_ij, e_ik, e_il, z_i, z_j, z_k, z_l] -> [z_i, p_j, z_j, p_k, z_k, p_l, z_l]
+        perm_ve = np.r_[9:38, 0:3, 38:67, 3:6, 67:96, 6:9, 96:125]
+        out = {}
+        for name, key, perm in (("I", "net_init", perm_i), ("V", "net_vertex", perm_ve),
+                                ("E", "net_edge", perm_ve)):
+            mlp = self.module[name]
+            for idx, layer in ((0, "layerIn"), (2, "hidden.0"), (4, "layerOut")):
+                W = mlp[idx].weight.detach().clone()
+                if idx == 0:
+                    W = W[:, _torch_index(perm)]
+                out[f"{key}.{layer}.weight"] = W
+                out[f"{key}.{layer}.bias"] = mlp[idx].bias.detach().clone()
+        return out
 
     def _apply_torch(self, torch, name, V, Z, lv):
         """Outputs of module ``name`` on every half-flap: world displacement (H, 3), feature

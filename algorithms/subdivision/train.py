@@ -69,6 +69,18 @@ class TrainParams:
                                    step=0.005, decimals=3, advanced=True,
                                    tooltip="Relative drop of the best validation loss that "
                                            "counts as progress for the patience (0.01 = 1 %).")
+    schedule: str = param("constant", label="Learning-rate schedule",
+                          choices=("constant", "cosine", "step"), advanced=True,
+                          tooltip="constant: the thesis's fixed step size; cosine: decays it "
+                                  "smoothly to 1 % over the epochs; step: divides it by 10 at "
+                                  "70 % of the epochs.")
+    scale_augmentation: float = param(1.0, label="Random scale (augmentation)", minimum=1.0,
+                                      maximum=4.0, step=0.1, decimals=2, advanced=True,
+                                      tooltip="1: off. Otherwise each coarse mesh is scaled by "
+                                              "a random factor between 1/a and a (log-uniform) "
+                                              "every time it is used. Random rotations need "
+                                              "no augmentation: the network sees every flap in "
+                                              "its own frame.")
     training_seed: int = param(0, label="Training seed", minimum=0, maximum=2**31 - 1, step=1,
                                advanced=True,
                                tooltip="Seed of the initial weights and the shuffling.")
@@ -85,7 +97,8 @@ class Trainer:
     """
 
     def __init__(self, samples: Sequence[CoarseSample], params: TrainParams = TrainParams(),
-                 net: SubdivisionNet | None = None):
+                 net: SubdivisionNet | None = None,
+                 validation_samples: Sequence[CoarseSample] | None = None):
         import torch
 
         validate_params(params)
@@ -103,9 +116,12 @@ class Trainer:
         if params.validation_fraction > 0 and len(samples) >= 2:
             nval = max(1, nval)
         nval = min(nval, len(samples) - 1)
+        if validation_samples:  # held-out shapes: every coarse mesh of ``samples`` trains
+            nval = 0
         self._rng = rng
         self.train_set = [self._prepare(samples[t]) for t in order[nval:]]
-        self.val_set = [self._prepare(samples[t]) for t in order[:nval]]
+        self.val_set = ([self._prepare(s) for s in validation_samples] if validation_samples
+                        else [self._prepare(samples[t]) for t in order[:nval]])
         self._val_batch = self._batch(self.val_set or self.train_set)
         self.opt = _adam(torch, self.net.module.parameters(), params.learning_rate)
         self.best_loss = np.inf
@@ -139,9 +155,13 @@ class Trainer:
                                    dtype=V0.dtype) for it in items]) for lv in range(L + 1)]
         return V0, ml, T, w
 
-    def _loss(self, item):
+    def _loss(self, item, scale: float = 1.0):
+        """The loss of one prepared mesh (or batch); ``scale`` (augmentation) scales the
+        coarse mesh and its targets, and the loss is taken back to the unscaled frame."""
         V0, ml, T = item[:3]
-        outs = self.net.forward(V0, ml)
+        outs = self.net.forward(V0 * scale if scale != 1.0 else V0, ml)
+        if scale != 1.0:
+            outs = [o / scale for o in outs]
         loss = 0.0
         for lv in range(1, self.levels + 1):
             d2 = ((outs[lv] - T[lv]) ** 2).sum(dim=1)
@@ -168,16 +188,22 @@ class Trainer:
         """
         total = int(self.params.epochs if epochs is None else epochs)
         clock = time.perf_counter
+        a = float(self.params.scale_augmentation)
         try:
             for ep in range(1, total + 1):
                 t0 = clock()
                 losses = []
                 t_fwd = t_bwd = 0.0
+                lr = self.learning_rate(ep, total)
+                for group in self.opt.param_groups:
+                    group["lr"] = lr
                 with _one_thread():
                     for t in self._rng.permutation(len(self.train_set)):
                         ta = clock()
                         self.opt.zero_grad()
-                        loss = self._loss(self.train_set[t])
+                        scale = float(np.exp(self._rng.uniform(-np.log(a), np.log(a)))) \
+                            if a > 1.0 else 1.0
+                        loss = self._loss(self.train_set[t], scale)
                         tb = clock()
                         loss.backward()
                         self.opt.step()
@@ -196,7 +222,7 @@ class Trainer:
                 t1 = clock()
                 dt = t1 - t0
                 self.seconds_per_epoch.append(dt)
-                m = {"loss": float(np.mean(losses)), "validation_loss": val,
+                m = {"loss": float(np.mean(losses)), "validation_loss": val, "learning_rate": lr,
                      "best_validation_loss": float(self.best_loss), "seconds": dt,
                      "seconds_forward": t_fwd, "seconds_backward": t_bwd,
                      "seconds_validation": t1 - tv,
@@ -215,6 +241,16 @@ class Trainer:
                     break
         finally:
             self.net.load_state(self.best_state)
+
+    def learning_rate(self, epoch: int, total: int) -> float:
+        """The step size of epoch ``epoch`` (1-based) of ``total`` (``params.schedule``)."""
+        lr = float(self.params.learning_rate)
+        if self.params.schedule == "cosine":
+            frac = (epoch - 1) / max(1, total - 1)
+            return lr * (0.01 + 0.99 * 0.5 * (1.0 + np.cos(np.pi * frac)))
+        if self.params.schedule == "step":
+            return lr * (0.1 if epoch > 0.7 * total else 1.0)
+        return lr
 
     def preview(self) -> np.ndarray:
         import torch

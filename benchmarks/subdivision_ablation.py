@@ -1,0 +1,427 @@
+"""Neural subdivision: which training choices make the difference (issue 22, the ablation).
+
+One choice at a time against one baseline, on the same data: coarse meshes of the cartoon
+elephant (``cartoon_elephant_10/subd2/001.obj`` of the author's reference folder, the default
+data parameters: 150-300 vertices, 2 levels, seed 0), the same reduced training budget for
+every row (``--coarse`` meshes, ``--epochs`` epochs; a row that changes one of them says so).
+Each trained network is measured two ways:
+
+* **validation set**: the author's ten coarse elephants (``cartoon_elephant_10/subd0``), level-2
+  vertex error against the ground truth (``subd2``): RMS over the vertices in % of the
+  bounding-box diagonal, mean over the ten;
+* **Table 4.2 protocol**: the 11 shared meshes other than armadillo (cleaned), each QSlimmed to
+  350-450 vertices (seed 0: the same coarse meshes for every row, as ``stylize3d
+  subdivide-eval --clean``), 2 levels, Hausdorff H and mean surface distance M in % of the
+  diagonal (200,000 samples); the count of meshes where the network beats Loop and butterfly on
+  both H and M.
+
+Every row subdivides the same way: the row's normalization (below) of the coarse mesh, then,
+like the product's guard, a mesh whose mean edge is more than 1.5x off the training meshes'
+is scaled to it; the network runs (PyTorch, ``SubdivisionNet.forward``) and the result is
+scaled back.
+
+The choices: ``formulation`` (ours: V / E see recomputed differential coordinates; the
+author's: they see only the flap vectors and features); ``normalization`` (``radius``: ours,
+centroid and farthest vertex at sqrt(3), per shape; ``unit-cube``: the author's, per shape;
+``edge``: every mesh scaled so its mean edge length is the training data's mean, per mesh);
+``coarse`` (training set size); ``epochs``; ``schedule`` (constant, cosine, step);
+``selection`` (``coarse``: the best epoch on a tenth of the training shape's coarse meshes, as
+the thesis; ``shape``: on 20 coarse meshes of another shape, armadillo, with the same 90 %
+training meshes); ``augment`` (random scale 1/a..a per use; random rotations are a no-op for
+this network: every flap is seen in its own frame).
+
+Usage::
+
+    python benchmarks/subdivision_ablation.py --prepare      # data, coarse meshes, peers
+    python benchmarks/subdivision_ablation.py --row baseline # one row (appends to the JSON)
+    python benchmarks/subdivision_ablation.py --table        # the markdown table
+
+Long runs: ``OMP_NUM_THREADS=1 nice -n 10``; torch runs on one thread while training.
+Results go to ``--out`` (default ``$TMPDIR/subdiv_ablation``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+REF = ROOT.parent / "shared" / "reference" / "neural_subdivision"
+MESHES = ROOT.parent / "shared" / "meshes"
+TRAIN_SHAPE = REF / "cartoon_elephant_10" / "subd2" / "001.obj"
+HELD_OUT_SHAPE = MESHES / "armadillo.obj"
+TEST_MESHES = ["bob.obj", "camelhead.off", "fandisk.off", "fertility.off", "hand_lowres.obj",
+               "igea.ply", "koala.obj", "rocker-arm.obj", "spot_lowres.obj",
+               "stanford-bunny.obj", "wingnut.obj"]
+TOLERANCE = 1.5  # the product's SCALE_TOLERANCE
+
+BASE = {"formulation": "stylize3d", "normalization": "radius", "coarse": 100, "epochs": 80,
+        "schedule": "constant", "selection": "coarse", "augment": 1.0, "lr": 2e-3}
+ROWS = {
+    "baseline": {},
+    "author formulation": {"formulation": "author"},
+    "unit-cube normalization": {"normalization": "unit-cube"},
+    "edge-length normalization": {"normalization": "edge"},
+    "50 coarse meshes": {"coarse": 50},
+    "200 coarse meshes": {"coarse": 200},
+    "2x epochs": {"epochs": 160},
+    "cosine schedule": {"schedule": "cosine"},
+    "step schedule": {"schedule": "step"},
+    "held-out shape selection": {"selection": "shape"},
+    "scale augmentation 1.5": {"augment": 1.5},
+}
+
+
+def _load() -> str:
+    try:
+        return "load " + " ".join(f"{x:.1f}" for x in os.getloadavg())
+    except OSError:
+        return "load ?"
+
+
+def _out_dir(args) -> Path:
+    p = Path(args.out or Path(tempfile.gettempdir()) / "subdiv_ablation")
+    p.mkdir(parents=True, exist_ok=True)
+    return p
+
+
+def _dataset(shape_path: Path, n: int, out: Path):
+    from algorithms.mesh import read_mesh
+    from algorithms.subdivision.data import DataParams, generate_dataset
+
+    m = read_mesh(shape_path)
+    return generate_dataset([(m.V, m.F)], DataParams(coarse_meshes=n), workers=2,
+                            cache_dir=out / "cache")
+
+
+def _shape_scale(shape_path: Path, normalization: str) -> float:
+    """Factor from the data's frame (:func:`normalization`, radius) to the row's frame."""
+    from algorithms.mesh import read_mesh
+    from algorithms.subdivision.data import normalization as radius
+
+    m = read_mesh(shape_path)
+    c, s = radius(m.V)
+    Vn = (m.V - c) * s
+    if normalization == "unit-cube":
+        return 1.0 / float((Vn - Vn.min(0)).max())
+    return 1.0
+
+
+def _mean_edge(V, F) -> float:
+    from algorithms.subdivision.inference import mean_edge_length
+
+    return mean_edge_length(V, F)
+
+
+def _scaled_samples(samples, factor: float | None, edge: float | None):
+    """The samples in the row's frame: times ``factor``, or each to mean edge ``edge``."""
+    from algorithms.subdivision.data import CoarseSample
+
+    out = []
+    for s in samples:
+        k = factor if edge is None else edge / _mean_edge(s.V, s.F)
+        c = s.V.mean(0)
+        out.append(CoarseSample((s.V - c) * k, s.F, [(T - c) * k for T in s.targets]))
+    return out
+
+
+def _row_frame(cfg: dict, ref_edge: float):
+    """normalize(V, F) -> (centre, scale) of the row (before the range guard)."""
+    from algorithms.subdivision.data import normalization as radius
+
+    def norm(V, F):
+        if cfg["normalization"] == "unit-cube":
+            lo = V.min(0)
+            return lo, 1.0 / float((V - lo).max())
+        if cfg["normalization"] == "edge":
+            return V.mean(0), ref_edge / _mean_edge(V, F)
+        return radius(V)
+
+    return norm
+
+
+def _subdivider(net, norm, ref_edge: float):
+    """(V, F, levels) -> (V_sub, F_sub): the row's normalization, the range guard, the net."""
+    import torch
+
+    from algorithms.subdivision.model import MeshLevels
+
+    def run(V, F, levels=2):
+        c, s = norm(V, F)
+        ratio = _mean_edge(V, F) * s / ref_edge
+        if not 1 / TOLERANCE <= ratio <= TOLERANCE:
+            s = s / ratio
+        ml = MeshLevels(F, len(V), levels, net.dtype)
+        with torch.no_grad():
+            out = net.forward(torch.from_numpy((V - c) * s).to(net.dtype), ml)[-1]
+        return out.double().numpy() / s + c, ml.faces[-1]
+
+    return run
+
+
+def _numpy_subdivider(path):
+    from algorithms.subdivision.inference import load_network, neural_subdivide_np
+
+    net = load_network(path)
+    return lambda V, F, levels=2: neural_subdivide_np(V, F, levels, net, dense="scale")[:2]
+
+
+def _baseline(method):
+    from algorithms.subdivision.baselines import subdivide_baseline
+
+    def run(V, F, levels=2):
+        return subdivide_baseline(V, F, levels, method)
+
+    return run
+
+
+def _validation_errors(fn) -> list:
+    """Level-2 vertex RMS error (% of the diagonal) on the ten validation elephants."""
+    from algorithms.mesh import read_mesh
+    from algorithms.subdivision.topology import split_vertex_order
+
+    errs = []
+    for k in range(1, 11):
+        m = read_mesh(REF / "cartoon_elephant_10" / "subd0" / f"{k:03d}.obj")
+        g1 = read_mesh(REF / "cartoon_elephant_10" / "subd1" / f"{k:03d}.obj")
+        g2 = read_mesh(REF / "cartoon_elephant_10" / "subd2" / f"{k:03d}.obj")
+        order = split_vertex_order(m.F, len(m.V), [g1.F, g2.F])
+        diag = float(np.linalg.norm(m.V.max(0) - m.V.min(0)))
+        V, F = fn(m.V, m.F, 2)
+        if len(V) != len(g2.V):
+            raise RuntimeError("level-2 vertex count differs from the ground truth")
+        d = np.linalg.norm(V - g2.V[order], axis=1) / diag
+        errs.append(100.0 * float(np.sqrt((d ** 2).mean())))
+    return errs
+
+
+def _loop_validation(method):
+    """Baselines on the validation set, put in our refine's vertex order."""
+    from algorithms.subdivision.baselines import subdivide_baseline
+    from algorithms.subdivision.topology import split_vertex_order
+
+    def run(V, F, levels=2):
+        V1, F1 = subdivide_baseline(V, F, 1, method)
+        V2, F2 = subdivide_baseline(V1, F1, 1, method)
+        return V2[split_vertex_order(F, len(V), [F1, F2])], F2
+
+    return run
+
+
+def _coarse_test_meshes(out: Path):
+    """The 11 test meshes (cleaned) and their coarse versions, cached (seed 0, 350-450)."""
+    from algorithms.subdivision.metrics import coarsen_to_vertices
+    from app.cli.common import read_valid
+
+    path = out / "coarse.npz"
+    if path.exists():
+        z = np.load(path)
+        names = [str(x) for x in z["names"]]
+        return [(n, z[f"V{i}"], z[f"F{i}"], z[f"cV{i}"], z[f"cF{i}"])
+                for i, n in enumerate(names)]
+    rng = np.random.default_rng(0)  # evaluate_protocol's draws, in the same order
+    items, arrays = [], {}
+    for i, name in enumerate(TEST_MESHES):
+        d, _ = read_valid(str(MESHES / name), clean=True, quiet=True)
+        nv = int(rng.integers(350, 451))
+        Vc, Fc = coarsen_to_vertices(d.V, d.F, nv)
+        items.append((name, d.V, d.F, Vc, Fc))
+        arrays.update({f"V{i}": d.V, f"F{i}": d.F, f"cV{i}": Vc, f"cF{i}": Fc})
+    np.savez(path, names=np.array(TEST_MESHES), **arrays)
+    return items
+
+
+def _protocol(fn, meshes) -> dict:
+    from algorithms.subdivision.metrics import surface_distances
+
+    res = {}
+    for name, V, F, Vc, Fc in meshes:
+        Vs, Fs = fn(Vc, Fc, 2)
+        d = surface_distances(Vs, Fs, V, F, 200_000, 0)
+        res[name] = {"H": d["hausdorff"], "M": d["mean_distance"]}
+    return res
+
+
+def prepare(args) -> int:
+    out = _out_dir(args)
+    print(f"prepare [{_load()}]", flush=True)
+    t0 = time.perf_counter()
+    _dataset(TRAIN_SHAPE, 200, out)
+    _dataset(HELD_OUT_SHAPE, 20, out)
+    print(f"  data: {time.perf_counter() - t0:.0f} s [{_load()}]", flush=True)
+    meshes = _coarse_test_meshes(out)
+    peers = {"shipped": _numpy_subdivider(None),
+             "author": _numpy_subdivider(REF / "author_network" / "netparams.dat"),
+             "Loop": _baseline("loop"), "butterfly": _baseline("butterfly")}
+    val = {"shipped": peers["shipped"], "author": peers["author"],
+           "Loop": _loop_validation("loop"), "butterfly": _loop_validation("butterfly")}
+    res = {}
+    for name, fn in peers.items():
+        t = time.perf_counter()
+        res[name] = {"validation": _validation_errors(val[name]),
+                     "protocol": _protocol(fn, meshes)}
+        print(f"  {name}: {time.perf_counter() - t:.0f} s", flush=True)
+    (out / "peers.json").write_text(json.dumps(res, indent=1))
+    print(f"end [{_load()}]")
+    return 0
+
+
+def run_row(args) -> int:
+    import torch
+
+    from algorithms.subdivision.model import SubdivisionNet
+    from algorithms.subdivision.train import Trainer, TrainParams
+
+    torch.set_num_threads(1)
+    out = _out_dir(args)
+    cfg = {**BASE, **ROWS[args.row]}
+    if args.epochs:
+        cfg["epochs"] = args.epochs * cfg["epochs"] // BASE["epochs"]
+    load0 = _load()
+    print(f"row {args.row!r}: {cfg} [{load0}]", flush=True)
+    t0 = time.perf_counter()
+    samples = _dataset(TRAIN_SHAPE, cfg["coarse"], out)
+    factor = _shape_scale(TRAIN_SHAPE, cfg["normalization"])
+    edge = None
+    if cfg["normalization"] == "edge":
+        edge = float(np.mean([_mean_edge(s.V, s.F) for s in samples]))
+    samples = _scaled_samples(samples, factor, edge)
+    ref_edge = float(np.mean([_mean_edge(s.V, s.F) for s in samples]))
+    validation = None
+    if cfg["selection"] == "shape":
+        held = _dataset(HELD_OUT_SHAPE, 20, out)
+        validation = _scaled_samples(held, _shape_scale(HELD_OUT_SHAPE, cfg["normalization"]),
+                                     edge)
+        order = np.random.default_rng(0).permutation(len(samples))
+        nval = int(round(0.1 * len(samples)))
+        samples = [samples[t] for t in order[nval:]]  # the baseline's 90 % training meshes
+    tp = TrainParams(epochs=cfg["epochs"], learning_rate=cfg["lr"], schedule=cfg["schedule"],
+                     scale_augmentation=cfg["augment"])
+    net = SubdivisionNet(seed=0, formulation=cfg["formulation"])
+    tr = Trainer(samples, tp, net=net, validation_samples=validation)
+    for step in tr.steps():
+        if step.iteration % 20 == 0:
+            print(f"  {step.message} [{_load()}]", flush=True)
+    t_train = time.perf_counter() - t0
+    fn = _subdivider(tr.net, _row_frame(cfg, ref_edge), ref_edge)
+    t1 = time.perf_counter()
+    val = _validation_errors(fn)
+    meshes = _coarse_test_meshes(out)
+    prot = _protocol(fn, meshes)
+    t_eval = time.perf_counter() - t1
+    row = {"row": args.row, "config": cfg, "validation": val, "protocol": prot,
+           "best_epoch": tr.best_epoch, "best_validation_loss": float(tr.best_loss),
+           "final_training_loss": tr.history[-1]["loss"], "train_seconds": t_train,
+           "eval_seconds": t_eval, "load_start": load0, "load_end": _load(),
+           "reference_edge": ref_edge}
+    if args.save:
+        from algorithms.subdivision.model import save_weights
+
+        if cfg["formulation"] == "stylize3d":
+            save_weights(args.save, tr.net, {"trained_on": TRAIN_SHAPE.name,
+                                             "mean_edge_length": ref_edge})
+        else:
+            torch.save(tr.net.author_state(), args.save)
+    path = out / "rows.json"
+    rows = json.loads(path.read_text()) if path.exists() else {}
+    rows[args.row] = row
+    path.write_text(json.dumps(rows, indent=1))
+    print(_summary(row, _peers(out)), flush=True)
+    print(f"  train {t_train:.0f} s, eval {t_eval:.0f} s [{_load()}]", flush=True)
+    return 0
+
+
+def _peers(out: Path) -> dict:
+    p = out / "peers.json"
+    return json.loads(p.read_text()) if p.exists() else {}
+
+
+def _wins(prot: dict, peers: dict) -> int:
+    if "Loop" not in peers:
+        return -1
+    n = 0
+    for name, r in prot.items():
+        if all(r[k] < peers[b]["protocol"][name][k] for b in ("Loop", "butterfly")
+               for k in ("H", "M")):
+            n += 1
+    return n
+
+
+def _beats(prot: dict, peers: dict, other: str, key: str) -> int:
+    return sum(r[key] < peers[other]["protocol"][name][key] for name, r in prot.items())
+
+
+def _summary(row: dict, peers: dict) -> str:
+    prot = row["protocol"]
+    H = np.mean([r["H"] for r in prot.values()])
+    M = np.mean([r["M"] for r in prot.values()])
+    return (f"  validation RMS {np.mean(row['validation']):.4f} %, protocol H {H:.3f} M "
+            f"{M:.3f}, beats Loop and butterfly on both on {_wins(prot, peers)} of "
+            f"{len(prot)}")
+
+
+def table(args) -> int:
+    out = _out_dir(args)
+    peers = _peers(out)
+    path = out / "rows.json"
+    rows = json.loads(path.read_text()) if path.exists() else {}
+    print("| row | validation RMS % | H mean | M mean | beats Loop+butterfly (H and M) | "
+          "H < author | M < author | best epoch | training | load (start/end) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for name in ("author", "shipped", "Loop", "butterfly"):
+        if name in peers:
+            p = peers[name]
+            H = np.mean([r["H"] for r in p["protocol"].values()])
+            M = np.mean([r["M"] for r in p["protocol"].values()])
+            w = _wins(p["protocol"], peers) if name in ("author", "shipped") else "-"
+            print(f"| {name} (peer) | {np.mean(p['validation']):.4f} | {H:.3f} | {M:.3f} | {w} "
+                  f"| - | - | - | - | - |")
+    for name in ROWS:
+        if name not in rows:
+            continue
+        r = rows[name]
+        prot = r["protocol"]
+        H = np.mean([x["H"] for x in prot.values()])
+        M = np.mean([x["M"] for x in prot.values()])
+        ha = _beats(prot, peers, "author", "H") if "author" in peers else "?"
+        ma = _beats(prot, peers, "author", "M") if "author" in peers else "?"
+        print(f"| {name} | {np.mean(r['validation']):.4f} | {H:.3f} | {M:.3f} | "
+              f"{_wins(prot, peers)} | {ha} | {ma} | {r['best_epoch']}/{r['config']['epochs']} | "
+              f"{r['train_seconds'] / 60:.1f} min | {r['load_start'][5:]} / "
+              f"{r['load_end'][5:]} |")
+    return 0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--prepare", action="store_true")
+    ap.add_argument("--row", choices=list(ROWS))
+    ap.add_argument("--table", action="store_true")
+    ap.add_argument("--epochs", type=int, help="override the baseline's epoch budget")
+    ap.add_argument("--save", help="write the row's weights here")
+    ap.add_argument("--out", help="results folder (default $TMPDIR/subdiv_ablation)")
+    args = ap.parse_args()
+    if not REF.is_dir():
+        print(f"the reference folder is not here ({REF}); nothing to do")
+        return 0
+    if args.prepare:
+        return prepare(args)
+    if args.row:
+        return run_row(args)
+    if args.table:
+        return table(args)
+    ap.print_help()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
