@@ -336,7 +336,7 @@ class Viewport(QWidget):
             self.plotter.add_mesh(pv.PolyData(np.asarray(points, dtype=np.float64)),
                                   name="markers", color=color, point_size=9,
                                   render_points_as_spheres=True, reset_camera=False,
-                                  pickable=False)
+                                  pickable=False, render=False)
         self.render()
 
     def show_overlay(self, V: np.ndarray | None, F: np.ndarray | None = None,
@@ -349,7 +349,7 @@ class Viewport(QWidget):
             poly = pv.PolyData(np.asarray(V, dtype=np.float64), _faces_vtk(np.asarray(F)))
             self.plotter.add_mesh(poly, name="overlay", color=color, show_edges=True,
                                   edge_color="#8b1a1a", line_width=1.0, smooth_shading=False,
-                                  reset_camera=False, pickable=False)
+                                  reset_camera=False, pickable=False, render=False)
             if self.mesh_actor is not None:
                 self.mesh_actor.SetVisibility(False)
         elif self.mesh_actor is not None:
@@ -365,11 +365,11 @@ class Viewport(QWidget):
             targets = np.array([handles[v] for v in verts], dtype=np.float64)
             self.handles_actor = self.plotter.add_mesh(
                 pv.PolyData(targets), name="handles", color="#d62728", point_size=14,
-                render_points_as_spheres=True, reset_camera=False, pickable=False)
+                render_points_as_spheres=True, reset_camera=False, pickable=False, render=False)
             src = np.asarray(self.poly.points)[verts]
             lines = pv.line_segments_from_points(np.stack([src, targets], 1).reshape(-1, 3))
             self.plotter.add_mesh(lines, name="handle_lines", color="#d62728", line_width=2,
-                                  reset_camera=False, pickable=False)
+                                  reset_camera=False, pickable=False, render=False)
         self.render()
 
     # -- geometry ----------------------------------------------------------------------------
@@ -385,7 +385,7 @@ class Viewport(QWidget):
         self.mesh_actor = self.plotter.add_mesh(
             poly, name="mesh", color=MESH_COLOR, smooth_shading=False, show_edges=self._edges,
             edge_color="#404040", line_width=0.5, specular=0.25, specular_power=20,
-            scalars=None, reset_camera=False)
+            scalars=None, reset_camera=False, render=False)
         self._apply_shading()
         self._field_name = None
         self._set_legend(None)
@@ -430,7 +430,7 @@ class Viewport(QWidget):
             ghost = pv.PolyData(np.asarray(V, dtype=np.float64), _faces_vtk(F))
             self.ghost_actor = self.plotter.add_mesh(ghost, name="ghost", color=GHOST_COLOR,
                                                      opacity=0.25, reset_camera=False,
-                                                     scalars=None)
+                                                     scalars=None, render=False)
         self.render()
 
     def set_wireframe(self, on: bool) -> None:
