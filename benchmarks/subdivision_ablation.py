@@ -24,7 +24,8 @@ The choices: ``formulation`` (ours: V / E see recomputed differential coordinate
 author's: they see only the flap vectors and features); ``normalization`` (``radius``: ours,
 centroid and farthest vertex at sqrt(3), per shape; ``unit-cube``: the author's, per shape;
 ``edge``: every mesh scaled so its mean edge length is the training data's mean, per mesh);
-``coarse`` (training set size); ``epochs``; ``schedule`` (constant, cosine, step);
+``shape`` (the training shape: the elephant, or armadillo -- the mesh the shipped weights and
+the issue's default run were trained on); ``coarse`` (training set size); ``epochs``; ``schedule`` (constant, cosine, step);
 ``selection`` (``coarse``: the best epoch on a tenth of the training shape's coarse meshes, as
 the thesis; ``shape``: on 20 coarse meshes of another shape, armadillo, with the same 90 %
 training meshes); ``augment`` (random scale 1/a..a per use; random rotations are a no-op for
@@ -64,7 +65,8 @@ TEST_MESHES = ["bob.obj", "camelhead.off", "fandisk.off", "fertility.off", "hand
                "stanford-bunny.obj", "wingnut.obj"]
 TOLERANCE = 1.5  # the product's SCALE_TOLERANCE
 
-BASE = {"formulation": "stylize3d", "normalization": "radius", "coarse": 100, "epochs": 80,
+SHAPES = {"elephant": TRAIN_SHAPE, "armadillo": HELD_OUT_SHAPE}
+BASE = {"shape": "elephant", "formulation": "stylize3d", "normalization": "radius", "coarse": 100, "epochs": 80,
         "schedule": "constant", "selection": "coarse", "augment": 1.0, "lr": 2e-3}
 ROWS = {
     "baseline": {},
@@ -78,6 +80,7 @@ ROWS = {
     "step schedule": {"schedule": "step"},
     "held-out shape selection": {"selection": "shape"},
     "scale augmentation 1.5": {"augment": 1.5},
+    "trained on armadillo": {"shape": "armadillo"},
 }
 
 
@@ -289,8 +292,9 @@ def run_row(args) -> int:
     load0 = _load()
     print(f"row {args.row!r}: {cfg} [{load0}]", flush=True)
     t0 = time.perf_counter()
-    samples = _dataset(TRAIN_SHAPE, cfg["coarse"], out)
-    factor = _shape_scale(TRAIN_SHAPE, cfg["normalization"])
+    shape = SHAPES[cfg["shape"]]
+    samples = _dataset(shape, cfg["coarse"], out)
+    factor = _shape_scale(shape, cfg["normalization"])
     edge = None
     if cfg["normalization"] == "edge":
         edge = float(np.mean([_mean_edge(s.V, s.F) for s in samples]))
@@ -298,6 +302,9 @@ def run_row(args) -> int:
     ref_edge = float(np.mean([_mean_edge(s.V, s.F) for s in samples]))
     validation = None
     if cfg["selection"] == "shape":
+        if cfg["shape"] == HELD_OUT_SHAPE.stem:
+            raise SystemExit("held-out-shape selection validates on armadillo: train on "
+                             "another shape")
         held = _dataset(HELD_OUT_SHAPE, 20, out)
         validation = _scaled_samples(held, _shape_scale(HELD_OUT_SHAPE, cfg["normalization"]),
                                      edge)
@@ -323,14 +330,17 @@ def run_row(args) -> int:
            "final_training_loss": tr.history[-1]["loss"], "train_seconds": t_train,
            "eval_seconds": t_eval, "load_start": load0, "load_end": _load(),
            "reference_edge": ref_edge}
-    if args.save:
+    save = args.save or out / "weights" / (args.row.replace(" ", "_") + ".pt")
+    Path(save).parent.mkdir(parents=True, exist_ok=True)
+    if cfg["formulation"] == "stylize3d" and cfg["normalization"] == "radius":
         from algorithms.subdivision.model import save_weights
 
-        if cfg["formulation"] == "stylize3d":
-            save_weights(args.save, tr.net, {"trained_on": TRAIN_SHAPE.name,
-                                             "mean_edge_length": ref_edge})
-        else:
-            torch.save(tr.net.author_state(), args.save)
+        save_weights(save, tr.net, {"trained_on": shape.name, "mean_edge_length": ref_edge,
+                                    "coarse_meshes": cfg["coarse"], "epochs": cfg["epochs"],
+                                    "best_epoch": tr.best_epoch, "row": args.row})
+    else:  # not loadable as product weights (other frame or formulation): the raw state
+        torch.save({"config": json.dumps(cfg), "state": tr.net.state()}, save)
+    row["weights"] = str(save)
     path = out / "rows.json"
     rows = json.loads(path.read_text()) if path.exists() else {}
     rows[args.row] = row
@@ -407,7 +417,7 @@ def main() -> int:
     ap.add_argument("--row", choices=list(ROWS))
     ap.add_argument("--table", action="store_true")
     ap.add_argument("--epochs", type=int, help="override the baseline's epoch budget")
-    ap.add_argument("--save", help="write the row's weights here")
+    ap.add_argument("--save", help="write the row's weights here (default: OUT/weights/ROW.pt)")
     ap.add_argument("--out", help="results folder (default $TMPDIR/subdiv_ablation)")
     args = ap.parse_args()
     if not REF.is_dir():
