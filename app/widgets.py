@@ -93,12 +93,20 @@ class LinePlot(QWidget):
         self.title = title
         self.log_y = log_y
         self.series: dict[str, list[float]] = {}
+        #: drawn in the middle while there is no series (why the plot is empty)
+        self.placeholder = ""
         self.setMinimumHeight(110)
         self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Preferred)
         self.setToolTip("Value per iteration of the running method (latest value on the right).")
 
     def clear(self) -> None:
         self.series.clear()
+        self.placeholder = ""
+        self.update()
+
+    def set_placeholder(self, text: str) -> None:
+        """Say in the empty plot why it is empty (cleared by :meth:`clear`)."""
+        self.placeholder = text
         self.update()
 
     def append(self, name: str, value: float) -> None:
@@ -121,6 +129,11 @@ class LinePlot(QWidget):
         area = QRectF(m + 2, top, self.width() - 2 * m - 4, self.height() - top - m)
         p.setPen(QColor("#333"))
         p.drawText(QPointF(m, m + 8), self.title or ", ".join(self.series))
+        if not self.series and self.placeholder:
+            p.setPen(QColor("#555"))
+            p.drawText(area.adjusted(4, 0, -4, 0), int(Qt.AlignmentFlag.AlignCenter
+                                                       | Qt.TextFlag.TextWordWrap),
+                       self.placeholder)
         for i, (name, ys) in enumerate(self.series.items()):
             vals = [math.log10(y) if self.log_y else y for y in ys if (y > 0 or not self.log_y)]
             if not vals:

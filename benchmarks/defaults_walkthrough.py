@@ -10,7 +10,7 @@ after each run goes to --out (look at them). Needs an X display (xvfb-run on a s
 
     xvfb-run -a -s "-screen 0 1600x1000x24" .venv/bin/python benchmarks/defaults_walkthrough.py \\
         [--meshes blob bumpy pretzel orange armadillo] [--panels Cubic Smooth ...] \\
-        [--size 1280x800] [--out /tmp/walkthrough]
+        [--size 1280x800] [--out /tmp/walkthrough] [--profile]
 """
 
 from __future__ import annotations
@@ -40,6 +40,8 @@ def main(argv=None) -> int:
     ap.add_argument("--size", default="1280x800")
     ap.add_argument("--out", type=Path, default=Path("/tmp/walkthrough"))
     ap.add_argument("--timeout", type=float, default=300.0)
+    ap.add_argument("--profile", action="store_true",
+                    help="profile the GUI thread during each run (top functions by own time)")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
@@ -94,6 +96,12 @@ def main(argv=None) -> int:
             redraws0 = win.viewport.redraws
             errors.clear()
             t0 = last[0] = time.perf_counter()
+            prof = None
+            if args.profile:
+                import cProfile
+
+                prof = cProfile.Profile()
+                prof.enable()
             timer.start()
             panel.run_button.click()
             QTest.qWait(50)
@@ -101,6 +109,11 @@ def main(argv=None) -> int:
                 QTest.qWait(20)
             seconds = time.perf_counter() - t0
             timer.stop()
+            if prof is not None:
+                import pstats
+
+                prof.disable()
+                pstats.Stats(prof).sort_stats("tottime").print_stats(12)
             QTest.qWait(300)
             stall = max([g for t, g in gaps if t - t0 > 1.0] or [0.0]) * 1000
             V1 = np.asarray(win.document.V)

@@ -375,6 +375,10 @@ class MultigridPanel(MethodPanel):
         self.status_label.setText(
             f"{pre}Solved with {SOLVER_NAMES.get(name, name)} in "
             f"{info['seconds'] * 1000:.0f} ms{cyc}. Undo with Ctrl+Z.")
+        if name == "direct" and not self.plot.series:
+            self.plot.set_placeholder("The direct solver solved it exactly in one step: no "
+                                      "V-cycles to plot. Choose Solver = multigrid to watch "
+                                      "them converge.")
         self.stop_button.setEnabled(False)
 
     def _on_committed(self, name: str, after) -> None:

@@ -207,6 +207,14 @@ def test_auto_solver_says_which(window, dialogs, qtbot):
     with qtbot.waitSignal(window.job_committed, timeout=120000):
         panel.run_button.click()
     qtbot.waitUntil(lambda: "Auto: direct solver" in panel.status_label.text(), timeout=10000)
+    # the residual plot has nothing to show after a direct solve: it says why (issue 24 item 10)
+    assert not panel.plot.series and "no V-cycles" in panel.plot.placeholder
+    # a multigrid solve plots its V-cycles and drops the note
+    panel.form.set_value("solver", "multigrid")
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    qtbot.waitUntil(lambda: bool(panel.plot.series), timeout=10000)
+    assert panel.plot.placeholder == ""
 
 
 # -- the panel's jobs are the recipes of app.recipes.multigrid ------------------------------------
