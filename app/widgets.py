@@ -88,9 +88,12 @@ class LinePlot(QWidget):
 
     COLORS = ["#2b6cb0", "#c05621", "#2f855a", "#9b2c2c", "#6b46c1"]
 
-    def __init__(self, title: str = "", log_y: bool = False, parent: QWidget | None = None):
+    def __init__(self, title: str = "", log_y: bool = False, parent: QWidget | None = None,
+                 empty_text: str = ""):
         super().__init__(parent)
         self.title = title
+        #: shown while there is no series and no placeholder (what would appear here, and when)
+        self.empty_text = empty_text
         self.log_y = log_y
         self.series: dict[str, list[float]] = {}
         #: drawn in the middle while there is no series (why the plot is empty)
@@ -129,11 +132,11 @@ class LinePlot(QWidget):
         area = QRectF(m + 2, top, self.width() - 2 * m - 4, self.height() - top - m)
         p.setPen(QColor("#333"))
         p.drawText(QPointF(m, m + 8), self.title or ", ".join(self.series))
-        if not self.series and self.placeholder:
+        if not self.series and (self.placeholder or self.empty_text):
             p.setPen(QColor("#555"))
             p.drawText(area.adjusted(4, 0, -4, 0), int(Qt.AlignmentFlag.AlignCenter
                                                        | Qt.TextFlag.TextWordWrap),
-                       self.placeholder)
+                       self.placeholder or self.empty_text)
         for i, (name, ys) in enumerate(self.series.items()):
             vals = [math.log10(y) if self.log_y else y for y in ys if (y > 0 or not self.log_y)]
             if not vals:

@@ -50,6 +50,8 @@ class MethodPanel(QDockWidget):
     plot_metrics: tuple[str, ...] = ()
     plot_title = ""
     plot_log_y = False
+    #: what the plot says while it is empty (e.g. which button fills it)
+    plot_empty_text = ""
     live_debounce_ms = 300
     live_by_default = False
     #: live re-runs start switched on only for meshes up to this many vertices (where a run
@@ -132,7 +134,8 @@ class MethodPanel(QDockWidget):
                                  "so you see its effect at once. The result is applied only when "
                                  "the run finishes.")
         lay.addWidget(self.live_box)
-        self.plot = LinePlot(self.plot_title or ", ".join(self.plot_metrics), log_y=self.plot_log_y)
+        self.plot = LinePlot(self.plot_title or ", ".join(self.plot_metrics), log_y=self.plot_log_y,
+                             empty_text=self.plot_empty_text)
         lay.addWidget(self.plot)
         lay.addStretch(1)
         scroll = QScrollArea()

@@ -40,6 +40,8 @@ class SubdivisionPanel(MethodPanel):
     plot_metrics = ("loss", "validation_loss")
     plot_title = "Training loss (ℓ2), validation loss"
     plot_log_y = True
+    plot_empty_text = ("The training and validation losses appear here while "
+                       "'Train on this mesh' runs.")
     changes_faces = True
 
     def __init__(self, window):

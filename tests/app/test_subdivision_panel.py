@@ -27,6 +27,8 @@ def test_subdivide_with_shipped_weights_then_undo_redo(window, dialogs, qtbot):
     m0 = 2 * 300 - 4  # blob is a closed genus-0 mesh: QSlim to ~300 vertices, then 1 level
     assert abs(len(doc.F) - 4 * m0) <= 16 and np.isfinite(doc.V).all()
     assert window.viewport.poly.n_points == len(doc.V)
+    # the loss plot, empty after subdividing, says what fills it (issue 24 walkthrough)
+    assert not panel.plot.series and "Train on this mesh" in panel.plot.empty_text
     window.undo_stack.undo()
     np.testing.assert_array_equal(doc.F, F0)
     np.testing.assert_array_equal(doc.V, V0)
