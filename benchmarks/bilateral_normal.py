@@ -25,7 +25,8 @@ Rows (lengths / bounding-box diagonal of the clean mesh):
   bending      bending energy sum |L V|^2 / M (lower = smoother)
   seconds      wall time of the method (the guided one only when run here)
 
-Prints the load average; every figure is measured in this run.
+Prints the load average; every figure is measured in this run. Unless --no-sheet, writes
+docs/images/paparazzi_bilateral_noisy.png: per mesh, noisy scan / guided / bilateral / clean.
 """
 
 from __future__ import annotations
@@ -87,13 +88,19 @@ def main() -> int:
     from algorithms.mesh.bilateral import BilateralNormalParams, bilateral_normal_filter
     from algorithms.paparazzi import Paparazzi, PaparazziParams, get_filter
     from algorithms.paparazzi.measures import surface_distance
-    from benchmarks.paparazzi_effects import NOISE, NOISE_SEED, control_spec, load
+    from benchmarks.paparazzi_effects import (NOISE, NOISE_SEED, contact_sheet, control_spec,
+                                              load, view_picture)
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--meshes", nargs="+", default=["fandisk.off", "bob.obj"])
     ap.add_argument("--guided", default=None, help="folder of saved guided outputs")
     ap.add_argument("--iterations", type=int, default=1000)
+    ap.add_argument("--moves", nargs="*", type=float, default=[],
+                    help="more equal-move rows: mean moves (/ diagonal) to match")
+    ap.add_argument("--no-sheet", action="store_true",
+                    help="do not write docs/images/paparazzi_bilateral_noisy.png")
     a = ap.parse_args()
+    pictures = []
     print(f"load average {os.getloadavg()[0]:.2f}; noise {NOISE} mean edge lengths, seed "
           f"{NOISE_SEED}; guided: Paparazzi CLI defaults, {a.iterations} iterations")
     for mesh in a.meshes:
@@ -127,8 +134,27 @@ def main() -> int:
         Vb = bilateral_normal_filter(Vn, F)
         row("bilateral, defaults (20 + 10)", Vc, Vn, F, Vb, F, time.perf_counter() - t)
         # equal move: the fewest normal passes (10 vertex updates each) whose output moved at
-        # least as far from the noisy scan as the guided output did
-        want = surface_distance(Vg, Fg, Vn, F) / diag
+        # least as far from the noisy scan as the guided output did (and --moves: other moves)
+        for want in [surface_distance(Vg, Fg, Vn, F) / diag] + list(a.moves):
+            Vk2 = equal_move(Vn, F, diag, want, row, Vc)
+        pictures.append((f"{stem}\n{len(Vc):,} V", view_picture(Vn, F), view_picture(Vg, Fg),
+                         view_picture(Vb, F), view_picture(Vc, F)))
+    if not a.no_sheet:
+        out = ROOT / "docs" / "images" / "paparazzi_bilateral_noisy.png"
+        contact_sheet(pictures, out, "Noisy scans (0.3 mean edge lengths along the normals): the "
+                      "guided filter (Paparazzi defaults) and bilateral normal filtering",
+                      captions=("noisy scan", "guided", "bilateral normal", "clean"))
+        print(f"\nwrote {out}")
+    return 0
+
+
+def equal_move(Vn, F, diag, want, row, Vc):
+    """Bilateral normal filtering with the fewest normal passes whose output moved at least
+    ``want`` (mean distance to the noisy surface / diagonal); prints its row."""
+    from algorithms.mesh.bilateral import BilateralNormalParams, bilateral_normal_filter
+    from algorithms.paparazzi.measures import surface_distance
+
+    if True:
         got = None
         for k in range(0, 41):
             t = time.perf_counter()
@@ -145,8 +171,8 @@ def main() -> int:
                 if surface_distance(Vs, F, Vn, F) / diag >= want:
                     Vk2 = Vs
                     break
-        row(f"bilateral, equal move ({k} passes)", Vc, Vn, F, Vk2, F, tk)
-    return 0
+        row(f"bilateral, move {want:.5f} ({k} passes)", Vc, Vn, F, Vk2, F, tk)
+        return Vk2
 
 
 if __name__ == "__main__":

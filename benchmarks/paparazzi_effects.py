@@ -148,18 +148,20 @@ def view_picture(V, F, size=256):
     return (img * 255 + 0.5).astype(np.uint8)
 
 
-def contact_sheet(rows, path, title):
-    """rows: [(label, before, after, control-or-None)] of uint8 pictures -> a PNG."""
+def contact_sheet(rows, path, title,
+                  captions=("before", "after", "control (remeshing alone)")):
+    """rows: [(label, picture, ...)] of uint8 pictures (one per caption; None = blank) -> a
+    PNG."""
     from PIL import Image, ImageDraw
 
     size = rows[0][1].shape[0]
     pad, head = 6, 22
-    W = 3 * size + 4 * pad + 110
+    W = len(captions) * (size + pad) + pad + 110
     H = head + len(rows) * (size + pad) + pad + 16
     sheet = Image.new("L", (W, H), 255)
     d = ImageDraw.Draw(sheet)
     d.text((pad, 4), title, fill=0)
-    for j, cap in enumerate(("before", "after", "control (remeshing alone)")):
+    for j, cap in enumerate(captions):
         d.text((110 + pad + j * (size + pad), head - 2), cap, fill=0)
     for i, (label, *pics) in enumerate(rows):
         y = head + 14 + i * (size + pad)
