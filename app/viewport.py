@@ -46,6 +46,10 @@ NO_LEGEND = {"target_direction", "capture"}
 #: anti-aliasing samples when idle; none while a job streams or the camera moves (3× cheaper
 #: with software OpenGL)
 MULTI_SAMPLES = 4
+#: meshes with more triangles than this are drawn without anti-aliasing even when still: their
+#: triangles are about a pixel, and 4x anti-aliasing made a still frame of a 467k-triangle mesh
+#: 3-4x slower with software OpenGL (a window frozen ~0.7 s each time it is shown)
+MSAA_MAX_FACES = 200_000
 #: while the camera moves (a drag, the wheel), a mesh with more triangles than this is drawn as a
 #: stand-in of about LOD_TARGET_FACES triangles (app/lod.py), the full mesh again on release
 LOD_FACES = 50_000
@@ -391,6 +395,7 @@ class Viewport(QWidget):
         self._set_legend(None)
         if reset_camera:
             self._home_camera()
+        self._set_samples()
         self.render()
 
     def update_points(self, V: np.ndarray) -> None:
@@ -694,7 +699,8 @@ class Viewport(QWidget):
         self._set_samples()
 
     def _set_samples(self) -> None:
-        samples = 0 if (self._streaming or self.interacting) else MULTI_SAMPLES
+        big = self.poly is not None and self.poly.n_cells > MSAA_MAX_FACES
+        samples = 0 if (self._streaming or self.interacting or big) else MULTI_SAMPLES
         rw = self.plotter.ren_win
         if rw is not None and rw.GetMultiSamples() != samples:
             rw.SetMultiSamples(samples)
