@@ -411,11 +411,34 @@ def table(args) -> int:
     return 0
 
 
+def per_mesh(args) -> int:
+    """One row's figures per mesh beside the peers'."""
+    out = _out_dir(args)
+    peers = _peers(out)
+    rows = json.loads((out / "rows.json").read_text())
+    r = rows[args.per_mesh]["protocol"]
+    names = ["row", "author", "shipped", "Loop", "butterfly"]
+    get = {"row": r, **{n: peers[n]["protocol"] for n in names[1:]}}
+    print("| mesh | " + " | ".join(f"{n} H" for n in names) + " | "
+          + " | ".join(f"{n} M" for n in names) + " |")
+    print("|---" * (1 + 2 * len(names)) + "|")
+    for mesh in r:
+        print(f"| {Path(mesh).stem} | "
+              + " | ".join(f"{get[n][mesh]['H']:.3f}" for n in names) + " | "
+              + " | ".join(f"{get[n][mesh]['M']:.3f}" for n in names) + " |")
+    print("| mean | " + " | ".join(f"{np.mean([x['H'] for x in get[n].values()]):.3f}"
+                                   for n in names) + " | "
+          + " | ".join(f"{np.mean([x['M'] for x in get[n].values()]):.3f}" for n in names)
+          + " |")
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--prepare", action="store_true")
     ap.add_argument("--row", choices=list(ROWS))
     ap.add_argument("--table", action="store_true")
+    ap.add_argument("--per-mesh", metavar="ROW", help="one row's table per mesh")
     ap.add_argument("--epochs", type=int, help="override the baseline's epoch budget")
     ap.add_argument("--save", help="write the row's weights here (default: OUT/weights/ROW.pt)")
     ap.add_argument("--out", help="results folder (default $TMPDIR/subdiv_ablation)")
@@ -429,6 +452,8 @@ def main() -> int:
         return run_row(args)
     if args.table:
         return table(args)
+    if args.per_mesh:
+        return per_mesh(args)
     ap.print_help()
     return 0
 
