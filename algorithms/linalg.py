@@ -63,10 +63,10 @@ class SPDSolver:
             keep = sp.diags(free_mask.astype(np.float64))
             self.A_fc = (keep @ A[:, fixed]).tocsc()      # n x k, zero in the fixed rows
             A_e = (keep @ A @ keep + sp.diags((~free_mask).astype(np.float64))).tocsc()
+            A_e.eliminate_zeros()  # our own matrix (the caller's is never modified)
         else:
             self.A_fc = None
             A_e = A
-        A_e.eliminate_zeros()
         self.A_e = A_e
         if backend == "auto":
             # CHOLMOD: 2.6x faster per ARAP iteration than SuperLU on igea (134k vertices)

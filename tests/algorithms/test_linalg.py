@@ -63,3 +63,29 @@ def test_solve_without_fixed_unknowns_and_errors():
         SPDSolver(A, [n])
     with pytest.raises(ValueError, match="backend"):
         SPDSolver(A, backend="nope")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_fixed_unknowns_as_identity_rows_keep_the_callers_matrix_and_many_fixed(backend):
+    # the factored matrix keeps the fixed unknowns in place as identity rows: the caller's
+    # matrix is not touched, and a large fixed set (half the unknowns, scattered) still solves
+    # the reduced system
+    A, n = laplacian_system()
+    A = A.tocsc()
+    snapshot = (A.indptr.copy(), A.indices.copy(), A.data.copy())
+    rng = np.random.default_rng(2)
+    fixed = np.sort(rng.choice(n, n // 2, replace=False))
+    b = rng.standard_normal((n, 3))
+    x_fixed = rng.standard_normal((len(fixed), 3))
+    solver = SPDSolver(A, fixed, backend=backend)
+    for before, after in zip(snapshot, (A.indptr, A.indices, A.data)):
+        np.testing.assert_array_equal(before, after)
+    x = solver.solve(b, x_fixed)
+    np.testing.assert_array_equal(x[fixed], x_fixed)
+    np.testing.assert_allclose(x, dense_solution(A, b, fixed, x_fixed), atol=1e-9)
+    # the factored matrix: A_ff in place, identity on the fixed rows and columns
+    Ae = solver.A_e.toarray()
+    free = solver.free
+    np.testing.assert_array_equal(Ae[np.ix_(free, free)], A.toarray()[np.ix_(free, free)])
+    np.testing.assert_array_equal(Ae[np.ix_(fixed, fixed)], np.eye(len(fixed)))
+    assert not Ae[np.ix_(free, fixed)].any() and not Ae[np.ix_(fixed, free)].any()
