@@ -95,6 +95,8 @@ def main() -> int:
     ap.add_argument("--meshes", nargs="+", default=["fandisk.off", "bob.obj"])
     ap.add_argument("--guided", default=None, help="folder of saved guided outputs")
     ap.add_argument("--iterations", type=int, default=1000)
+    ap.add_argument("--saved-filters", nargs="*", default=[],
+                    help="also measure these filters' outputs saved in the --guided folder")
     ap.add_argument("--moves", nargs="*", type=float, default=[],
                     help="more equal-move rows: mean moves (/ diagonal) to match")
     ap.add_argument("--no-sheet", action="store_true",
@@ -130,6 +132,11 @@ def main() -> int:
             Vk, Fk = cl.V, cl.F
         row("guided (Paparazzi defaults)", Vc, Vn, F, Vg, Fg, tg)
         row("control (remeshing alone)", Vc, Vn, F, Vk, Fk)
+        for other in a.saved_filters:        # other Paparazzi filters' saved outputs
+            p = Path(a.guided or ".") / f"noisy_{stem}_{other}.obj"
+            if p.exists():
+                o = read_mesh(p)
+                row(f"{other} (Paparazzi defaults)", Vc, Vn, F, o.V, o.F)
         t = time.perf_counter()
         Vb = bilateral_normal_filter(Vn, F)
         row("bilateral, defaults (20 + 10)", Vc, Vn, F, Vb, F, time.perf_counter() - t)
