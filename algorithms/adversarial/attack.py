@@ -34,7 +34,13 @@ once fooled, App. 3.7.6; a stronger light transfers to more unseen views), and
 ``formation="radiance"`` (:class:`RadianceSHShading`) looks the light up along the normal
 instead of forming the irradiance of a diffuse surface: every degree then shades, where Eq. 3.24
 gives degrees 3 and 5 no effect (``A_3 = A_5 = 0``) and degrees 4 and 6 only ``1/24`` and
-``1/64`` of degree 0's weight. The defaults stay the thesis's (irradiance, stop once fooled).
+``1/64`` of degree 0's weight. Two more options for views the attack does not see:
+``aggregate="max"`` lowers, at each step, the cost of the attacked view the classifier is
+still surest of (the worst case of the views) instead of Eq. 3.5's sum; ``jitter=J`` takes each
+step's gradient on the attacked views turned by random angles of up to ``J`` degrees
+(:func:`jittered_cameras`; the light is checked and reported on the views as given), so that the
+light also fools views near them (an expectation over nearby views). The defaults stay the
+thesis's (irradiance, gradient steps, sum over views, no jitter, stop once fooled).
 
 Random baseline (Fig. 3.10): a perturbation of the same norm, ``radius * sign(N(0, 1))`` per
 parameter (a corner of the ball: the largest random perturbation the ball allows), evaluated on
