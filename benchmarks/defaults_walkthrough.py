@@ -10,7 +10,7 @@ after each run goes to --out (look at them). Needs an X display (xvfb-run on a s
 
     xvfb-run -a -s "-screen 0 1600x1000x24" .venv/bin/python benchmarks/defaults_walkthrough.py \\
         [--meshes blob bumpy pretzel orange armadillo] [--panels Cubic Smooth ...] \\
-        [--size 1280x800] [--out /tmp/walkthrough] [--profile]
+        [--size 1280x800] [--out /tmp/walkthrough] [--profile] [--stacks]
 """
 
 from __future__ import annotations
@@ -42,6 +42,9 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=300.0)
     ap.add_argument("--profile", action="store_true",
                     help="profile the GUI thread during each run (top functions by own time)")
+    ap.add_argument("--stacks", action="store_true",
+                    help="for each stall over 100 ms after the first second, print where the "
+                         "other threads were when it ended (a call that kept Python's lock)")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
@@ -101,6 +104,33 @@ def main(argv=None) -> int:
                 last[0] = now
 
             timer.timeout.connect(tick)
+            stall_stacks = []
+            if args.stacks:
+                import threading
+                import traceback
+
+                gui_id = threading.get_ident()
+
+                def watch(stop):
+                    # a pure-Python thread: it only runs with Python's lock, so an overslept
+                    # 5 ms sleep is a stretch in which some thread kept the lock
+                    last = time.perf_counter()
+                    while not stop.is_set():
+                        time.sleep(0.005)
+                        now = time.perf_counter()
+                        if now - last > 0.1 and now - t0 > 1.0:
+                            here = []
+                            for tid, fr in sys._current_frames().items():
+                                if tid in (gui_id, threading.get_ident()):
+                                    continue
+                                st = traceback.extract_stack(fr)[-3:]
+                                here.append(" <- ".join(f"{x.filename.split('/')[-1]}:{x.lineno} "
+                                                        f"{x.name}" for x in reversed(st)))
+                            stall_stacks.append((now - last, here))
+                        last = now
+
+                stop_watch = threading.Event()
+                watcher = threading.Thread(target=watch, args=(stop_watch,), daemon=True)
             redraws0 = win.viewport.redraws
             errors.clear()
             t0 = last[0] = time.perf_counter()
@@ -110,6 +140,8 @@ def main(argv=None) -> int:
 
                 prof = cProfile.Profile()
                 prof.enable()
+            if args.stacks:
+                watcher.start()
             timer.start()
             panel.run_button.click()
             wait(50)
@@ -117,6 +149,11 @@ def main(argv=None) -> int:
                 wait(20)
             seconds = time.perf_counter() - t0
             timer.stop()
+            if args.stacks:
+                stop_watch.set()
+                watcher.join()
+                for gap, here in sorted(stall_stacks, key=lambda x: -x[0])[:5]:
+                    print(f"  lock held {gap * 1000:.0f} ms; threads then at: " + " | ".join(here))
             if prof is not None:
                 import pstats
 
