@@ -74,7 +74,12 @@ def offset_surface(V, F, sigma: float, *, max_cells: int = 72) -> OffsetSurface:
     lo = lo - h
     axes = [lo[d] + h * np.arange(counts[d]) for d in range(3)]
     P = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    S = igl.signed_distance(P, V, F, igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER)[0]
+    # in slices: libigl keeps Python's lock for a whole call (0.3-1 s for the ~370k grid points),
+    # which froze the app's window while a run started; between slices other threads run
+    kind = igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER
+    step = 1 << 15
+    S = np.concatenate([np.asarray(igl.signed_distance(P[i:i + step], V, F, kind)[0]).reshape(-1)
+                        for i in range(0, len(P), step)])
     S = S.reshape(tuple(counts))
     if not (S.min() < sigma < S.max()):
         raise InvalidMeshError("The camera offset surface could not be built for this mesh "
