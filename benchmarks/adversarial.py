@@ -364,7 +364,7 @@ def table34(args):
                 print(f"  {s} view(s), draw {d}: attacked fooled {tr.attacked_fooled}/{s} in "
                       f"{tr.iterations} it. (norm {tr.norm:.3f}) -> unseen "
                       f"{int(tr.unseen_fooled.sum())}/{len(tr.unseen_fooled)} "
-                      f"({100 * tr.unseen_rate:.0f} %), random {100 * r_rate:.0f} %  "
+                      f"({100 * tr.unseen_rate:.0f} %), random {100 * r_rate:.1f} %  "
                       f"({time.perf_counter() - t:.0f} s)", flush=True)
             tot[s][0] += fs
             tot[s][1] += ns
