@@ -6,6 +6,9 @@ beats remeshing alone (the control) and leaves a clean 2-manifold with the input
         camelhead.off blob.obj bumpy.obj pretzel.obj] [--filters guided quantize slic l0
         neural-style] [--iterations 1000] [--no-sheets]
     python benchmarks/paparazzi_effects.py --suspects [--meshes bob.obj fandisk.off]
+    python benchmarks/paparazzi_effects.py --noisy [--save DIR] [--sheet-tag _noisy]
+    python benchmarks/paparazzi_effects.py --pretzel [--iterations 1000]
+    python benchmarks/paparazzi_effects.py --noise-variance
 
 For each mesh (tests/data, ../shared/meshes or resources/samples; Loop-subdivided until it has at
 least 5,000 vertices, e.g. spot 829 -> 13,234; the bundled samples are used as they are) and each
@@ -31,6 +34,12 @@ against its stylization (down).
 Unless --no-sheets, writes one contact sheet per filter, docs/images/paparazzi_<filter>.png:
 one row per mesh, before / after / control, rendered off-screen with a grey light from a fixed
 three-quarter view (algorithms.render).
+
+``--noisy`` runs issue 23's noisy scans (``noisy:fandisk.off``, ``noisy:bob.obj``: Gaussian
+noise of 0.3 mean edge lengths along the vertex normals, seed 0); crease5 and the distances are
+then measured against the clean mesh. ``--pretzel`` measures why the guided energy of the pretzel
+sample rises, ``--noise-variance`` why the guided filter cannot both remove that noise and keep
+fandisk's creases (docs/paparazzi.md).
 
 ``--suspects`` measures, for the guided filter, each suspect of issue 23 separately (see
 docs/paparazzi.md): the filter's change per view against the optimizer's step, the radius
@@ -370,6 +379,108 @@ def suspects(a) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- pretzel, noise
+def pretzel(a) -> int:
+    """Why the guided energy of the pretzel sample rises (docs/paparazzi.md, "The pretzel"):
+    each monitor view before and after one remeshing; remeshings alone; the same with the
+    vertices projected onto the exact implicit surface the sample was made from; the jumps at
+    remeshings against the steps between them for several learning rates and remeshing
+    intervals."""
+    import os
+
+    from algorithms.mesh.primitives import _field_pretzel as field
+    from algorithms.paparazzi import Paparazzi, PaparazziParams, bending_energy, get_filter
+
+    V, F = load("pretzel.obj")
+    spec = get_filter("guided")
+    run = Paparazzi(V, F, spec, None, PaparazziParams(iterations=1))
+    X, G = run.V0, run.F0
+    cams = run.monitor_cameras()
+    print(f"load average {os.getloadavg()[0]:.2f}; pretzel {len(X):,} vertices; guided defaults")
+    everything = np.ones(len(X), bool)
+    U, H = run._remesh(X, G, everything)
+    for i, c in enumerate(cams):
+        print(f"  view {i:2d}: E {run.evaluate(X, G, c)[0]:.3f} -> {run.evaluate(U, H, c)[0]:.3f} "
+              "after one remeshing")
+    # the sample is marching cubes of _field_pretzel relaxed onto it, then scaled: find the scale
+    ss = np.linspace(0.9, 1.2, 3001)
+    s = ss[int(np.argmin([np.mean(field(X * t) ** 2) for t in ss]))]
+
+    def onto_surface(P):
+        P = P * s
+        for _ in range(4):
+            f = field(P)
+            g = np.stack([(field(P + 1e-6 * e) - field(P - 1e-6 * e)) / 2e-6 for e in np.eye(3)],
+                         axis=1)
+            P = P - (f / np.maximum((g * g).sum(1), 1e-12))[:, None] * g
+        return P / s
+
+    U, H = X, G
+    print(f"  input E16 {run.monitor_energy(X, G, cams):.4f}")
+    for k in range(1, 4):
+        U, H = run._remesh(U, H, np.ones(len(U), bool))
+        P = onto_surface(U)
+        print(f"  after {k} remeshing(s) alone: E16 {run.monitor_energy(U, H, cams):.4f}; "
+              f"projected onto the exact surface {run.monitor_energy(P, H, cams):.4f}", flush=True)
+        U = P
+    for label, lr, extra in [("defaults", None, {}), ("lr 2e-5", 2e-5, {}),
+                             ("lr 5e-5", 5e-5, {}), ("remesh every 100", None,
+                                                     {"remesh_every": 100}),
+                             ("no remeshing", None, {"remesh_every": 0})]:
+        sp = spec if lr is None else dataclasses.replace(spec, learning_rate=lr)
+        e0, e1, jumps, last = _remesh_effect(V, F, sp, None,
+                                             PaparazziParams(iterations=a.iterations, **extra))
+        up = sum(j[1] - j[0] for j in jumps)
+        print(f"  {label:<18} E16 {e0:.4f} -> {e1:.4f}; {len(jumps)} remeshings {up:+.4f}, steps "
+              f"{e1 - e0 - up:+.4f}; bending {bending_energy(V, F):.1f} -> "
+              f"{bending_energy(last.V, last.F):.1f}", flush=True)
+    return 0
+
+
+def noise_variance(a) -> int:
+    """Colour variance of the guided filter's 9 x 9 windows on clean and noisy fandisk, in flat
+    regions and at creases (20 random views), and the filter's change there: why no epsilon
+    both removes the noise and keeps the creases (docs/paparazzi.md, "Noisy scans")."""
+    import os
+
+    from algorithms.paparazzi import Paparazzi, PaparazziParams
+    from algorithms.paparazzi.filters import _box, guided_filter
+    from algorithms.paparazzi.measures import _dihedral_angles
+    from algorithms.render import render
+
+    Vc, F = load("fandisk.off")
+    Vn, _ = load("noisy:fandisk.off")
+    run = Paparazzi(Vc, F, "guided", None, PaparazziParams(iterations=1))
+    eps, r = run.filter_params.epsilon, run.filter_params.radius
+    Xc, Xn = (Vc - run.center) / run.scale, (Vn - run.center) / run.scale
+    _, f0, f1, ang = _dihedral_angles(Vc, F)
+    crease = np.zeros(len(F), bool)
+    crease[f0[ang > 30]] = crease[f1[ang > 30]] = True
+    rng = np.random.default_rng(5)
+    var = {k: [] for k in ("clean flat", "clean crease", "noisy flat", "noisy crease")}
+    change = {k: [] for k in var}
+    for _ in range(20):
+        cam = run.camera(rng)
+        rc = render(Xc, F, cam, run.shading)
+        fid = np.where(rc.slot >= 0, rc.faces[np.maximum(rc.slot, 0)], -1)
+        cm = (fid >= 0) & crease[np.maximum(fid, 0)]
+        near = _box(cm[..., None].astype(float), r)[..., 0] > 0
+        for tag, X in (("clean", Xc), ("noisy", Xn)):
+            I = render(X, F, cam, run.shading)
+            v = (_box(I.image ** 2, r) - _box(I.image, r) ** 2).sum(2)
+            q = guided_filter(I.image, I.image, r, eps)
+            inside = _box(I.mask[..., None].astype(float), r)[..., 0] > 0.999
+            for part, sel in (("flat", inside & ~near), ("crease", inside & near & cm)):
+                var[f"{tag} {part}"].append(v[sel])
+                change[f"{tag} {part}"].append(np.linalg.norm(q - I.image, axis=2)[sel])
+    print(f"load average {os.getloadavg()[0]:.2f}; fandisk, guided radius {r}, epsilon {eps:g}")
+    for k in var:
+        v, c = np.concatenate(var[k]), np.concatenate(change[k])
+        print(f"  {k:<13} window colour variance median {np.median(v):.4f}; the filter's change "
+              f"|q - I| median {np.median(c):.4f}")
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--meshes", nargs="+", default=None)
@@ -383,7 +494,15 @@ def main() -> int:
     ap.add_argument("--noisy", action="store_true",
                     help="the noisy scans: noisy:fandisk.off noisy:bob.obj")
     ap.add_argument("--suspects", action="store_true")
+    ap.add_argument("--pretzel", action="store_true",
+                    help="why the pretzel's guided energy rises (each suspect)")
+    ap.add_argument("--noise-variance", action="store_true",
+                    help="window colour variance of noise and creases (fandisk)")
     a = ap.parse_args()
+    if a.pretzel:
+        return pretzel(a)
+    if a.noise_variance:
+        return noise_variance(a)
     if a.suspects:
         a.meshes = a.meshes or ["bob.obj", "fandisk.off"]
         return suspects(a)
