@@ -311,7 +311,8 @@ def run_row(args) -> int:
         order = np.random.default_rng(0).permutation(len(samples))
         nval = int(round(0.1 * len(samples)))
         samples = [samples[t] for t in order[nval:]]  # the baseline's 90 % training meshes
-    tp = TrainParams(epochs=cfg["epochs"], learning_rate=cfg["lr"], schedule=cfg["schedule"],
+    tp = TrainParams(epochs=cfg["epochs"], learning_rate=cfg["lr"],
+                     lr_schedule=cfg["schedule"],
                      scale_augmentation=cfg["augment"], training_seed=cfg.get("seed", 0))
     net = SubdivisionNet(seed=cfg.get("seed", 0), formulation=cfg["formulation"])
     tr = Trainer(samples, tp, net=net, validation_samples=validation)

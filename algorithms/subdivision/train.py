@@ -69,7 +69,7 @@ class TrainParams:
                                    step=0.005, decimals=3, advanced=True,
                                    tooltip="Relative drop of the best validation loss that "
                                            "counts as progress for the patience (0.01 = 1 %).")
-    schedule: str = param("constant", label="Learning-rate schedule",
+    lr_schedule: str = param("constant", label="Learning-rate schedule",
                           choices=("constant", "cosine", "step"), advanced=True,
                           tooltip="constant: the thesis's fixed step size; cosine: decays it "
                                   "smoothly to 1 % over the epochs; step: divides it by 10 at "
@@ -243,12 +243,12 @@ class Trainer:
             self.net.load_state(self.best_state)
 
     def learning_rate(self, epoch: int, total: int) -> float:
-        """The step size of epoch ``epoch`` (1-based) of ``total`` (``params.schedule``)."""
+        """The step size of epoch ``epoch`` (1-based) of ``total`` (``params.lr_schedule``)."""
         lr = float(self.params.learning_rate)
-        if self.params.schedule == "cosine":
+        if self.params.lr_schedule == "cosine":
             frac = (epoch - 1) / max(1, total - 1)
             return lr * (0.01 + 0.99 * 0.5 * (1.0 + np.cos(np.pi * frac)))
-        if self.params.schedule == "step":
+        if self.params.lr_schedule == "step":
             return lr * (0.1 if epoch > 0.7 * total else 1.0)
         return lr
 

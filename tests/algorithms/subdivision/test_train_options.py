@@ -59,7 +59,7 @@ def test_author_formulation_trains(samples):
 
 @pytest.mark.parametrize("schedule", ["constant", "cosine", "step"])
 def test_learning_rate_schedules(samples, schedule):
-    tr = Trainer(samples, TrainParams(epochs=10, learning_rate=1e-3, schedule=schedule))
+    tr = Trainer(samples, TrainParams(epochs=10, learning_rate=1e-3, lr_schedule=schedule))
     lrs = [tr.learning_rate(e, 10) for e in range(1, 11)]
     assert lrs[0] == pytest.approx(1e-3)
     if schedule == "constant":
