@@ -84,6 +84,9 @@ ROWS = {
     "trained on armadillo": {"shape": "armadillo"},
     "baseline, training seed 1": {"seed": 1},
     "armadillo, selected on the elephant": {"shape": "armadillo", "selection": "shape"},
+    "trained on armadillo, seed 1": {"shape": "armadillo", "seed": 1},
+    "armadillo, selected on the elephant, seed 1": {"shape": "armadillo", "selection": "shape",
+                                                    "seed": 1},
 }
 
 
