@@ -26,6 +26,12 @@ features (the authors' code handles closed meshes only). The network is not scal
 (thesis §4.7): meshes are scaled by :func:`algorithms.subdivision.data.normalization` (rigid-
 motion invariant: centroid and farthest-vertex distance) before the network and back after.
 
+``SubdivisionNet(formulation="author")`` trains the thesis author's formulation instead (V and E
+see the three flap vectors and the four vertices' 29 learned features, 125 inputs, no
+differential coordinates; see :mod:`.inference`); :meth:`SubdivisionNet.author_state` gives
+its weights in the author's layout, which the NumPy inference runs with ``formulation="author"``
+(tested equal). Our weights files hold our formulation only.
+
 Weights files: ``torch.save`` of a dict of plain tensors, numbers and strings, read back with
 ``torch.load(..., weights_only=True)``; a file without our ``format`` tag gives a plain error.
 """
