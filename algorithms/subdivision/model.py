@@ -615,6 +615,10 @@ def save_weights(path, net, info: dict | None = None) -> None:
         if net.reference_edge:  # the scale guard's reference goes with the weights
             info = {"mean_edge_length": float(net.reference_edge), **(info or {})}
     else:
+        if getattr(net, "formulation", "stylize3d") != "stylize3d":
+            raise WeightsError("Only networks of Stylize3D's formulation can be saved as "
+                               "Stylize3D weights (this one is of the thesis author's "
+                               "formulation: save author_state() with torch.save instead).")
         state = net.state()
     obj = {"format": FORMAT, "version": FORMAT_VERSION, "state": state,
            "info": {str(k): v for k, v in (info or {}).items()

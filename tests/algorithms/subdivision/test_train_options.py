@@ -42,6 +42,14 @@ def test_author_formulation_matches_the_numpy_author_inference(name, fused):
     assert np.abs(ours - V.mean()).max() > 0.1
 
 
+def test_author_formulation_is_not_saved_as_our_weights(tmp_path):
+    from algorithms.subdivision.model import WeightsError, save_weights
+
+    with pytest.raises(WeightsError, match="author"):
+        save_weights(tmp_path / "w.pt", SubdivisionNet(seed=0, formulation="author"))
+    assert not (tmp_path / "w.pt").exists()
+
+
 def test_author_state_needs_the_author_formulation():
     with pytest.raises(ParameterError):
         SubdivisionNet(seed=0).author_state()
