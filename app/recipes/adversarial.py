@@ -365,7 +365,8 @@ def _random_baseline(last, scene, clf, cams, params, true, target) -> None:
     x = random_perturbation(scene, params.mode, params.ball(), seed=params.seed)
     kw = {"lighting": x} if params.mode == "lighting" else {"V": x}
     top, _ = evaluate(scene, clf, cams, supersample=params.supersample,
-                      resolution=params.resolution, **kw)
+                      resolution=params.resolution,
+                      formation=getattr(params, "formation", "irradiance"), **kw)
     before = last.probs_before.argmax(1)
     last.random_fooled = np.array(
         [bool(top[b] == target) if target is not None else

@@ -192,3 +192,25 @@ def test_installed_classifier_mug_attack_and_random_baseline():
     assert a.outcome["random_fooled"].shape == (2,) and a.outcome["random_fooled"].dtype == bool
     assert a.outcome["random_success_rate"] == np.mean(a.outcome["random_fooled"])
     assert a.outcome["probabilities_after"].shape == (2, 1000)
+
+
+def test_random_baseline_is_judged_in_the_attacks_image_formation(candle, tiny_ref, monkeypatch):
+    # the control light of the same norm is rendered the way the attack's images are (with
+    # radiance selected it was rendered as irradiance: the baseline of another picture)
+    import importlib
+
+    attack = importlib.import_module("algorithms.adversarial.attack")  # the module, not the function
+    seen = []
+    real = attack.evaluate
+
+    def spy(*a, **k):
+        seen.append(k.get("formation", "irradiance"))
+        return real(*a, **k)
+
+    monkeypatch.setattr(attack, "evaluate", spy)
+    for formation in ("radiance", "irradiance"):
+        seen.clear()
+        out = run("adversary", candle, {**SMALL, "formation": formation},
+                  opts(tiny_ref, random_baseline=True)).last
+        assert seen and set(seen) == {formation}
+        assert out.random_fooled is not None and len(out.random_fooled) == 1
