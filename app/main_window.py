@@ -79,9 +79,10 @@ class MainWindow(QMainWindow):
     job_committed = Signal(str, object)
     #: (the triangles checked, their MeshReport or the exception) from the background check
     _report_ready = Signal(object, object)
-    #: triangles above which a changed mesh is checked (validate_mesh) off the GUI thread: about
-    #: 0.1 s at 100k triangles, 1 s at 467k (a subdivided armadillo), which would freeze the window
-    ASYNC_VALIDATE_FACES = 100_000
+    #: triangles above which a changed mesh is checked (validate_mesh) off the GUI thread: 38 ms
+    #: at 29k triangles (armadillo: with the redraw, Paparazzi's result froze the window 110 ms),
+    #: 1 s at 467k (a subdivided armadillo)
+    ASYNC_VALIDATE_FACES = 20_000
 
     def __init__(self, settings: QSettings | None = None):
         super().__init__()

@@ -160,7 +160,11 @@ def main(argv=None) -> int:
                 prof.disable()
                 pstats.Stats(prof).sort_stats("tottime").print_stats(12)
             wait(300)
-            stall = max([g for t, g in gaps if t - t0 > 1.0] or [0.0]) * 1000
+            late = [(g, t - t0) for t, g in gaps if t - t0 > 1.0]
+            stall = max([g for g, _ in late] or [0.0]) * 1000
+            if args.stacks and late:
+                print("  longest stalls (ms at s): " + ", ".join(
+                    f"{g * 1000:.0f} at {t:.1f}" for g, t in sorted(late, reverse=True)[:4]))
             V1 = np.asarray(win.document.V)
             diag = float(np.linalg.norm(np.ptp(V0, axis=0)))
             if V1.shape == V0.shape:
