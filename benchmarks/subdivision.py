@@ -419,12 +419,44 @@ def roughness(max_levels: int, render: str) -> int:
     return 0
 
 
+def refine_order_baseline(method: str):
+    """Two levels of a library baseline (``loop``, ``butterfly``), its vertices put in our
+    refine's order: ``fn(V, F) -> (V2, F2)``."""
+    from algorithms.subdivision.baselines import subdivide_baseline
+    from algorithms.subdivision.topology import split_vertex_order
+
+    def run(V, F):
+        V1, F1 = subdivide_baseline(V, F, 1, method)
+        V2, F2 = subdivide_baseline(V1, F1, 1, method)
+        return V2[split_vertex_order(F, len(V), [F1, F2])], F2
+
+    return run
+
+
+def elephant_level2_distances(ref: Path, fn):
+    """The author's validation set (``ref``/cartoon_elephant_10): for each of the ten coarse
+    meshes, the level-2 vertex distances of ``fn(V, F) -> (V2, F2)`` (vertices in our refine's
+    order) to the ground truth, in units of the diagonal; (n,) arrays, one per mesh."""
+    from algorithms.mesh import read_mesh
+    from algorithms.subdivision.topology import split_vertex_order
+
+    out = []
+    for k in range(1, 11):
+        m = read_mesh(ref / "cartoon_elephant_10" / "subd0" / f"{k:03d}.obj")
+        g1 = read_mesh(ref / "cartoon_elephant_10" / "subd1" / f"{k:03d}.obj")
+        g2 = read_mesh(ref / "cartoon_elephant_10" / "subd2" / f"{k:03d}.obj")
+        order = split_vertex_order(m.F, len(m.V), [g1.F, g2.F])
+        diag = float(np.linalg.norm(m.V.max(0) - m.V.min(0)))
+        V, _ = fn(m.V, m.F)
+        if len(V) != len(g2.V):
+            raise RuntimeError("level-2 vertex count differs from the ground truth")
+        out.append(np.linalg.norm(V - g2.V[order], axis=1) / diag)
+    return out
+
+
 def validation_set(weights: list) -> int:
     """Level-2 vertex errors on the author's validation set (cartoon_elephant_10)."""
-    from algorithms.mesh import read_mesh
-    from algorithms.subdivision.baselines import subdivide_baseline
     from algorithms.subdivision.inference import load_network, neural_subdivide_np
-    from algorithms.subdivision.topology import split_vertex_order
 
     ref = Path(__file__).resolve().parents[2] / "shared" / "reference" / "neural_subdivision"
     if not (ref / "cartoon_elephant_10").is_dir():
@@ -437,26 +469,11 @@ def validation_set(weights: list) -> int:
         net = load_network(path)
         methods[w] = (lambda V, F, net=net: neural_subdivide_np(V, F, 2, net,
                                                                  dense="scale")[:2])
-    def baseline(method):
-        def run(V, F):  # two levels, put in our refine's vertex order
-            V1, F1 = subdivide_baseline(V, F, 1, method)
-            V2, F2 = subdivide_baseline(V1, F1, 1, method)
-            return V2[split_vertex_order(F, len(V), [F1, F2])], None
-        return run
-
-    methods["Loop"] = baseline("loop")
-    methods["butterfly"] = baseline("butterfly")
-    errs = {k: [] for k in methods}
-    for k in range(1, 11):
-        m = read_mesh(ref / "cartoon_elephant_10" / "subd0" / f"{k:03d}.obj")
-        g1 = read_mesh(ref / "cartoon_elephant_10" / "subd1" / f"{k:03d}.obj")
-        g2 = read_mesh(ref / "cartoon_elephant_10" / "subd2" / f"{k:03d}.obj")
-        order = split_vertex_order(m.F, len(m.V), [g1.F, g2.F])
-        diag = float(np.linalg.norm(m.V.max(0) - m.V.min(0)))
-        for name, fn in methods.items():
-            V, _ = fn(m.V, m.F)
-            d = np.linalg.norm(V - g2.V[order], axis=1) / diag
-            errs[name].append((float(np.sqrt((d ** 2).mean())), float(d.max())))
+    methods["Loop"] = refine_order_baseline("loop")
+    methods["butterfly"] = refine_order_baseline("butterfly")
+    errs = {name: [(float(np.sqrt((d ** 2).mean())), float(d.max()))
+                   for d in elephant_level2_distances(ref, fn)]
+            for name, fn in methods.items()}
     print("level-2 vertex error against the ground truth, in units of the diagonal "
           "(mean over the 10 meshes of the RMS, and of the max; range of the RMS)")
     for name, e in errs.items():

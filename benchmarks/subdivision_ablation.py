@@ -56,6 +56,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 REF = ROOT.parent / "shared" / "reference" / "neural_subdivision"
 MESHES = ROOT.parent / "shared" / "meshes"
@@ -194,36 +195,20 @@ def _baseline(method):
 
 
 def _validation_errors(fn) -> list:
-    """Level-2 vertex RMS error (% of the diagonal) on the ten validation elephants."""
-    from algorithms.mesh import read_mesh
-    from algorithms.subdivision.topology import split_vertex_order
+    """Level-2 vertex RMS error (% of the diagonal) on the ten validation elephants;
+    ``fn(V, F, levels) -> (V2, F2)``."""
+    from subdivision import elephant_level2_distances
 
-    errs = []
-    for k in range(1, 11):
-        m = read_mesh(REF / "cartoon_elephant_10" / "subd0" / f"{k:03d}.obj")
-        g1 = read_mesh(REF / "cartoon_elephant_10" / "subd1" / f"{k:03d}.obj")
-        g2 = read_mesh(REF / "cartoon_elephant_10" / "subd2" / f"{k:03d}.obj")
-        order = split_vertex_order(m.F, len(m.V), [g1.F, g2.F])
-        diag = float(np.linalg.norm(m.V.max(0) - m.V.min(0)))
-        V, F = fn(m.V, m.F, 2)
-        if len(V) != len(g2.V):
-            raise RuntimeError("level-2 vertex count differs from the ground truth")
-        d = np.linalg.norm(V - g2.V[order], axis=1) / diag
-        errs.append(100.0 * float(np.sqrt((d ** 2).mean())))
-    return errs
+    return [100.0 * float(np.sqrt((d ** 2).mean()))
+            for d in elephant_level2_distances(REF, lambda V, F: fn(V, F, 2))]
 
 
 def _loop_validation(method):
     """Baselines on the validation set, put in our refine's vertex order."""
-    from algorithms.subdivision.baselines import subdivide_baseline
-    from algorithms.subdivision.topology import split_vertex_order
+    from subdivision import refine_order_baseline
 
-    def run(V, F, levels=2):
-        V1, F1 = subdivide_baseline(V, F, 1, method)
-        V2, F2 = subdivide_baseline(V1, F1, 1, method)
-        return V2[split_vertex_order(F, len(V), [F1, F2])], F2
-
-    return run
+    run = refine_order_baseline(method)
+    return lambda V, F, levels=2: run(V, F)
 
 
 def _coarse_test_meshes(out: Path):
