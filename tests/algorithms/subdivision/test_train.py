@@ -1,19 +1,14 @@
 import numpy as np
 import pytest
 
-from algorithms.mesh import read_mesh
-from algorithms.subdivision.data import DataParams, generate_dataset
 from algorithms.subdivision.train import Trainer, TrainParams
 
 torch = pytest.importorskip("torch")
 
 
 @pytest.fixture(scope="module")
-def samples(tmp_path_factory):
-    m = read_mesh("tests/data/spot_lowres.obj")
-    return generate_dataset([(m.V, m.F)], DataParams(coarse_meshes=3, min_vertices=60,
-                                                     max_vertices=80),
-                            workers=1, cache_dir=tmp_path_factory.mktemp("cache"))
+def samples(spot_coarse_samples):
+    return spot_coarse_samples(3)
 
 
 def test_training_lowers_the_loss_and_streams_steps(samples):

@@ -6,7 +6,6 @@ import pytest
 
 from algorithms.errors import ParameterError
 from algorithms.mesh import read_mesh
-from algorithms.subdivision.data import DataParams, generate_dataset
 from algorithms.subdivision.inference import network_from_state, neural_subdivide_np
 from algorithms.subdivision.model import MeshLevels, SubdivisionNet
 from algorithms.subdivision.train import Trainer, TrainParams
@@ -15,11 +14,8 @@ torch = pytest.importorskip("torch")
 
 
 @pytest.fixture(scope="module")
-def samples(tmp_path_factory):
-    m = read_mesh("tests/data/spot_lowres.obj")
-    return generate_dataset([(m.V, m.F)], DataParams(coarse_meshes=4, min_vertices=60,
-                                                     max_vertices=80),
-                            workers=1, cache_dir=tmp_path_factory.mktemp("cache"))
+def samples(spot_coarse_samples):
+    return spot_coarse_samples(4)
 
 
 @pytest.mark.parametrize("name", ["spot_lowres.obj", "hand_lowres.obj"])
