@@ -50,7 +50,7 @@ the same views.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Iterator, Sequence
 
 import numpy as np
@@ -337,8 +337,8 @@ def jittered_cameras(cameras: Sequence[Camera], degrees: float, rng: np.random.G
         tilt = math.radians(rng.uniform(-degrees / 2, degrees / 2))
         turn = math.radians(rng.uniform(-degrees, degrees))
         R = _rotation((0.0, 1.0, 0.0), turn) @ _rotation(right, tilt)
-        out.append(Camera(R @ c.position, R @ c.direction, R @ c.up, c.projection, c.width,
-                          c.fov, c.resolution, c.near))
+        out.append(replace(c, position=R @ c.position, direction=R @ c.direction,
+                           up=R @ c.up))
     return out
 
 

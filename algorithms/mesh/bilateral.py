@@ -68,17 +68,27 @@ def _default_sigma_s(V, F) -> float:
     return float(d.mean()) if len(d) else 1.0
 
 
-def filter_face_normals(V, F, N, sigma_s: float, sigma_r: float, pairs=None) -> np.ndarray:
+def _spatial_weights(V, F, pairs, sigma_s: float) -> np.ndarray:
+    """``A_j W_s(|c_i - c_j|)`` of every face pair: what a normal pass does not change."""
+    i, j = pairs
+    C = V[F].mean(1)
+    ds = ((C[i] - C[j]) ** 2).sum(1)
+    return face_areas(V, F)[j] * np.exp(-ds / (2 * sigma_s ** 2))
+
+
+def filter_face_normals(V, F, N, sigma_s: float, sigma_r: float, pairs=None,
+                        spatial=None) -> np.ndarray:
     """One bilateral pass over the face normals ``N (m, 3)`` of ``(V, F)`` (step 1 of the
-    module docstring); returns the new unit normals."""
+    module docstring); returns the new unit normals. ``pairs`` / ``spatial``: the face pairs
+    and their spatial weights when the caller has them (the positions do not change between
+    normal passes)."""
     V = np.asarray(V, float)
     F = np.asarray(F, np.int64)
     i, j = _face_neighbours(F) if pairs is None else pairs
-    C = V[F].mean(1)
-    A = face_areas(V, F)
-    ds = ((C[i] - C[j]) ** 2).sum(1)
+    if spatial is None:
+        spatial = _spatial_weights(V, F, (i, j), sigma_s)
     dr = ((N[i] - N[j]) ** 2).sum(1)
-    w = A[j] * np.exp(-ds / (2 * sigma_s ** 2)) * np.exp(-dr / (2 * sigma_r ** 2))
+    w = spatial * np.exp(-dr / (2 * sigma_r ** 2))
     W = sp.csr_matrix((w, (i, j)), shape=(len(F), len(F)))
     out = np.asarray(W @ N)
     ln = np.linalg.norm(out, axis=1)
@@ -96,10 +106,11 @@ def bilateral_normal_filter_iter(V, F, params: BilateralNormalParams | None = No
     F = np.asarray(F, dtype=np.int64)
     sigma_s = p.sigma_s or _default_sigma_s(V, F)
     pairs = _face_neighbours(F)
+    spatial = _spatial_weights(V, F, pairs, sigma_s)  # V is fixed while the normals filter
     N = face_normals(V, F)
     total = p.normal_iterations + p.vertex_iterations
     for k in range(1, p.normal_iterations + 1):
-        N1 = filter_face_normals(V, F, N, sigma_s, p.sigma_r, pairs)
+        N1 = filter_face_normals(V, F, N, sigma_s, p.sigma_r, pairs, spatial)
         turn = float(np.degrees(np.arccos(np.clip((N1 * N).sum(1), -1, 1))).mean())
         N = N1
         yield Step(k, total, V.copy(), {"normal_change": turn}, "filtering normals")
