@@ -140,12 +140,9 @@ def noisy_scan(V, F, amount: float = 0.3, seed: int = 0) -> np.ndarray:
 
 def surface_distance(V, F, V_ref, F_ref) -> float:
     """Mean distance of the vertices ``V`` (``F``: only its referenced vertices count) to the
-    surface ``(V_ref, F_ref)`` (libigl's point-to-mesh distance)."""
-    import igl
+    surface ``(V_ref, F_ref)`` (:func:`algorithms.subdivision.metrics.point_surface_distances`)."""
+    from ..subdivision.metrics import point_surface_distances
 
     V = np.asarray(V, float)
     used = np.unique(np.asarray(F, np.int64))
-    d2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(V[used]),
-                                               np.ascontiguousarray(V_ref, float),
-                                               np.ascontiguousarray(F_ref, np.int64))
-    return float(np.sqrt(np.maximum(d2, 0.0)).mean())
+    return float(point_surface_distances(V[used], np.asarray(V_ref, float), F_ref).mean())

@@ -45,8 +45,8 @@ import numpy as np
 
 from ..errors import ParameterError
 
-__all__ = ["sample_surface", "surface_distances", "evaluate_protocol", "coarsen_to_vertices",
-           "bending_energy", "planar_faces", "planar_normal_deviation"]
+__all__ = ["sample_surface", "surface_distances", "point_surface_distances", "evaluate_protocol",
+           "coarsen_to_vertices", "bending_energy", "planar_faces", "planar_normal_deviation"]
 
 
 def _face_normals(V, F):
@@ -132,7 +132,8 @@ def sample_surface(V, F, count: int, seed: int = 0) -> np.ndarray:
     return np.einsum("qi,qij->qj", b, V[F[f]])
 
 
-def _one_sided(P, V, F):
+def point_surface_distances(P, V, F) -> np.ndarray:
+    """(k,) distance of each point ``P`` (k, 3) to the surface ``(V, F)`` (libigl)."""
     import igl
 
     d2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(P), np.ascontiguousarray(V),
@@ -154,8 +155,8 @@ def surface_distances(VA, FA, VB, FB, samples: int = 200_000, seed: int = 0) -> 
         raise ParameterError("The reference mesh has no extent.")
     PA = np.concatenate([VA, sample_surface(VA, FA, samples, seed)])
     PB = np.concatenate([VB, sample_surface(VB, FB, samples, seed + 1)])
-    dab = _one_sided(PA, VB, FB)
-    dba = _one_sided(PB, VA, FA)
+    dab = point_surface_distances(PA, VB, FB)
+    dba = point_surface_distances(PB, VA, FA)
     # area-uniform means over the random samples only (vertices are not area-uniform)
     mab = float(dab[len(VA):].mean()) if samples > 0 else float(dab.mean())
     mba = float(dba[len(VB):].mean()) if samples > 0 else float(dba.mean())
