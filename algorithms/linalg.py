@@ -34,7 +34,9 @@ class SPDSolver:
         ``fixed`` unknowns are removed.
     fixed : (k,) int indices of unknowns whose values are given at solve time (may be empty).
     backend : "auto" (CHOLMOD when cholespy is installed, else SuperLU), "cholmod" (CHOLMOD
-        supernodal Cholesky; needs ``A_ff`` positive definite) or "superlu".
+        supernodal Cholesky; needs ``A_ff`` positive definite), "superlu", or "auto-once" for a
+        matrix factored for a single solve: "auto", or SuperLU (which releases Python's lock
+        while it factors) in a process that asked for that (:mod:`algorithms.offload`).
 
     Notes
     -----
@@ -68,6 +70,16 @@ class SPDSolver:
             self.A_fc = None
             A_e = A
         self.A_e = A_e
+        if backend == "auto-once":
+            # a matrix factored for one solve (a new matrix every step). CHOLMOD through
+            # cholespy keeps Python's lock while it factors (63 ms at 14.6k vertices, 362 ms at
+            # 58k for mean curvature flow), so the desktop app's window froze that long; SuperLU
+            # releases it. Same total time at <= 15k vertices (cMCF, 10 steps: armadillo 0.81 vs
+            # 0.86 s), 22 % slower at 58k; so SuperLU where the process asks for it (the app,
+            # algorithms.offload.keep_lock_free), CHOLMOD elsewhere.
+            from .offload import lock_free
+
+            backend = "superlu" if lock_free() else "auto"
         if backend == "auto":
             # CHOLMOD: 2.6x faster per ARAP iteration than SuperLU on igea (134k vertices)
             backend = "cholmod" if cholmod_available() else "superlu"

@@ -148,15 +148,15 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
     if multigrid is not None and multigrid.n_vertices != len(V0):
         raise InvalidMeshError("The multigrid hierarchy was built on another mesh.")
 
-    def factor(A):
+    def factor(A, once: bool):
         if multigrid is None:
-            return SPDSolver(sp.csc_matrix(A), fixed)
+            return SPDSolver(sp.csc_matrix(A), fixed, backend="auto-once" if once else "auto")
         return multigrid.solver(A, fixed=fixed if fixed.size else None)
 
     solver = None
     if params.flow == "laplacian":
         M0 = mass_matrix(V0, F)
-        solver = factor(M0 + h * K0)
+        solver = factor(M0 + h * K0, once=False)
 
     X = V0.copy()
     for it in range(1, params.iterations + 1):
@@ -165,7 +165,7 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
         else:
             M = mass_matrix(X, F)
             K = K0 if params.flow == "cmcf" else -cotangent_laplacian(X, F)
-            solver = factor(M + h * K)
+            solver = factor(M + h * K, once=True)
         extra = {}
         if multigrid is None:
             Xn = solver.solve(M @ X, X[fixed] if fixed.size else None)

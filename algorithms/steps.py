@@ -114,11 +114,16 @@ class IsolatedProcessError(RuntimeError):
     """The child process of :func:`isolated_iter` died without a result (killed, crashed)."""
 
 
-def _isolated_main(conn, gen_fn, args, kwargs) -> None:  # pragma: no cover - runs in the child
+def _child_threads() -> None:  # pragma: no cover - runs in the child
+    """A child process computes on one BLAS/OpenMP thread (the parent's threads are busy)."""
     import os
 
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
+
+
+def _isolated_main(conn, gen_fn, args, kwargs) -> None:  # pragma: no cover - runs in the child
+    _child_threads()
     try:
         gen = gen_fn(*args, **kwargs)
         while True:

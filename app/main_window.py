@@ -86,6 +86,11 @@ class MainWindow(QMainWindow):
 
     def __init__(self, settings: QSettings | None = None):
         super().__init__()
+        from algorithms import offload
+
+        # compiled calls that keep Python's lock (remeshing, exact intersection tests, CHOLMOD
+        # refactorizations every step) would freeze this window while a job runs
+        offload.keep_lock_free(True)
         self.settings = settings or QSettings(APP_NAME, APP_NAME)
         self.document = Document()
         self.undo_stack = QUndoStack(self)

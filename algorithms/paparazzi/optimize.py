@@ -85,6 +85,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from .. import offload
 from ..errors import InvalidMeshError, ParameterError, Stylize3DError
 from ..params import param, validate_params
 from ..render import image_vjp, render
@@ -194,12 +195,31 @@ def count_self_intersections(V, F) -> int:
     return int(len(IF)) if found else 0
 
 
-def _intersecting_pairs(V, F) -> np.ndarray:
+def _intersecting_pairs_here(V, F) -> np.ndarray:
     import igl.predicates
 
     found, IF, _ = igl.predicates.find_self_intersections(
         np.ascontiguousarray(V, dtype=np.float64), np.ascontiguousarray(F, dtype=np.int64), False)
     return np.asarray(IF, np.int64).reshape(-1, 2) if found else np.zeros((0, 2), np.int64)
+
+
+def _intersecting_pairs(V, F) -> np.ndarray:
+    """(k, 2) intersecting face pairs. libigl keeps Python's lock for the whole test (36 ms on
+    a 14.6k-vertex mesh): in the desktop app it runs in the helper process
+    (:mod:`algorithms.offload`)."""
+    return offload.call(_intersecting_pairs_here, np.ascontiguousarray(V, np.float64),
+                        np.ascontiguousarray(F, np.int64))
+
+
+def _remesh_core(V, F, iterations: int, h: float, n_fixed: int, creases) -> tuple:
+    """gpytoolbox's ``remesh_botsch`` C++ core (fixed vertices first)."""
+    from gpytoolbox_bindings import _remesh_botsch_cpp_impl
+
+    U, G = _remesh_botsch_cpp_impl(np.ascontiguousarray(V, np.float64),
+                                   np.ascontiguousarray(F, np.int32), int(iterations), float(h),
+                                   np.arange(n_fixed, dtype=np.int32),
+                                   np.ascontiguousarray(creases, np.int32), True)
+    return np.ascontiguousarray(U, np.float64), np.ascontiguousarray(G, np.int64)
 
 
 def _topology(F) -> tuple[int, int, bool]:
@@ -328,8 +348,6 @@ class Paparazzi:
         """One ``remesh_botsch`` pass through its C++ core (the Python wrapper spends more time
         than the pass itself re-deriving boundary vertices and re-checking manifoldness, which
         the loop keeps as invariants): fixed vertices first, as the core expects."""
-        from gpytoolbox_bindings import _remesh_botsch_cpp_impl
-
         n = len(V)
         # a piecewise-planar filter's creases (FilterSpec.crease_angle) survive the remeshing:
         # without it the remeshing alone rounded fandisk's edges (near-planar area 0.75 -> 0.63
@@ -348,12 +366,12 @@ class Paparazzi:
             V = V[order]
             F = inverse[F]
             creases = inverse[creases]
-        U, G = _remesh_botsch_cpp_impl(np.ascontiguousarray(V, np.float64),
-                                       np.ascontiguousarray(F, np.int32),
-                                       int(self.params.remesh_iterations), float(self.edge_length),
-                                       np.arange(len(fixed), dtype=np.int32),
-                                       np.ascontiguousarray(creases, np.int32), True)
-        return np.ascontiguousarray(U, np.float64), np.ascontiguousarray(G, np.int64)
+        # the core keeps Python's lock for the whole pass (~90 ms on 14.6k vertices): in the
+        # desktop app it runs in the helper process (algorithms.offload), same result
+        return offload.call(_remesh_core, np.ascontiguousarray(V, np.float64),
+                            np.ascontiguousarray(F, np.int32), int(self.params.remesh_iterations),
+                            float(self.edge_length), len(fixed),
+                            np.ascontiguousarray(creases, np.int32))
 
     def band_fraction(self, V, F) -> float:
         """Share of the edges outside ``[4/5 h, 4/3 h]`` (the ones remeshing would change)."""

@@ -79,6 +79,9 @@ def window(qtbot, tmp_path, dialogs, needs_display):
     win.document.modified = False
     win.close()
     win.deleteLater()
+    from algorithms import offload
+
+    offload.keep_lock_free(False)   # the window turned it on; later algorithm tests run here
 
 
 def front_vertex(window) -> int:
