@@ -782,9 +782,17 @@ class CubicStylizer:
         pin_i = np.asarray(pin_i, dtype=np.int64)
         pin_a = np.asarray(pin_a, dtype=np.int64)
         constrained[pin_i, pin_a] = True
-        self._exact_mask = constrained.copy()
+        exact_mask = constrained.copy()
         if not pin_one_vertex:
-            self._exact_mask[pin_i, pin_a] = False  # pinned internally only, then translated
+            exact_mask[pin_i, pin_a] = False  # pinned internally only, then translated
+        self._exact_rows, self._exact_cols = np.nonzero(exact_mask)  # usually none
+        # the recentring of each part as (vertices or a slice for all, weights, axes, weighted
+        # rest centroid): no fancy indexing per iteration for the usual single-part mesh
+        self._recenter = [(slice(None) if len(verts) == len(Vn)
+                           and np.array_equal(verts, np.arange(len(Vn))) else verts,
+                           w, slice(None) if list(dims) == [0, 1, 2] else dims,
+                           w @ Vn[verts][:, dims])
+                          for verts, w, dims in self._recenter]
 
         self.known = known
         self.exact = exact
@@ -797,7 +805,9 @@ class CubicStylizer:
 
     def _to_output(self, U: np.ndarray) -> np.ndarray:
         out = U * self.scale + self.center
-        out[self._exact_mask] = self.exact[self._exact_mask]
+        if len(self._exact_rows):
+            out[self._exact_rows, self._exact_cols] = self.exact[self._exact_rows,
+                                                                 self._exact_cols]
         return out
 
     def style_prox(self, params: CubicParams, *, lam_axes=None, rotation=None,
@@ -907,9 +917,11 @@ class CubicStylizer:
                 state = AdmmState.initial(n, params.rho0)
             R, iters = admm_local_step(S, self.normals, lam_a, prox, state, params, frames, use)
             Un = system.solve(system.rhs(R), known)
-            for verts, w, dims in self._recenter:
-                shift = w @ (Vn[verts][:, dims] - Un[verts][:, dims])
-                Un[np.ix_(verts, dims)] += shift
+            for verts, w, dims, rest_centroid in self._recenter:
+                if isinstance(verts, slice):
+                    Un[:, dims] += rest_centroid - w @ Un[:, dims]
+                else:
+                    Un[np.ix_(verts, dims)] += rest_centroid - w @ Un[verts][:, dims]
             disp = relative_displacement(Un, U, Vn)
             U = Un
             # the covariances at the new positions: for the energy now, the local step next
