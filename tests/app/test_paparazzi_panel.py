@@ -282,6 +282,17 @@ def test_panel_run_is_the_headless_recipe_bit_for_bit(window, dialogs, qtbot):
 
     again = run("paparazzi", panel.last_request["input"], headless.params, headless.options)
     _assert_same_bits(after, again)
+    # in the app the remeshings and intersection tests ran in the helper process (they keep
+    # Python's lock: the window froze ~100 ms per remeshing on armadillo); run here instead
+    # (command line, batch) they give the same bits
+    import os
+
+    from algorithms import offload
+
+    assert offload.lock_free() and offload.helper_pid() not in (None, os.getpid())
+    offload.keep_lock_free(False)
+    here = run("paparazzi", panel.last_request["input"], headless.params, headless.options)
+    _assert_same_bits(after, here)
 
 
 def test_panel_run_with_a_target_image_replays_from_its_blob(window, dialogs, qtbot, tmp_path):
