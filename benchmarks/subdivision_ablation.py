@@ -28,7 +28,8 @@ centroid and farthest vertex at sqrt(3), per shape; ``unit-cube``: the author's,
 the issue's default run were trained on); ``coarse`` (training set size); ``epochs``; ``schedule`` (constant, cosine, step);
 ``selection`` (``coarse``: the best epoch on a tenth of the training shape's coarse meshes, as
 the thesis; ``shape``: on 20 coarse meshes of the other shape -- armadillo for the elephant, the
-elephant for armadillo -- with the same 90 % training meshes); ``seed`` (the initial weights and the shuffling: the noise floor of
+elephant for armadillo, or ``held_out``: a bundled sample, blob or pretzel -- with the same 90 %
+training meshes); ``seed`` (the initial weights and the shuffling: the noise floor of
 every comparison); ``augment`` (random scale 1/a..a per use; random rotations are a no-op for
 this network: every flap is seen in its own frame).
 
@@ -67,7 +68,9 @@ TEST_MESHES = ["bob.obj", "camelhead.off", "fandisk.off", "fertility.off", "hand
                "stanford-bunny.obj", "wingnut.obj"]
 TOLERANCE = 1.5  # the product's SCALE_TOLERANCE
 
-SHAPES = {"elephant": TRAIN_SHAPE, "armadillo": HELD_OUT_SHAPE}
+SAMPLES = ROOT / "resources" / "samples"
+SHAPES = {"elephant": TRAIN_SHAPE, "armadillo": HELD_OUT_SHAPE, "blob": SAMPLES / "blob.obj",
+          "pretzel": SAMPLES / "pretzel.obj"}
 BASE = {"shape": "elephant", "formulation": "stylize3d", "normalization": "radius", "coarse": 100, "epochs": 80,
         "schedule": "constant", "selection": "coarse", "augment": 1.0, "lr": 2e-3, "seed": 0}
 ROWS = {
@@ -88,6 +91,14 @@ ROWS = {
     "trained on armadillo, seed 1": {"shape": "armadillo", "seed": 1},
     "armadillo, selected on the elephant, seed 1": {"shape": "armadillo", "selection": "shape",
                                                     "seed": 1},
+    # a selection shape the product can bundle (our own procedural samples, not the thesis
+    # author's data): candidates for the default
+    "armadillo, selected on the blob": {"shape": "armadillo", "selection": "shape",
+                                        "held_out": "blob"},
+    "armadillo, selected on the pretzel": {"shape": "armadillo", "selection": "shape",
+                                           "held_out": "pretzel"},
+    "armadillo, selected on the pretzel, seed 1": {"shape": "armadillo", "selection": "shape",
+                                                   "held_out": "pretzel", "seed": 1},
 }
 
 
@@ -293,7 +304,8 @@ def run_row(args) -> int:
     ref_edge = float(np.mean([_mean_edge(s.V, s.F) for s in samples]))
     validation = None
     if cfg["selection"] == "shape":  # 20 coarse meshes of the other shape
-        other = TRAIN_SHAPE if cfg["shape"] == "armadillo" else HELD_OUT_SHAPE
+        other = (SHAPES[cfg["held_out"]] if cfg.get("held_out")
+                 else TRAIN_SHAPE if cfg["shape"] == "armadillo" else HELD_OUT_SHAPE)
         held = _dataset(other, 20, out)
         validation = _scaled_samples(held, _shape_scale(other, cfg["normalization"]), edge)
         order = np.random.default_rng(0).permutation(len(samples))
@@ -422,6 +434,25 @@ def per_mesh(args) -> int:
     return 0
 
 
+def evaluate_weights(args) -> int:
+    """A product weights file (e.g. a whole default ``subdivide-train`` run's) measured like a
+    row, through the product's NumPy inference; stored in rows.json under ``--name``."""
+    out = _out_dir(args)
+    t0 = time.perf_counter()
+    fn = _numpy_subdivider(args.weights)
+    row = {"row": args.name, "config": {"weights": str(args.weights)},
+           "validation": _validation_errors(fn),
+           "protocol": _protocol(fn, _coarse_test_meshes(out)),
+           "eval_seconds": time.perf_counter() - t0, "load_end": _load(),
+           "weights": str(args.weights)}
+    path = out / "rows.json"
+    rows = json.loads(path.read_text()) if path.exists() else {}
+    rows[args.name] = row
+    path.write_text(json.dumps(rows, indent=1))
+    print(_summary(row, _peers(out)), flush=True)
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--prepare", action="store_true")
@@ -431,6 +462,8 @@ def main() -> int:
     ap.add_argument("--epochs", type=int, help="override the baseline's epoch budget")
     ap.add_argument("--save", help="write the row's weights here (default: OUT/weights/ROW.pt)")
     ap.add_argument("--out", help="results folder (default $TMPDIR/subdiv_ablation)")
+    ap.add_argument("--weights", help="measure this product weights file as a row (--name)")
+    ap.add_argument("--name", default="weights file", help="the row name of --weights")
     args = ap.parse_args()
     if not REF.is_dir():
         print(f"the reference folder is not here ({REF}); nothing to do")
@@ -443,6 +476,8 @@ def main() -> int:
         return table(args)
     if args.per_mesh:
         return per_mesh(args)
+    if args.weights:
+        return evaluate_weights(args)
     ap.print_help()
     return 0
 

@@ -295,22 +295,44 @@ def training_steps(state, params, options: dict | None = None, cache: dict | Non
     if meshes is None:
         meshes = [(state.V, state.F)]
     shapes = [(np.asarray(V), np.asarray(F)) for V, F in meshes]
+    n_val = 0
+    if tparams.validation_shape == "pretzel" and tparams.validation_fraction > 0:
+        # the epoch is chosen on coarse meshes of the bundled pretzel (as many as the
+        # validation share would hold out); every coarse mesh of the user's trains
+        n_val = max(1, int(round(tparams.validation_fraction * dparams.coarse_meshes)))
+    share = dparams.coarse_meshes / (dparams.coarse_meshes + n_val)
+
+    def make_data(progress):
+        def part(lo, hi, prefix=""):
+            return lambda f, msg="": progress(lo + (hi - lo) * f, prefix + msg)
+
+        train = generate_dataset(shapes, dparams, workers=workers, scheduler=scheduler,
+                                 cache_dir=cache_dir, use_cache=use_cache,
+                                 progress=part(0.0, share))
+        val = None
+        if n_val:
+            from algorithms.subdivision.data import selection_shape
+
+            val = generate_dataset([selection_shape()],
+                                   dataclasses.replace(dparams, coarse_meshes=n_val),
+                                   workers=workers, scheduler=scheduler, cache_dir=cache_dir,
+                                   use_cache=use_cache,
+                                   progress=part(share, 1.0, "pretzel (to choose the epoch): "))
+        return train, val
+
     box: dict = {}
     t0 = time.perf_counter()
-    yield from with_progress(
-        lambda progress: generate_dataset(shapes, dparams, workers=workers,
-                                          scheduler=scheduler, cache_dir=cache_dir,
-                                          use_cache=use_cache, progress=progress),
-        state.V, box)
+    yield from with_progress(make_data, state.V, box)
     if "value" not in box:
         return
     data_seconds = time.perf_counter() - t0
-    trainer = Trainer(box["value"], tparams)
+    samples, validation = box["value"]
+    trainer = Trainer(samples, tparams, validation_samples=validation)
     from algorithms.subdivision.inference import mean_edge_length
 
     # the edge length the network is trained at (its scale guard's reference, see
     # algorithms.subdivision.inference.scale_plan)
-    ref_edge = float(np.mean([mean_edge_length(s.V, s.F) for s in box["value"]]))
+    ref_edge = float(np.mean([mean_edge_length(s.V, s.F) for s in samples]))
     info = {**params_to_dict(dparams), **params_to_dict(tparams), "mean_edge_length": ref_edge}
     losses: list[float] = []
     vlosses: list[float] = []
