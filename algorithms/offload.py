@@ -14,9 +14,10 @@ module-level function there, or here when the helper is off. The helper starts o
 one call at a time, and exits when this process closes its end of the pipe or exits. Unlike
 :func:`algorithms.steps.isolated_iter` (a new process for a whole stage, e.g. ARPACK), the helper
 stays, for short calls repeated inside a loop (a remeshing every 30 Paparazzi iterations).
-An exception raised by the function is raised again here; a helper that stops mid-call (a crash in the compiled code) raises
-:class:`~algorithms.errors.Stylize3DError` instead of taking the app down with it, and the next
-call starts a new helper. If no helper can be started the call runs here.
+An exception raised by the function is raised again here; a helper that stops mid-call (a crash
+in the compiled code) raises :class:`~algorithms.errors.Stylize3DError` instead of taking the app
+down with it, and the next call starts a new helper. If no helper can be started the call runs
+here.
 """
 
 from __future__ import annotations

@@ -245,6 +245,106 @@ def _coarse_test_meshes(out: Path):
     return items
 
 
+def _open_copy(V, F, radius: float, holes: int, rng):
+    """``F`` with ``holes`` disks cut out: the faces connected to a random face whose centroids
+    lie within ``radius`` of its centroid; a disk is kept only if the mesh stays manifold and
+    gains exactly one boundary loop. Returns the faces (the vertices are compacted)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    from algorithms.mesh.topology import boundary_loops, face_adjacency
+
+    C = V[F].mean(axis=1)
+    adj = face_adjacency(F)
+    cut = 0
+    for _ in range(200):
+        if cut == holes:
+            break
+        seed = int(rng.integers(len(F)))
+        near = np.flatnonzero(np.linalg.norm(C - C[seed], axis=1) < radius)
+        sub = sp.csr_matrix(adj[near][:, near])
+        _, lab = connected_components(sub, directed=False)
+        disk = near[lab == lab[np.searchsorted(near, seed)]]
+        keep = np.ones(len(F), bool)
+        keep[disk] = False
+        F2 = F[keep]
+        old = boundary_loops(F)
+        loops = boundary_loops(F2)
+        allv = np.concatenate(loops) if loops else np.zeros(0, np.int64)
+        if len(disk) < 2 or len(loops) != len(old) + 1 or len(np.unique(allv)) != len(allv):
+            continue
+        F, C = F2, C[keep]
+        adj = face_adjacency(F)
+        cut += 1
+    used = np.unique(F)
+    remap = np.full(len(V), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return V[used], remap[F]
+
+
+def _open_test_meshes(out: Path):
+    """Open copies of the 11 test meshes: two holes cut in the dense mesh (disks of radius 1.5
+    mean coarse edge lengths), then QSlimmed like the closed ones (cached)."""
+    from algorithms.subdivision.inference import mean_edge_length
+    from algorithms.subdivision.metrics import coarsen_to_vertices
+
+    path = out / "coarse_open.npz"
+    if path.exists():
+        z = np.load(path)
+        return [(str(n), z[f"V{i}"], z[f"F{i}"], z[f"cV{i}"], z[f"cF{i}"])
+                for i, n in enumerate(z["names"])]
+    rng = np.random.default_rng(1)
+    items, arrays = [], {}
+    for i, (name, V, F, Vc, Fc) in enumerate(_coarse_test_meshes(out)):
+        Vo, Fo = _open_copy(V, F, 1.5 * mean_edge_length(Vc, Fc), 2, rng)
+        cVo, cFo = coarsen_to_vertices(Vo, Fo, len(Vc))
+        items.append((name, Vo, Fo, cVo, cFo))
+        arrays.update({f"V{i}": Vo, f"F{i}": Fo, f"cV{i}": cVo, f"cF{i}": cFo})
+    np.savez(path, names=np.array([it[0] for it in items]), **arrays)
+    return items
+
+
+def open_table(args) -> int:
+    """Closed and open copies side by side: the shipped weights (and ``--weights`` files),
+    the author's network, Loop and butterfly; per mesh and the counts of the issue."""
+    from algorithms.mesh.topology import boundary_loops
+
+    out = _out_dir(args)
+    nets = {"shipped": _numpy_subdivider(None),
+            "author": _numpy_subdivider(REF / "author_network" / "netparams.dat"),
+            "Loop": _baseline("loop"), "butterfly": _baseline("butterfly")}
+    for w in args.compare or []:
+        nets[Path(w).stem] = _numpy_subdivider(w)
+    for kind, meshes in (("closed", _coarse_test_meshes(out)), ("open", _open_test_meshes(out))):
+        res = {name: _protocol(fn, meshes) for name, fn in nets.items()}
+        print(f"\n{kind} copies" + ("" if kind == "closed" else " (boundary loops of the "
+              "coarse meshes: " + ", ".join(str(len(boundary_loops(m[4]))) for m in meshes)
+              + ")"))
+        print("| mesh | " + " | ".join(f"{n} H" for n in nets) + " | "
+              + " | ".join(f"{n} M" for n in nets) + " |")
+        print("|---" * (1 + 2 * len(nets)) + "|")
+        for name, *_ in meshes:
+            print(f"| {Path(name).stem} | "
+                  + " | ".join(f"{res[n][name]['H']:.3f}" for n in nets) + " | "
+                  + " | ".join(f"{res[n][name]['M']:.3f}" for n in nets) + " |")
+        print("| mean | " + " | ".join(f"{np.mean([r['H'] for r in res[n].values()]):.3f}"
+                                       for n in nets) + " | "
+              + " | ".join(f"{np.mean([r['M'] for r in res[n].values()]):.3f}" for n in nets)
+              + " |")
+        for n in nets:
+            if n in ("Loop", "butterfly", "author"):
+                continue
+            wins = sum(all(res[n][m][k] < min(res["Loop"][m][k], res["butterfly"][m][k])
+                           for k in ("H", "M")) for m in res[n])
+            h = sum(res[n][m]["H"] < res["author"][m]["H"] for m in res[n])
+            mm = sum(res[n][m]["M"] < res["author"][m]["M"] for m in res[n])
+            both = sum(res[n][m]["H"] < res["author"][m]["H"]
+                       and res[n][m]["M"] < res["author"][m]["M"] for m in res[n])
+            print(f"{kind} {n}: beats Loop and butterfly on H and M on {wins} of {len(meshes)}; "
+                  f"below the author on H on {h}, on M on {mm}, on both on {both}")
+    return 0
+
+
 def _protocol(fn, meshes) -> dict:
     from algorithms.subdivision.metrics import surface_distances
 
@@ -464,6 +564,9 @@ def main() -> int:
     ap.add_argument("--out", help="results folder (default $TMPDIR/subdiv_ablation)")
     ap.add_argument("--weights", help="measure this product weights file as a row (--name)")
     ap.add_argument("--name", default="weights file", help="the row name of --weights")
+    ap.add_argument("--open", action="store_true",
+                    help="closed and open copies (holes cut): shipped, author, Loop, butterfly")
+    ap.add_argument("--compare", nargs="*", help="with --open: more weights files")
     args = ap.parse_args()
     if not REF.is_dir():
         print(f"the reference folder is not here ({REF}); nothing to do")
@@ -476,6 +579,8 @@ def main() -> int:
         return table(args)
     if args.per_mesh:
         return per_mesh(args)
+    if args.open:
+        return open_table(args)
     if args.weights:
         return evaluate_weights(args)
     ap.print_help()
