@@ -123,9 +123,15 @@ def _stop() -> None:
 
 
 def stop_helper() -> None:
-    """End the helper process (it is started again by the next :func:`call`)."""
-    with _lock:
-        _stop()
+    """End the helper process (it is started again by the next :func:`call`). At exit a call
+    still waiting for its reply does not hold this up for more than 2 s: the helper is killed."""
+    if _lock.acquire(timeout=2.0):
+        try:
+            _stop()
+        finally:
+            _lock.release()
+    elif _proc is not None and _proc.is_alive():
+        _proc.kill()
 
 
 atexit.register(stop_helper)
