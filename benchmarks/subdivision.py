@@ -486,21 +486,24 @@ def validation_set(weights: list) -> int:
 
 def full(shape, args) -> int:
     """The whole default training (DataParams(), TrainParams()) on one shape, measured."""
-    from algorithms.subdivision.data import DataParams, generate_dataset
+    from algorithms.subdivision.data import DataParams
     from algorithms.subdivision.model import save_weights
-    from algorithms.subdivision.train import Trainer, TrainParams
+    from algorithms.subdivision.train import Trainer, TrainParams, training_data
 
     print(f"--full: default training on {args.mesh} [{_load()}]", flush=True)
+    tp = TrainParams() if args.patience is None else TrainParams(patience=args.patience)
     with tempfile.TemporaryDirectory() as tmp:
         cache = args.cache_dir or tmp
         t0 = time.perf_counter()
-        samples = generate_dataset([(shape.V, shape.F)], DataParams(), workers=2, cache_dir=cache)
+        # the product's data: the user's coarse meshes and the pretzel's to choose the epoch
+        samples, validation = training_data([(shape.V, shape.F)], DataParams(), tp, workers=2,
+                                            cache_dir=cache)
         t_data = time.perf_counter() - t0
-    print(f"  data: {len(samples)} coarse meshes in {t_data:.0f} s "
-          f"({t_data / len(samples):.2f} s each, 2 workers) [{_load()}]", flush=True)
+    n_all = len(samples) + len(validation or [])
+    print(f"  data: {n_all} coarse meshes ({len(validation or [])} to choose the epoch) in "
+          f"{t_data:.0f} s ({t_data / n_all:.2f} s each, 2 workers) [{_load()}]", flush=True)
     t1 = time.perf_counter()
-    tp = TrainParams() if args.patience is None else TrainParams(patience=args.patience)
-    tr = Trainer(samples, tp)
+    tr = Trainer(samples, tp, validation_samples=validation)
     t_prep = time.perf_counter() - t1
     gen = tr.steps()
     try:

@@ -304,6 +304,23 @@ def _open_test_meshes(out: Path):
     return items
 
 
+def _print_mesh_table(res: dict, meshes: list) -> None:
+    """Markdown: per mesh, H then M of every method in ``res`` ({method: {mesh: {H, M}}}), and
+    the means."""
+    names = list(res)
+    print("| mesh | " + " | ".join(f"{n} H" for n in names) + " | "
+          + " | ".join(f"{n} M" for n in names) + " |")
+    print("|---" * (1 + 2 * len(names)) + "|")
+    for mesh in meshes:
+        print(f"| {Path(mesh).stem} | "
+              + " | ".join(f"{res[n][mesh]['H']:.3f}" for n in names) + " | "
+              + " | ".join(f"{res[n][mesh]['M']:.3f}" for n in names) + " |")
+    print("| mean | " + " | ".join(f"{np.mean([res[n][m]['H'] for m in meshes]):.3f}"
+                                   for n in names) + " | "
+          + " | ".join(f"{np.mean([res[n][m]['M'] for m in meshes]):.3f}" for n in names)
+          + " |")
+
+
 def open_table(args) -> int:
     """Closed and open copies side by side: the shipped weights (and ``--weights`` files),
     the author's network, Loop and butterfly; per mesh and the counts of the issue."""
@@ -320,17 +337,7 @@ def open_table(args) -> int:
         print(f"\n{kind} copies" + ("" if kind == "closed" else " (boundary loops of the "
               "coarse meshes: " + ", ".join(str(len(boundary_loops(m[4]))) for m in meshes)
               + ")"))
-        print("| mesh | " + " | ".join(f"{n} H" for n in nets) + " | "
-              + " | ".join(f"{n} M" for n in nets) + " |")
-        print("|---" * (1 + 2 * len(nets)) + "|")
-        for name, *_ in meshes:
-            print(f"| {Path(name).stem} | "
-                  + " | ".join(f"{res[n][name]['H']:.3f}" for n in nets) + " | "
-                  + " | ".join(f"{res[n][name]['M']:.3f}" for n in nets) + " |")
-        print("| mean | " + " | ".join(f"{np.mean([r['H'] for r in res[n].values()]):.3f}"
-                                       for n in nets) + " | "
-              + " | ".join(f"{np.mean([r['M'] for r in res[n].values()]):.3f}" for n in nets)
-              + " |")
+        _print_mesh_table(res, [m[0] for m in meshes])
         for n in nets:
             if n in ("Loop", "butterfly", "author"):
                 continue
@@ -520,17 +527,7 @@ def per_mesh(args) -> int:
     r = rows[args.per_mesh]["protocol"]
     names = ["row", "author", "shipped", "Loop", "butterfly"]
     get = {"row": r, **{n: peers[n]["protocol"] for n in names[1:]}}
-    print("| mesh | " + " | ".join(f"{n} H" for n in names) + " | "
-          + " | ".join(f"{n} M" for n in names) + " |")
-    print("|---" * (1 + 2 * len(names)) + "|")
-    for mesh in r:
-        print(f"| {Path(mesh).stem} | "
-              + " | ".join(f"{get[n][mesh]['H']:.3f}" for n in names) + " | "
-              + " | ".join(f"{get[n][mesh]['M']:.3f}" for n in names) + " |")
-    print("| mean | " + " | ".join(f"{np.mean([x['H'] for x in get[n].values()]):.3f}"
-                                   for n in names) + " | "
-          + " | ".join(f"{np.mean([x['M'] for x in get[n].values()]):.3f}" for n in names)
-          + " |")
+    _print_mesh_table({n: get[n] for n in names}, list(r))
     return 0
 
 

@@ -50,7 +50,7 @@ from ..steps import Step
 from .data import CoarseSample
 from .model import MeshLevels, SubdivisionNet
 
-__all__ = ["TrainParams", "Trainer", "train_iter"]
+__all__ = ["TrainParams", "Trainer", "train_iter", "training_data"]
 
 
 @dataclass(frozen=True)
@@ -298,7 +298,46 @@ def _one_thread():
         torch.set_num_threads(before)
 
 
+def training_data(shapes, data_params, params: TrainParams = TrainParams(), *,
+                  progress=None, **generate_kwargs):
+    """The coarse meshes a training run uses: ``(samples, validation)``.
+
+    ``samples`` are ``generate_dataset(shapes, data_params, ...)``; ``validation`` is None
+    (the Trainer then holds out ``validation_fraction`` of ``samples``: the thesis) or, for
+    ``params.validation_shape`` "pretzel" (the default), as many coarse meshes of the bundled
+    pretzel (:func:`~algorithms.subdivision.data.selection_shape`) as that share would hold out,
+    made with the same data parameters. ``progress(fraction, message)`` covers both;
+    ``generate_kwargs`` (workers, scheduler, cache_dir, use_cache) go to ``generate_dataset``.
+    Pass the result on as ``Trainer(samples, params, validation_samples=validation)``.
+    """
+    from dataclasses import replace
+
+    from .data import generate_dataset, selection_shape
+
+    n = int(data_params.coarse_meshes)
+    n_val = 0
+    if params.validation_shape == "pretzel" and params.validation_fraction > 0:
+        n_val = max(1, int(round(params.validation_fraction * n)))
+    share = n / (n + n_val)
+
+    def part(lo, hi, prefix=""):
+        if progress is None:
+            return None
+        return lambda f, msg="": progress(lo + (hi - lo) * f, prefix + msg)
+
+    samples = generate_dataset(shapes, data_params, progress=part(0.0, share), **generate_kwargs)
+    validation = None
+    if n_val:
+        validation = generate_dataset([selection_shape()],
+                                      replace(data_params, coarse_meshes=n_val),
+                                      progress=part(share, 1.0, "pretzel (to choose the "
+                                                                "epoch): "),
+                                      **generate_kwargs)
+    return samples, validation
+
+
 def train_iter(samples: Sequence[CoarseSample], params: TrainParams = TrainParams()
                ) -> Iterator[Step]:
-    """Shorthand: ``Trainer(samples, params).steps()``."""
+    """Shorthand: ``Trainer(samples, params).steps()`` (the epoch chosen on a share of
+    ``samples``; :func:`training_data` makes the default's pretzel validation meshes)."""
     return Trainer(samples, params).steps()

@@ -208,9 +208,12 @@ class SubdivisionPanel(MethodPanel):
         self.trained_net, self.trained_weights = net, out["weights"]
         self.weights_combo.setCurrentIndex(1)
         self.save_button.setEnabled(True)
+        info = holder["last"].info
+        on = ("coarse pretzels" if info.get("validation_shape") == "pretzel"
+              and info.get("validation_fraction", 0) > 0 else "this mesh's coarse meshes")
         self.status_label.setText(
             f"Trained {out['epochs']} epochs; best validation loss "
-            f"{out['best_validation_loss']:.3g} (epoch {out['best_epoch']}). "
+            f"{out['best_validation_loss']:.3g} (epoch {out['best_epoch']}, measured on {on}). "
             f"'Trained here' is selected.")
 
     def _training_failed(self, *_):

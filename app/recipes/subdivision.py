@@ -285,8 +285,7 @@ def training_steps(state, params, options: dict | None = None, cache: dict | Non
 
     from algorithms.params import params_to_dict
     from algorithms.steps import with_progress
-    from algorithms.subdivision.data import generate_dataset
-    from algorithms.subdivision.train import Trainer
+    from algorithms.subdivision.train import Trainer, training_data
 
     options = options or {}
     dparams, tparams = split_training_params(params)
@@ -295,30 +294,10 @@ def training_steps(state, params, options: dict | None = None, cache: dict | Non
     if meshes is None:
         meshes = [(state.V, state.F)]
     shapes = [(np.asarray(V), np.asarray(F)) for V, F in meshes]
-    n_val = 0
-    if tparams.validation_shape == "pretzel" and tparams.validation_fraction > 0:
-        # the epoch is chosen on coarse meshes of the bundled pretzel (as many as the
-        # validation share would hold out); every coarse mesh of the user's trains
-        n_val = max(1, int(round(tparams.validation_fraction * dparams.coarse_meshes)))
-    share = dparams.coarse_meshes / (dparams.coarse_meshes + n_val)
 
     def make_data(progress):
-        def part(lo, hi, prefix=""):
-            return lambda f, msg="": progress(lo + (hi - lo) * f, prefix + msg)
-
-        train = generate_dataset(shapes, dparams, workers=workers, scheduler=scheduler,
-                                 cache_dir=cache_dir, use_cache=use_cache,
-                                 progress=part(0.0, share))
-        val = None
-        if n_val:
-            from algorithms.subdivision.data import selection_shape
-
-            val = generate_dataset([selection_shape()],
-                                   dataclasses.replace(dparams, coarse_meshes=n_val),
-                                   workers=workers, scheduler=scheduler, cache_dir=cache_dir,
-                                   use_cache=use_cache,
-                                   progress=part(share, 1.0, "pretzel (to choose the epoch): "))
-        return train, val
+        return training_data(shapes, dparams, tparams, progress=progress, workers=workers,
+                             scheduler=scheduler, cache_dir=cache_dir, use_cache=use_cache)
 
     box: dict = {}
     t0 = time.perf_counter()

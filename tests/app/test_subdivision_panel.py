@@ -164,6 +164,7 @@ def test_training_is_the_headless_recipe_and_its_weights_subdivide(window, dialo
     assert panel.trained_weights == head.outcome["weights"]
     assert losses == list(head.outcome["losses"])
     assert "Trained 3 epochs" in panel.status_label.text()
+    assert "measured on coarse pretzels" in panel.status_label.text()  # the default's choice
     assert panel.weights_combo.currentText() == "Trained here"
     assert window.undo_stack.count() == 0 and doc.state is state
     # subdividing with them: the panel's Run and the headless recipe agree
