@@ -11,7 +11,8 @@ Meshes (default): spot_lowres, bob, rocker-arm, armadillo (tests/data) and a pro
   local, global, other
                 the same loop re-timed part by part, ms per iteration: local = per-vertex ADMM
                 (compiled kernel or NumPy), global = right-hand side + prefactored solve,
-                other = covariances at the new positions, energy, metrics and output copy
+                other = the pass after the solve (covariances at the new positions, L1 term,
+                move, output) and the energy
   numpy ms/it   the same run with the compiled kernels switched off (the NumPy path; --no-numpy
                 skips it)
   igl ms/it     libigl's ARAP (igl.arap_precomputation / igl.arap_solve, SPOKES_AND_RIMS, one
@@ -99,14 +100,22 @@ def split_run(st: CubicStylizer, params: CubicParams, iterations: int) -> dict[s
         t0 = time.perf_counter()
         R, iters = admm_local_step(S, st.normals, lam_a, prox, state, params)
         t1 = time.perf_counter()
-        Un = system.solve(system.rhs(R), known)
+        b = system.rhs(R)
+        Un = system.solve(b, known)
         t2 = time.perf_counter()
-        relative_displacement(Un, U, Vn)
+        kern = compiled_kernels()
+        if kern is not None:  # what CubicStylizer.steps does after the solve
+            S, V_out, *_ = kern.cube_after_solve(*system._k_blocks(), Un, R, st.normals, None,
+                                                 prox.diagonal, lam_a, U, Vn, st.scale,
+                                                 st.center)
+        else:
+            relative_displacement(Un, U, Vn)
+            S = system.covariances(Un)
+            float((lam_a * prox.norm(np.einsum("kab,kb->ka", R, st.normals))).sum())
+            V_out = None
         U = Un
-        S = system.covariances(U)
-        system.energy(U, R, exact=False, covariances=S)
-        float((lam_a * prox.norm(np.einsum("kab,kb->ka", R, st.normals))).sum())
-        st._to_output(U)
+        system.energy_after_solve(U, R, b, rotations=True, covariances=S)
+        st._to_output(U, V_out)
         t3 = time.perf_counter()
         t_local += t1 - t0
         t_global += t2 - t1
@@ -184,12 +193,18 @@ def threads_child(repeat: int) -> None:
     times["covariances K U"] = 1e3 * median_seconds(lambda: system.covariances(U), reps)
     times["right-hand side K^T R"] = 1e3 * median_seconds(lambda: system.rhs(R), reps)
     times["solve (cholespy)"] = 1e3 * median_seconds(lambda: system.solve(b, known), reps)
-    times["ARAP energy terms"] = 1e3 * median_seconds(
+    times["ARAP energy terms (general)"] = 1e3 * median_seconds(
         lambda: system.energy(U, R, exact=False, covariances=S), reps)
+    times["energy after solve (the run's)"] = 1e3 * median_seconds(
+        lambda: system.energy_after_solve(U, R, b, rotations=True), reps)
+    Uo = U + 1e-3
     if kern is not None:
         times["L1 term"] = 1e3 * median_seconds(
             lambda: kern.cube_l1_energy(R, st.normals, None, prox.diagonal, lam_a), reps)
-    Uo = U + 1e-3
+        times["after solve: K U + L1 + move + out"] = 1e3 * median_seconds(
+            lambda: kern.cube_after_solve(*system._k_blocks(), U, R, st.normals, None,
+                                          prox.diagonal, lam_a, Uo, Vn, st.scale, st.center),
+            reps)
     times["relative displacement"] = 1e3 * median_seconds(
         lambda: relative_displacement(U, Uo, Vn), reps)
     child_report(times)

@@ -275,6 +275,14 @@ def relative_displacement(U_new: np.ndarray, U_old: np.ndarray, U_rest: np.ndarr
         return 0.0
     if diag is None:
         diag = float(np.linalg.norm(np.ptp(U_rest, axis=0))) if len(U_rest) else 0.0
+    return displacement_ratio(step, total, diag, floor)
+
+
+def displacement_ratio(step: float, total: float, diag: float, floor: float = 1e-9) -> float:
+    """:func:`relative_displacement` from its three maxima (the largest move of the iteration,
+    the largest move from the rest, the rest's bounding-box diagonal)."""
+    if step == 0.0:
+        return 0.0
     total = max(total, floor * diag)
     return step / total if total > 0 else np.inf
 
@@ -394,12 +402,15 @@ class ArapSystem:
         self._KT = self.K.T.tocsr()
         self._blocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._tblocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._crows: tuple[np.ndarray, np.ndarray, sp.csr_matrix] | None = None
 
         # C_i = sum_{t in cell i} w d d^T
         outer = (wd[:, :, None] * d[:, None, :]).reshape(T, 9)
         self.rest_covariance = np.column_stack(
             [np.bincount(cell, weights=outer[:, k], minlength=nc) for k in range(9)]
         ).reshape(nc, 3, 3)
+        self._trace_rest_covariance = float(np.trace(self.rest_covariance, axis1=1,
+                                                     axis2=2).sum())
 
         # Q = G^T W G
         qr = np.concatenate([tail, head, tail, head])
@@ -695,6 +706,61 @@ class ArapSystem:
         dt = U[self._head] - U[self._tail]
         Rd = np.einsum("tab,tb->ta", R[self._cell], self._rest_edges)
         return float(0.5 * (self._w * ((Rd - dt) ** 2).sum(axis=1)).sum())
+
+    def energy_after_solve(self, U: np.ndarray, R: np.ndarray, rhs: np.ndarray, *,
+                           rotations: bool = False,
+                           covariances: np.ndarray | None = None) -> float:
+        """``energy(U, R, exact=False)`` right after a global step, in one dot product.
+
+        For the local-global loops, which plot the energy after every global step.
+
+        Parameters
+        ----------
+        U : (n, 3) float64, ``solve(rhs, ...)``, possibly moved afterwards by a translation of
+            each connected part.
+        R : (n_cells, 3, 3) the local step's rotations (or linear maps).
+        rhs : (n, 3) ``self.rhs(R)``, exactly the right-hand side ``U`` was solved with.
+        rotations : R are rotations (orthonormal to round-off).
+        covariances : ``self.covariances(U)`` when the caller has it (used by the general path).
+
+        Returns
+        -------
+        float, equal to ``energy(U, R, exact=False)`` to its round-off (about
+        ``1e-16 * sum w |d|^2``).
+
+        Notes
+        -----
+        Write ``b = rhs = K^T [R_1^T; ...]`` and ``S_i = K_i U``:
+
+        * ``sum_i tr(R_i S_i) = U . b`` (the same sum regrouped), for any ``U``;
+        * ``tr(R_i C_i R_i^T) = tr(C_i)`` for a rotation;
+        * ``Q U = b`` on every unconstrained coordinate (that is the global step; a translation
+          of a part changes neither side: ``Q`` and ``K`` map constants to zero), so
+          ``U . Q U = U . b + sum_c U_c ((Q U)_c - b_c)`` over the constrained coordinates c,
+          whose few rows of ``Q U`` are computed.
+
+        So ``E = 1/2 tr C - U . b + 1/2 U . Q U = 1/2 (tr C - U . b + sum_c ...)``. Linear maps
+        that are not rotations, an iterative backend (it meets ``Q U = b`` only to its
+        tolerance) and soft handles (they add terms to the solved system) take the general
+        path, :meth:`energy`.
+        """
+        U = np.ascontiguousarray(U, dtype=np.float64).reshape(self.n, 3)
+        if (not rotations or self._soft_idx.size
+                or self.backend not in ("cholmod", "superlu")):
+            return self.energy(U, R, exact=False, covariances=covariances)
+        b = np.asarray(rhs, dtype=np.float64).reshape(self.n, 3)
+        e2 = self._trace_rest_covariance - float(np.einsum("ij,ij->", U, b))
+        rows, mask, Q_rows = self._constrained_rows()
+        if rows.size:
+            e2 += float((U[rows] * (Q_rows @ U - b[rows]))[mask].sum())
+        return 0.5 * e2
+
+    def _constrained_rows(self) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix]:
+        """Vertices with a constrained coordinate, their (k, 3) mask and Q's rows (cached)."""
+        if self._crows is None:
+            rows = np.flatnonzero(self.constrained.any(axis=1))
+            self._crows = (rows, self.constrained[rows], sp.csr_matrix(self.Q)[rows])
+        return self._crows
 
     def soft_energy(self, U: np.ndarray, soft_targets: np.ndarray) -> float:
         """``sum_h k_h / 2 ||u_h - p_h||^2`` of the soft handles (0 when there are none)."""

@@ -128,7 +128,13 @@ from ..mesh.operators import barycentric_vertex_areas, normalize_unit_box, verte
 from ..mesh.topology import connected_components
 from ..params import param, validate_params
 from ..steps import Step, run_to_end
-from .arap import ArapSystem, compiled_kernels, procrustes_rotations, relative_displacement
+from .arap import (
+    ArapSystem,
+    compiled_kernels,
+    displacement_ratio,
+    procrustes_rotations,
+    relative_displacement,
+)
 
 __all__ = [
     "STYLE_PRESETS",
@@ -803,8 +809,11 @@ class CubicStylizer:
         self.normals = vertex_normals(Vn, F)
         self.areas = areas
 
-    def _to_output(self, U: np.ndarray) -> np.ndarray:
-        out = U * self.scale + self.center
+    def _to_output(self, U: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``U`` in the input's units (``out``: that product, already computed), with the
+        exactly prescribed coordinates copied from the input."""
+        if out is None:
+            out = U * self.scale + self.center
         if len(self._exact_rows):
             out[self._exact_rows, self._exact_cols] = self.exact[self._exact_rows,
                                                                  self._exact_cols]
@@ -909,27 +918,38 @@ class CubicStylizer:
         U = Vn.copy()
         U[system.constrained] = known[system.constrained]
         # the run stops on the tolerance: the number of iterations is not known in advance
-        total = None if params.rel_displacement_tol > 0 else params.max_iterations
+        total_its = None if params.rel_displacement_tol > 0 else params.max_iterations
         kern = compiled_kernels()
+        fused = kern is not None and prox.diagonal is not None and system.n_cells == n
         S = system.covariances(U)
         for it in range(1, params.max_iterations + 1):
             if not params.warm_start:
                 state = AdmmState.initial(n, params.rho0)
             R, iters = admm_local_step(S, self.normals, lam_a, prox, state, params, frames, use)
-            Un = system.solve(system.rhs(R), known)
+            b = system.rhs(R)
+            Un = system.solve(b, known)
             for verts, w, dims, rest_centroid in self._recenter:
                 if isinstance(verts, slice):
                     Un[:, dims] += rest_centroid - w @ Un[:, dims]
                 else:
                     Un[np.ix_(verts, dims)] += rest_centroid - w @ Un[verts][:, dims]
-            disp = relative_displacement(Un, U, Vn)
-            U = Un
-            # the covariances at the new positions: for the energy now, the local step next
-            S = system.covariances(U)
-            e_arap = max(system.energy(U, R, exact=False, covariances=S), 0.0)
-            if kern is not None and prox.diagonal is not None:
-                e_l1 = float(kern.cube_l1_energy(R, self.normals, frames, prox.diagonal, lam_a))
+            if fused:
+                # the covariances at the new positions (for the local step next), the L1 term,
+                # the move and the output in one parallel pass over the vertices
+                S, V_out, e_l1, step, total, bbox = kern.cube_after_solve(
+                    *system._k_blocks(), Un, R, self.normals, frames, prox.diagonal, lam_a, U,
+                    Vn, self.scale, self.center)
+                disp = displacement_ratio(step, total, bbox)
+                U = Un
             else:
+                disp = relative_displacement(Un, U, Vn)
+                U = Un
+                S = system.covariances(U)
+                V_out = None
+            # U solves Q U = b up to translations of its parts and R are rotations: the
+            # energy is one dot product
+            e_arap = max(system.energy_after_solve(U, R, b, rotations=True, covariances=S), 0.0)
+            if not fused:
                 if kern is not None:
                     Rn = np.empty((n, 3))
                     if frames is None:
@@ -950,7 +970,7 @@ class CubicStylizer:
                 "admm_iterations": float(iters.sum() / n_ran) if n_ran else 0.0,
                 "admm_iterations_max": float(iters.max()) if n_ran else 0.0,
             }
-            yield Step(iteration=it, total=total, V=self._to_output(U),
+            yield Step(iteration=it, total=total_its, V=self._to_output(U, V_out),
                        metrics=metrics, message=f"iteration {it}, relative move {disp:.2e}")
             if disp < params.rel_displacement_tol:
                 break

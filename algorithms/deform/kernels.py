@@ -69,6 +69,7 @@ __all__ = [
     "frame_normals",
     "displacement_maxima",
     "block_covariances",
+    "cube_after_solve",
     "block_rhs",
     "quadratic_form",
     "cube_l1_energy",
@@ -665,6 +666,12 @@ def _displacement_maxima(U_new, U_old, U_rest, par):
         _displacement_par(U_new, U_old, U_rest, parts)
     else:
         _displacement_ser(U_new, U_old, U_rest, parts)
+    return _combine_displacement(parts, n)
+
+
+@njit(**_OPTS)
+def _combine_displacement(parts, n):
+    """(max step, max total, bbox diagonal) from the per-chunk rows of :func:`_displacement_rows`."""
     step2 = 0.0
     total2 = 0.0
     nan = False
@@ -735,6 +742,81 @@ def block_covariances(ptr, col, val, U, S):
     ``K[3 i + a, col[k]] = val[k, a]``. S: (n, 3, 3) output. Chunks of cells on threads.
     """
     (_covariances_par if _par(S.shape[0], CHUNK) else _covariances_ser)(ptr, col, val, U, S)
+
+
+@njit(**_OPTS)
+def _cube_after_solve_rows(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old, U_rest,
+                           scale, center, V_out, l1, parts, c, lo, hi):
+    _covariance_rows(ptr, col, val, U, S, lo, hi)
+    _cube_l1_rows(R, normals, frames, diag, lam_a, lo, hi, l1)
+    _displacement_rows(U, U_old, U_rest, lo, hi, parts[c])
+    c0, c1, c2 = center[0], center[1], center[2]
+    for i in range(lo, hi):
+        V_out[i, 0] = U[i, 0] * scale + c0
+        V_out[i, 1] = U[i, 1] * scale + c1
+        V_out[i, 2] = U[i, 2] * scale + c2
+
+
+@njit(**_PAR)
+def _cube_after_solve_par(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old, U_rest,
+                          scale, center, V_out, l1, parts):
+    n = U.shape[0]
+    for c in prange(parts.shape[0]):
+        _cube_after_solve_rows(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old,
+                               U_rest, scale, center, V_out, l1, parts, c, c * CHUNK,
+                               min(n, (c + 1) * CHUNK))
+
+
+@njit(**_OPTS)
+def _cube_after_solve_ser(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old, U_rest,
+                          scale, center, V_out, l1, parts):
+    n = U.shape[0]
+    for c in range(parts.shape[0]):
+        _cube_after_solve_rows(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old,
+                               U_rest, scale, center, V_out, l1, parts, c, c * CHUNK,
+                               min(n, (c + 1) * CHUNK))
+
+
+@njit(**_OPTS)
+def _cube_after_solve(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old, U_rest,
+                      scale, center, V_out, par):
+    n = U.shape[0]
+    l1 = np.empty(n)
+    parts = np.empty(((n + CHUNK - 1) // CHUNK, 9))
+    if par:
+        _cube_after_solve_par(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old,
+                              U_rest, scale, center, V_out, l1, parts)
+    else:
+        _cube_after_solve_ser(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old,
+                              U_rest, scale, center, V_out, l1, parts)
+    e_l1 = 0.0
+    for i in range(n):  # vertex order, as cube_l1_energy
+        e_l1 += l1[i]
+    step, total, bbox = _combine_displacement(parts, n)
+    return e_l1, step, total, bbox
+
+
+def cube_after_solve(ptr, col, val, U, R, normals, frames, diag, lam_a, U_old, U_rest, scale,
+                     center):
+    """Cubic stylization's work after a global step, in one pass over the vertices (one
+    parallel launch instead of one and three serial passes), for vertex cells (``n_cells ==
+    n``):
+
+    * ``S``: :func:`block_covariances` of ``U`` (the next local step's, the energy's);
+    * ``e_l1``: :func:`cube_l1_energy` ``(R, normals, frames, diag, lam_a)``;
+    * ``step, total, bbox``: :func:`displacement_maxima` ``(U, U_old, U_rest)``;
+    * ``V_out = U * scale + center`` (the output in the input's units).
+
+    Returns ``(S, V_out, e_l1, step, total, bbox)``; every number the same, bit for bit, as the
+    separate kernels' (and for any thread count).
+    """
+    n = U.shape[0]
+    S = np.empty((n, 3, 3))
+    V_out = np.empty((n, 3))
+    e_l1, step, total, bbox = _cube_after_solve(
+        ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old, U_rest, float(scale),
+        np.asarray(center, dtype=np.float64), V_out, _par(n, CHUNK))
+    return S, V_out, e_l1, step, total, bbox
 
 
 @njit(**_OPTS)

@@ -121,6 +121,67 @@ def test_energy_matches_an_independent_loop():
     assert fd == pytest.approx(grad, rel=1e-6, abs=1e-9)
 
 
+@pytest.mark.parametrize("case", ["pinned", "fixed_and_planes", "translated_parts", "superlu"])
+def test_energy_after_solve_is_the_energy(case):
+    """energy_after_solve (one dot product after a global step) is the energy: against the
+    exact per-edge sum, with fixed vertices, per-coordinate constraints, an unreferenced vertex,
+    a mesh in two parts each moved by a translation after the solve, and both direct solvers."""
+    V, F = bumpy_sphere(2, seed=11)
+    rng = np.random.default_rng(12)
+    kw = {}
+    if case == "fixed_and_planes":
+        V = np.vstack([V, [[5.0, 5.0, 5.0]]])  # used by no triangle: constrained
+        kw = dict(fixed=[0, 7, 9], coord_constraints=([3, 4, 4], [0, 1, 2]))
+    elif case == "translated_parts":
+        V = np.vstack([V, V + [3.0, 0.0, 0.0]])
+        F = np.vstack([F, F + len(V) // 2])
+        kw = dict(fixed=[0, len(V) // 2])
+    else:
+        kw = dict(fixed=[0])
+    if case == "superlu":
+        kw["backend"] = "superlu"
+    system = ArapSystem(V, F, **kw)
+    known = V + 0.05 * rng.standard_normal(V.shape)
+    R = random_rotations(len(V), seed=13)
+    b = system.rhs(R)
+    U = system.solve(b, known)
+    if case == "translated_parts":  # the part-by-part recentring of cubic stylization
+        half = len(V) // 2
+        U[:half] += [0.1, -0.2, 0.3]
+        U[half:] += [-0.4, 0.0, 0.2]
+    exact = system.energy(U, R)
+    assert exact > 1e-3
+    fast = system.energy_after_solve(U, R, b, rotations=True)
+    assert fast == pytest.approx(exact, rel=1e-10)
+    assert fast == pytest.approx(system.energy(U, R, exact=False), rel=1e-10)
+    # the identity needs U to solve the system for b: a U that does not gives another number
+    scaled = 1.05 * U
+    wrong = system.energy_after_solve(scaled, R, b, rotations=True)
+    assert abs(wrong - system.energy(scaled, R)) > 1e-4 * system.energy(scaled, R)
+
+
+def test_energy_after_solve_takes_the_general_path_where_the_identity_fails():
+    """Linear maps that are not rotations, soft handles and the multigrid backend: the value
+    is energy(exact=False) itself."""
+    V, F = bumpy_sphere(2, seed=14)
+    rng = np.random.default_rng(15)
+    R = 1.3 * random_rotations(len(V), seed=16)  # scaled rotations (ACAP-like)
+    system = ArapSystem(V, F, fixed=[0])
+    b = system.rhs(R)
+    U = system.solve(b, V)
+    assert system.energy_after_solve(U, R, b) == system.energy(U, R, exact=False)
+    soft = ArapSystem(V, F, fixed=[0], soft_handles=([5, 9], 10.0))
+    b = soft.rhs(R / 1.3)
+    U = soft.solve(b, V, soft_targets=V[[5, 9]] + 0.1)
+    assert soft.energy_after_solve(U, R / 1.3, b, rotations=True) == soft.energy(
+        U, R / 1.3, exact=False)
+    mg = ArapSystem(V, F, fixed=[0], backend="multigrid")
+    b = mg.rhs(R / 1.3)
+    U = mg.solve(b, V + 0.01 * rng.standard_normal(V.shape))
+    assert mg.energy_after_solve(U, R / 1.3, b, rotations=True) == mg.energy(
+        U, R / 1.3, exact=False)
+
+
 def test_rest_state_is_a_fixed_point():
     V, F = bumpy_sphere(2, seed=8)
     system = ArapSystem(V, F, fixed=[3])

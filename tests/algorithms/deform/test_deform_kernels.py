@@ -214,6 +214,38 @@ def test_operators_match_the_sparse_products(numpy_path):
         assert relative_displacement(bad, V, V) == np.inf
 
 
+@pytest.mark.parametrize("frames", [False, True])
+def test_cube_after_solve_is_the_separate_kernels_bit_for_bit(frames):
+    """The fused pass after a global step (covariances, L1 term, move maxima, output) gives the
+    numbers of the separate kernels exactly, with and without local frames; a NaN reaches the
+    move (the run then never stops on it) without changing the other outputs."""
+    V, F = icosphere(4)  # 2,562 vertices: several chunks, so threads when there are two
+    rng = np.random.default_rng(21)
+    system = ArapSystem(V, F, fixed=[0])
+    n = len(V)
+    U = V + 0.02 * rng.standard_normal(V.shape)
+    U_old = V + 0.01 * rng.standard_normal(V.shape)
+    R = Rotation.random(n, random_state=22).as_matrix()
+    normals = V / np.linalg.norm(V, axis=1, keepdims=True)
+    lam_a = 0.2 * rng.random(n)
+    diag = np.array([1.0, 0.5, 2.0])
+    Q = Rotation.random(n, random_state=23).as_matrix() if frames else None
+    center, scale = np.array([0.3, -1.0, 2.0]), 1.7
+    S, V_out, e_l1, step, total, bbox = kernels.cube_after_solve(
+        *system._k_blocks(), U, R, normals, Q, diag, lam_a, U_old, V, scale, center)
+    np.testing.assert_array_equal(S, system.covariances(U))
+    np.testing.assert_array_equal(V_out, U * scale + center)
+    assert e_l1 == kernels.cube_l1_energy(R, normals, Q, diag, lam_a)
+    assert (step, total, bbox) == kernels.displacement_maxima(U, U_old, V)
+    assert arap.displacement_ratio(step, total, bbox) == relative_displacement(U, U_old, V)
+    bad = U.copy()
+    bad[5, 2] = np.nan
+    out = kernels.cube_after_solve(*system._k_blocks(), bad, R, normals, Q, diag, lam_a, U_old,
+                                   V, scale, center)
+    assert np.isnan(out[3]) and arap.displacement_ratio(*out[3:]) == np.inf
+    assert out[2] == e_l1
+
+
 # ------------------------------------------------------------------------------ cubic local step
 def spot_local_problem(lam=0.2):
     m = read_mesh(shared_mesh("spot_lowres.obj"))
