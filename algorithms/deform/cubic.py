@@ -96,7 +96,8 @@ Choices written down here:
   (:func:`algorithms.deform.arap.relative_displacement`); scale-free. With lambda = 0 nothing moves
   and the run stops after one iteration.
 * Metrics: ``energy`` = E(U_k, R_k) after the global step (ARAP + the lambda-weighted L1 term;
-  the ARAP part from the precomputed operators, ``ArapSystem.energy(exact=False)``),
+  the ARAP part ``ArapSystem.energy_after_solve``: ``1/2 (tr C - U.b)`` from the solve's own
+  right-hand side, equal to ``energy(exact=False)`` to round-off),
   ``arap``, ``l1``, ``displacement``, ``admm_iterations`` (mean inner iterations over the vertices
   that ran ADMM) and ``admm_iterations_max``.
 
