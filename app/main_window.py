@@ -20,7 +20,7 @@ from algorithms.errors import Stylize3DError
 from algorithms.mesh import (SUPPORTED_READ, SUPPORTED_WRITE, clean_mesh, file_filter, read_mesh,
                              validate_mesh, write_mesh)
 from algorithms.steps import Step
-from app import __version__, dialogs
+from app import __version__, dialogs, gc_guard
 from app.commands import StateCommand
 from app.document import Document
 from app.jobs import JobRunner
@@ -91,6 +91,9 @@ class MainWindow(QMainWindow):
         # compiled calls that keep Python's lock (remeshing, exact intersection tests, CHOLMOD
         # refactorizations every step) would freeze this window while a job runs
         offload.keep_lock_free(True)
+        # cyclic garbage (which may hold Qt and VTK objects) is collected on this thread only
+        gc_guard.acquire()
+        self._gc_acquired = True
         self.settings = settings or QSettings(APP_NAME, APP_NAME)
         self.document = Document()
         self.undo_stack = QUndoStack(self)
@@ -1142,3 +1145,6 @@ class MainWindow(QMainWindow):
         for vp in self.findChildren(Viewport):  # the main view and panel views (Gauss map)
             vp.close_plotter()
         event.accept()
+        if self._gc_acquired:
+            self._gc_acquired = False
+            gc_guard.release()

@@ -35,7 +35,8 @@ NUMBA_NUM_THREADS=1 and =2 (alternating rounds, benchmarks/_threads.py) and prin
 the medians and the ratio 2/1: a whole run (ms per iteration, the thesis's stopping rule), the
 local step (ADMM, the warm state of the run's 10th iteration), covariances K U, right-hand side
 K^T R, the prefactored solve (CHOLMOD through cholespy: one thread whatever NUMBA_NUM_THREADS
-says), and the energy / L1 / displacement terms. ``--no-threads`` skips it; ``--rounds`` sets
+says), the energy / L1 / displacement terms one by one (the general energy sum, and the one dot
+product the run uses), and the run's fused pass after the solve (covariances, L1, move, output). ``--no-threads`` skips it; ``--rounds`` sets
 the rounds.
 
 Usage: .venv/bin/python benchmarks/cubic.py [--lam 0.2] [--repeat 3] [--no-numpy] [--no-frames]
