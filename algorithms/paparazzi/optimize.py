@@ -270,6 +270,7 @@ class Paparazzi:
         self.edge_length = float(igl.edge_lengths(V0, F0).mean())
         self.input_intersections = count_self_intersections(V0, F0)
         self._crossings_tree = None
+        self._input_crease_tree = None  # built on first use (FilterSpec.crease_from_input)
         if self.input_intersections:
             from scipy.spatial import cKDTree
 
@@ -358,6 +359,8 @@ class Paparazzi:
         angle = float(getattr(self.spec, "crease_angle", 0.0) or 0.0)
         creases = (crease_edges(V, F, angle) if angle > 0 and self._crossings_tree is None
                    else np.zeros((0, 2), np.int64))
+        if len(creases) and getattr(self.spec, "crease_from_input", False):
+            creases = creases[self._on_input_creases(V, creases)]
         fixed = np.flatnonzero(~free[:n]).astype(np.int32)
         if len(fixed):
             order = np.concatenate([fixed, np.flatnonzero(free[:n])]).astype(np.int32)
@@ -372,6 +375,28 @@ class Paparazzi:
                             np.ascontiguousarray(F, np.int32), int(self.params.remesh_iterations),
                             float(self.edge_length), len(fixed),
                             np.ascontiguousarray(creases, np.int32))
+
+    def _on_input_creases(self, V, E) -> np.ndarray:
+        """Which edges ``E`` of the current mesh lie on the input's creases (edges sharper than
+        the filter's crease angle): both ends and the midpoint within half a target edge
+        length of the input's crease lines (sampled every quarter edge length)."""
+        if self._input_crease_tree is None:
+            from scipy.spatial import cKDTree
+
+            C = crease_edges(self.V0, self.F0, float(self.spec.crease_angle))
+            if not len(C):
+                self._input_crease_tree = False
+            else:
+                a, b = self.V0[C[:, 0]], self.V0[C[:, 1]]
+                k = max(2, int(np.ceil(np.linalg.norm(b - a, axis=1).max()
+                                       / (0.25 * self.edge_length))) + 1)
+                t = np.linspace(0.0, 1.0, k)[None, :, None]
+                self._input_crease_tree = cKDTree((a[:, None] + t * (b - a)[:, None]).reshape(-1, 3))
+        if self._input_crease_tree is False:
+            return np.zeros(len(E), dtype=bool)
+        P = np.concatenate([V[E[:, 0]], V[E[:, 1]], 0.5 * (V[E[:, 0]] + V[E[:, 1]])])
+        d, _ = self._input_crease_tree.query(P)
+        return (d.reshape(3, -1) <= 0.5 * self.edge_length).all(axis=0)
 
     def band_fraction(self, V, F) -> float:
         """Share of the edges outside ``[4/5 h, 4/3 h]`` (the ones remeshing would change)."""

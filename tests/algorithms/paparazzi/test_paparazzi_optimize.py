@@ -326,6 +326,42 @@ def test_piecewise_planar_filters_keep_creases_through_remeshing():
     assert planar[45.0] > 0.5 and planar[45.0] > planar[0.0] + 0.3
 
 
+def test_creases_from_the_input_keep_a_boxs_edges_but_not_new_folds():
+    """FilterSpec.crease_from_input (neural-style): of the current mesh's sharp edges only those
+    on the input's creases count; a sharp fold the run made elsewhere does not (kept as a
+    crease it could be neither flipped nor collapsed, and such remeshings crossed the
+    surface)."""
+    from algorithms.mesh.primitives import cube
+    from algorithms.paparazzi.optimize import crease_edges
+
+    spec = get_filter("neural-style")
+    assert spec.crease_angle == 45.0 and spec.crease_from_input
+    assert not any(get_filter(n).crease_from_input for n in ("slic", "l0", "guided"))
+    V, F = cube(subdivisions=6)
+    register_filter("test-identity-input-creases", kind="iterative", crease_angle=45.0,
+                    crease_from_input=True)(lambda image, params, ctx: image)
+    try:
+        run = Paparazzi(V, F, "test-identity-input-creases", None,
+                        PaparazziParams(iterations=1, resolution=32))
+    finally:
+        unregister_filter("test-identity-input-creases")
+    X = run.V0.copy()
+    box_edges = crease_edges(X, F, 45.0)
+    assert len(box_edges) == 12 * 7                      # 12 edges of 7 segments
+    np.testing.assert_array_equal(run._on_input_creases(X, box_edges), True)
+    # a spike in the middle of a face of the box: its sharp edges are not the input's creases
+    c = X.mean(axis=0)
+    middle = int(np.argmin(np.linalg.norm(X - [c[0], c[1], X[:, 2].max()], axis=1)))
+    X[middle, 2] += 2.0 * run.edge_length
+    moved = crease_edges(X, F, 45.0)
+    assert len(moved) > len(box_edges)
+    keep = run._on_input_creases(X, moved)
+    on_box = np.isin(moved[:, 0] * len(X) + moved[:, 1], box_edges[:, 0] * len(X)
+                     + box_edges[:, 1])
+    assert on_box.sum() == len(box_edges) and (moved[~on_box] == middle).any()
+    np.testing.assert_array_equal(keep, on_box)   # the box's edges, not the spike's folds
+
+
 def test_monitor_energy_is_the_mean_over_16_fixed_views_spread_around_the_shape(tmp_path):
     # issue 23: one monitor view sees a sixth of the shape at most; the run's monitor is the
     # mean energy of >= 16 fixed views spread over the offset surface, the same views all run
