@@ -28,8 +28,9 @@ per run:
                         self-intersecting pairs in -> out
 
 Measures (algorithms/paparazzi/measures.py): quantize palette15 (up); slic, l0 planar3 (up;
-also flat1); guided bending sum |L V|^2 / M (down); neural-style Gram loss of monitor view 0
-against its stylization (down).
+also flat1); guided bending sum |L V|^2 / M (down); neural-style Gram16: the Gram loss of each
+monitor view (of the 16 the shape covers at least half of) against its stylization, averaged
+(down; until 26 November 2026 monitor view 0 alone).
 
 Unless --no-sheets, writes one contact sheet per filter, docs/images/paparazzi_<filter>.png:
 one row per mesh, before / after / control, rendered off-screen with a grey light from a fixed
@@ -97,18 +98,25 @@ def clean_of(name):
     return load(name[len("noisy:"):] if name.startswith("noisy:") else name)
 
 
-def _gram_monitor(run, V, F):
-    """Gram loss between monitor view 0 (world-frame V) and the filter's stylization of it."""
+def _gram_monitor(run, V, F, views=1):
+    """Gram loss between a monitor view of world-frame V and the filter's stylization of it:
+    view 0 (``views=1``), or the mean over the first ``views`` monitor views that the shape
+    covers at least half of (``views=16``: *Gram16*; one view is a noisy judge, see
+    docs/paparazzi.md)."""
     from algorithms.paparazzi.filters import FilterContext
     from algorithms.paparazzi.neural_style import gram_style_loss
     from algorithms.render import render
 
-    cam = run.monitor_cameras()[0]
     X = (np.asarray(V) - run.center) / run.scale
-    r = render(X, F, cam, run.shading)
-    ctx = FilterContext(camera=cam, mask=r.mask, state=run.state)
-    styled = run.spec.function(r.image, run.filter_params, ctx)
-    return gram_style_loss(r.image, styled)
+    losses = []
+    for cam in run.monitor_cameras()[:views]:
+        r = render(X, F, cam, run.shading)
+        if views > 1 and r.mask.mean() < 0.5:
+            continue
+        ctx = FilterContext(camera=cam, mask=r.mask, state=run.state)
+        styled = run.spec.function(r.image, run.filter_params, ctx)
+        losses.append(gram_style_loss(r.image, styled))
+    return float(np.mean(losses))
 
 
 def measure(name, run, V, F):
@@ -121,7 +129,7 @@ def measure(name, run, V, F):
     if name == "guided":
         return "bending", bending_energy(V, F), -1
     if name == "neural-style":
-        return "gram", _gram_monitor(run, V, F), -1
+        return "gram16", _gram_monitor(run, V, F, views=16), -1
     raise KeyError(name)
 
 
