@@ -671,7 +671,8 @@ def _displacement_maxima(U_new, U_old, U_rest, par):
 
 @njit(**_OPTS)
 def _combine_displacement(parts, n):
-    """(max step, max total, bbox diagonal) from the per-chunk rows of :func:`_displacement_rows`."""
+    """(max step, max total, bbox diagonal) from the per-chunk rows of
+    :func:`_displacement_rows`."""
     step2 = 0.0
     total2 = 0.0
     nan = False

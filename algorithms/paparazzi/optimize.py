@@ -391,7 +391,8 @@ class Paparazzi:
                 k = max(2, int(np.ceil(np.linalg.norm(b - a, axis=1).max()
                                        / (0.25 * self.edge_length))) + 1)
                 t = np.linspace(0.0, 1.0, k)[None, :, None]
-                self._input_crease_tree = cKDTree((a[:, None] + t * (b - a)[:, None]).reshape(-1, 3))
+                samples = (a[:, None] + t * (b - a)[:, None]).reshape(-1, 3)
+                self._input_crease_tree = cKDTree(samples)
         if self._input_crease_tree is False:
             return np.zeros(len(E), dtype=bool)
         P = np.concatenate([V[E[:, 0]], V[E[:, 1]], 0.5 * (V[E[:, 0]] + V[E[:, 1]])])
