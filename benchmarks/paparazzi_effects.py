@@ -4,7 +4,7 @@ beats remeshing alone (the control) and leaves a clean 2-manifold with the input
 
     python benchmarks/paparazzi_effects.py [--meshes spot_lowres.obj bob.obj fandisk.off
         camelhead.off blob.obj bumpy.obj pretzel.obj] [--filters guided quantize slic l0
-        neural-style] [--iterations 1000] [--no-sheets]
+        neural-style] [--iterations 1000] [--no-sheets] [--remesh-near-bad LO HI AMIN]
     python benchmarks/paparazzi_effects.py --suspects [--meshes bob.obj fandisk.off]
     python benchmarks/paparazzi_effects.py --noisy [--save DIR] [--sheet-tag _noisy]
     python benchmarks/paparazzi_effects.py --pretzel [--iterations 1000]
@@ -139,11 +139,39 @@ def control_spec(spec):
                                function=lambda image, params, ctx: image)
 
 
+#: ``--remesh-near-bad``: the remesher moves only the vertices within one ring of an edge
+#: outside [LO h, HI h] or of a triangle with an angle below AMIN degrees (an experiment towards
+#: El Topo's "bad elements only"; docs/paparazzi.md, "What is left")
+NEAR_BAD = None   # (LO, HI, AMIN) when the flag is given
+
+
+def remesh_near_bad(run, lo, hi, amin):
+    """Restrict ``run``'s remeshing to the neighbourhood of bad elements (see NEAR_BAD)."""
+    import igl
+
+    original = run._remesh
+
+    def remesh(V, F, free):
+        E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+        L = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+        h = run.edge_length
+        near = np.zeros(len(V), dtype=bool)
+        near[E[(L < lo * h) | (L > hi * h)].ravel()] = True
+        near[F[np.degrees(igl.internal_angles(V, F)).min(axis=1) < amin].ravel()] = True
+        ring = near.copy()
+        ring[F[near[F].any(axis=1)].ravel()] = True
+        return original(V, F, free & ring)
+
+    run._remesh = remesh
+
+
 def run_filter(V, F, spec, fparams, params):
     from algorithms.paparazzi import Paparazzi
 
     t = time.perf_counter()
     run = Paparazzi(V, F, spec, fparams, params)
+    if NEAR_BAD is not None:
+        remesh_near_bad(run, *NEAR_BAD)
     last = None
     for last in run.steps():
         pass
@@ -499,6 +527,10 @@ def main() -> int:
     ap.add_argument("--sheet-tag", default="",
                     help="docs/images/paparazzi_<filter><TAG>.png (e.g. _noisy)")
     ap.add_argument("--save", default=None, help="write each output and control mesh here")
+    ap.add_argument("--remesh-near-bad", nargs=3, type=float, default=None,
+                    metavar=("LO", "HI", "AMIN"),
+                    help="experiment: remesh only near edges outside [LO h, HI h] or angles "
+                         "below AMIN degrees (e.g. 0.5 2 20)")
     ap.add_argument("--noisy", action="store_true",
                     help="the noisy scans: noisy:fandisk.off noisy:bob.obj")
     ap.add_argument("--suspects", action="store_true")
@@ -507,6 +539,9 @@ def main() -> int:
     ap.add_argument("--noise-variance", action="store_true",
                     help="window colour variance of noise and creases (fandisk)")
     a = ap.parse_args()
+    if a.remesh_near_bad is not None:
+        global NEAR_BAD
+        NEAR_BAD = tuple(a.remesh_near_bad)
     if a.pretzel:
         return pretzel(a)
     if a.noise_variance:
