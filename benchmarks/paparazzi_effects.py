@@ -4,7 +4,7 @@ beats remeshing alone (the control) and leaves a clean 2-manifold with the input
 
     python benchmarks/paparazzi_effects.py [--meshes spot_lowres.obj bob.obj fandisk.off
         camelhead.off blob.obj bumpy.obj pretzel.obj] [--filters guided quantize slic l0
-        neural-style] [--iterations 1000] [--no-sheets] [--remesh-near-bad LO HI AMIN]
+        neural-style] [--iterations 1000] [--no-sheets] [--remesh-scope bad|all]
     python benchmarks/paparazzi_effects.py --suspects [--meshes bob.obj fandisk.off]
     python benchmarks/paparazzi_effects.py --noisy [--save DIR] [--sheet-tag _noisy]
     python benchmarks/paparazzi_effects.py --pretzel [--iterations 1000]
@@ -139,30 +139,15 @@ def control_spec(spec):
                                function=lambda image, params, ctx: image)
 
 
-#: ``--remesh-near-bad``: the remesher moves only the vertices within one ring of an edge
-#: outside [LO h, HI h] or of a triangle with an angle below AMIN degrees (an experiment towards
-#: El Topo's "bad elements only"; docs/paparazzi.md, "What is left")
-NEAR_BAD = None   # (LO, HI, AMIN) when the flag is given
+#: ``--remesh-scope``: PaparazziParams.remesh_scope of every run here
+SCOPE = "bad"
 
 
-def remesh_near_bad(run, lo, hi, amin):
-    """Restrict ``run``'s remeshing to the neighbourhood of bad elements (see NEAR_BAD)."""
-    import igl
+def PP(**kw):
+    """``PaparazziParams`` with this run's ``--remesh-scope``."""
+    from algorithms.paparazzi import PaparazziParams
 
-    original = run._remesh
-
-    def remesh(V, F, free):
-        E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-        L = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
-        h = run.edge_length
-        near = np.zeros(len(V), dtype=bool)
-        near[E[(L < lo * h) | (L > hi * h)].ravel()] = True
-        near[F[np.degrees(igl.internal_angles(V, F)).min(axis=1) < amin].ravel()] = True
-        ring = near.copy()
-        ring[F[near[F].any(axis=1)].ravel()] = True
-        return original(V, F, free & ring)
-
-    run._remesh = remesh
+    return PaparazziParams(remesh_scope=SCOPE, **kw)
 
 
 def run_filter(V, F, spec, fparams, params):
@@ -170,8 +155,6 @@ def run_filter(V, F, spec, fparams, params):
 
     t = time.perf_counter()
     run = Paparazzi(V, F, spec, fparams, params)
-    if NEAR_BAD is not None:
-        remesh_near_bad(run, *NEAR_BAD)
     last = None
     for last in run.steps():
         pass
@@ -248,7 +231,7 @@ def effects(a) -> int:
                       f"(its optional packages are missing)", flush=True)
                 continue
             spec = get_filter(name)
-            params = PaparazziParams(iterations=a.iterations)
+            params = PaparazziParams(iterations=a.iterations, remesh_scope=SCOPE)
             run, last, sec = run_filter(V, F, spec, spec.params(), params)
             # the control's vertices move only by remeshing (its gradient is zero), so it depends
             # on the filter only through the remeshing's crease angle: one run per angle
@@ -369,14 +352,14 @@ def suspects(a) -> int:
         V, F = got
         from algorithms.paparazzi import Paparazzi
 
-        probe = Paparazzi(V, F, spec, P(), PaparazziParams(iterations=1))
+        probe = Paparazzi(V, F, spec, P(), PP(iterations=1))
         px = probe.edge_length / probe.width * probe.resolution
         print(f"\n{mesh}: {len(V):,} vertices; mean edge {probe.edge_length:.4f} "
               f"(shape in a cube of side 2) = {px:.1f} px at {probe.resolution} px, view "
               f"{probe.width}")
         for label, (fp, lr, crease) in settings.items():
             variant = dataclasses.replace(spec, learning_rate=lr, crease_angle=crease)
-            run = Paparazzi(V, F, variant, fp, PaparazziParams(iterations=1))
+            run = Paparazzi(V, F, variant, fp, PP(iterations=1))
             rms, want, step = _step_against_change(run, V, F)
             print(f"  {label:<28} radius {fp.radius} px = {fp.radius / px:.2f} edges; colour "
                   f"change per view {rms:.3g} (rms per pixel) -> asks for {want:.3g} per step; "
@@ -399,14 +382,14 @@ def suspects(a) -> int:
         for crease in sorted({r[3] for r in rows}):
             ctl = dataclasses.replace(control_spec(spec), crease_angle=crease)
             _, _, _, clast = _remesh_effect(V, F, ctl, P(),
-                                            PaparazziParams(iterations=a.iterations))
+                                            PP(iterations=a.iterations))
             print(f"  control (remeshing alone, creases {'kept' if crease else 'free'}): "
                   f"bending {bending_energy(V, F):.4g} -> {bending_energy(clast.V, clast.F):.4g},"
                   f" crease5 {crease_fraction(V, F, clast.V, clast.F):.3f}", flush=True)
         for label, fp, lr, crease, extra in rows:
             variant = dataclasses.replace(spec, learning_rate=lr, crease_angle=crease)
             e0, e1, jumps, last = _remesh_effect(
-                V, F, variant, fp, PaparazziParams(iterations=a.iterations, **extra))
+                V, F, variant, fp, PP(iterations=a.iterations, **extra))
             up = sum(j[1] - j[0] for j in jumps)
             print(f"  {label:<28} E16 {e0:.4g} -> {e1:.4g} ({100 * (e1 - e0) / e0:+.1f} %); "
                   f"remeshings changed it by {up:+.4g} in all ({len(jumps)} of them); bending "
@@ -429,7 +412,7 @@ def pretzel(a) -> int:
 
     V, F = load("pretzel.obj")
     spec = get_filter("guided")
-    run = Paparazzi(V, F, spec, None, PaparazziParams(iterations=1))
+    run = Paparazzi(V, F, spec, None, PP(iterations=1))
     X, G = run.V0, run.F0
     cams = run.monitor_cameras()
     print(f"load average {os.getloadavg()[0]:.2f}; pretzel {len(X):,} vertices; guided defaults")
@@ -465,7 +448,7 @@ def pretzel(a) -> int:
                              ("no remeshing", None, {"remesh_every": 0})]:
         sp = spec if lr is None else dataclasses.replace(spec, learning_rate=lr)
         e0, e1, jumps, last = _remesh_effect(V, F, sp, None,
-                                             PaparazziParams(iterations=a.iterations, **extra))
+                                             PP(iterations=a.iterations, **extra))
         up = sum(j[1] - j[0] for j in jumps)
         print(f"  {label:<18} E16 {e0:.4f} -> {e1:.4f}; {len(jumps)} remeshings {up:+.4f}, steps "
               f"{e1 - e0 - up:+.4f}; bending {bending_energy(V, F):.1f} -> "
@@ -486,7 +469,7 @@ def noise_variance(a) -> int:
 
     Vc, F = load("fandisk.off")
     Vn, _ = load("noisy:fandisk.off")
-    run = Paparazzi(Vc, F, "guided", None, PaparazziParams(iterations=1))
+    run = Paparazzi(Vc, F, "guided", None, PP(iterations=1))
     eps, r = run.filter_params.epsilon, run.filter_params.radius
     Xc, Xn = (Vc - run.center) / run.scale, (Vn - run.center) / run.scale
     _, f0, f1, ang = _dihedral_angles(Vc, F)
@@ -527,10 +510,9 @@ def main() -> int:
     ap.add_argument("--sheet-tag", default="",
                     help="docs/images/paparazzi_<filter><TAG>.png (e.g. _noisy)")
     ap.add_argument("--save", default=None, help="write each output and control mesh here")
-    ap.add_argument("--remesh-near-bad", nargs=3, type=float, default=None,
-                    metavar=("LO", "HI", "AMIN"),
-                    help="experiment: remesh only near edges outside [LO h, HI h] or angles "
-                         "below AMIN degrees (e.g. 0.5 2 20)")
+    ap.add_argument("--remesh-scope", choices=("bad", "all"), default="bad",
+                    help="PaparazziParams.remesh_scope (default bad, the command line's; all: "
+                         "the whole surface re-placed, the default before 27 November 2026)")
     ap.add_argument("--noisy", action="store_true",
                     help="the noisy scans: noisy:fandisk.off noisy:bob.obj")
     ap.add_argument("--suspects", action="store_true")
@@ -539,9 +521,8 @@ def main() -> int:
     ap.add_argument("--noise-variance", action="store_true",
                     help="window colour variance of noise and creases (fandisk)")
     a = ap.parse_args()
-    if a.remesh_near_bad is not None:
-        global NEAR_BAD
-        NEAR_BAD = tuple(a.remesh_near_bad)
+    global SCOPE
+    SCOPE = a.remesh_scope
     if a.pretzel:
         return pretzel(a)
     if a.noise_variance:

@@ -124,14 +124,11 @@ class FilterSpec:
     remeshing alone rounded fandisk's creases, crease5 0.95 -> 0.01 in 1000 iterations, and
     raised the guided run's energy); 0 for quantize, whose facets meet at ~40 deg
     everywhere: kept creases there made camelhead's remeshings cross the surface (15 of 33
-    rejected, palette share 0.77 instead of 0.89). Ignored for an input that already crosses
-    itself (see ``Paparazzi._remesh``);
-    ``crease_from_input``: only the input's creases are kept (an edge sharper than
-    ``crease_angle`` counts only where it lies on an edge of the input that was), not the ones
-    the run makes -- for neural-style (45): its fine relief folds sharply here and there, and
-    kept as creases those folds made remeshings cross the surface (spot: 10-15 of 33 rejected,
-    1,058 vertices held still), while without creases remeshing rounded fandisk's edges (the
-    run's 33 remeshings added +145 to its energy over 16 views, its steps -89).
+    rejected, palette share 0.77 instead of 0.89); 0 for neural-style, whose relief folds
+    sharply here and there (kept as creases, those folds made remeshings cross the surface; the
+    input's creases alone, tried until 27 November 2026, made the orange sample's energy rise
+    with 3 rollbacks, against a fall without creases, now that remeshing moves only bad
+    elements). Ignored for an input that already crosses itself (see ``Paparazzi._remesh``).
     """
 
     name: str
@@ -150,7 +147,6 @@ class FilterSpec:
                                                           hash=False)
     optional_files: tuple[str, ...] = ()
     crease_angle: float = 0.0
-    crease_from_input: bool = False
 
     def make_shading(self, params) -> Shading:
         return self.shading(params) if self.shading is not None else LambertianShading()
