@@ -512,7 +512,7 @@ def main() -> int:
     ap.add_argument("--save", default=None, help="write each output and control mesh here")
     ap.add_argument("--remesh-scope", choices=("bad", "all"), default="bad",
                     help="PaparazziParams.remesh_scope (default bad, the command line's; all: "
-                         "the whole surface re-placed, the default before 27 November 2026)")
+                         "the whole surface re-placed, the default before issue 23's fourth pass)")
     ap.add_argument("--noisy", action="store_true",
                     help="the noisy scans: noisy:fandisk.off noisy:bob.obj")
     ap.add_argument("--suspects", action="store_true")

@@ -126,7 +126,7 @@ class FilterSpec:
     everywhere: kept creases there made camelhead's remeshings cross the surface (15 of 33
     rejected, palette share 0.77 instead of 0.89); 0 for neural-style, whose relief folds
     sharply here and there (kept as creases, those folds made remeshings cross the surface; the
-    input's creases alone, tried until 27 November 2026, made the orange sample's energy rise
+    input's creases alone, tried in issue 23's third pass, made the orange sample's energy rise
     with 3 rollbacks, against a fall without creases, now that remeshing moves only bad
     elements). Ignored for an input that already crosses itself (see ``Paparazzi._remesh``).
     """

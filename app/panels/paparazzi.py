@@ -89,9 +89,10 @@ PLAIN = {
     "resolution": "The filter sees images this many pixels wide; details smaller than a pixel "
                   "are not changed. Higher is slower.",
     "view_width": "How wide a piece of the shape one picture shows (orthographic camera).",
-    "remesh_every": "Remeshing: the triangles are made even again so that they do not get "
-                    "thin while the shape moves. If the steps made the surface cross itself, "
-                    "they are undone and the step size is halved instead.",
+    "remesh_every": "Remeshing: triangles that got too thin, too long or too short while the "
+                    "shape moved are remade (the rest of the surface stays as the steps shaped "
+                    "it). If the steps made the surface cross itself, they are undone and the "
+                    "surface there is held still.",
     "monitor_every": "Monitor views: 16 fixed cameras all around the shape whose pictures are "
                      "filtered now and then; their mean energy (plotted below) says how far the "
                      "shape still is from what the filter wants. It should go down.",
