@@ -23,9 +23,10 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   ring of a bad element -- an edge shorter than h/2 or longer than 2 h, a triangle with an angle
   below 20 degrees -- may move; the others stay fixed, as El Topo (the thesis's remesher)
   changes bad elements only. Re-placing every vertex ("all", the default before issue 23's
-  fourth pass, 26 November 2026) cost what the steps had won: one such remeshing of the pretzel sample raised its
-  16-view guided energy by 8 % (1.783 -> 1.929) and the 1000-iteration run ended above its start
-  (1.856); moving bad elements only, it falls (docs/paparazzi.md). The remeshed mesh is accepted only if it is still a 2-manifold
+  fourth pass, 26 November 2026) cost what the steps had won: one such remeshing of the
+  pretzel sample raised its 16-view guided energy by 8 % (1.783 -> 1.929) and the
+  1000-iteration run ended above its start (1.856); moving bad elements only, it falls
+  (1.700; docs/paparazzi.md). The remeshed mesh is accepted only if it is still a 2-manifold
   with the input's Euler characteristic and boundary-loop count and no new self-intersections
   (``igl.predicates.find_self_intersections``, exact predicates). Otherwise (remeshed mesh
   rejected, or not remeshed, see below) the current mesh is checked for self-intersections; if the
