@@ -169,7 +169,8 @@ class PaparazziParams:
                                             "the edges is too long or too short (outside 4/5-4/3 "
                                             "of the target length); faster, but the result is "
                                             "rougher (e.g. 0.05).")
-    remesh_scope: str = param("bad", label="Remesh where", choices=REMESH_SCOPES, advanced=True,
+    remesh_scope: str = param("bad", label="Remesh triangles", choices=REMESH_SCOPES,
+                              advanced=True,
                               tooltip="Which vertices a remeshing may move. 'bad' (default): "
                                       "only those next to a bad element (an edge shorter than "
                                       "half or longer than twice the target length, or a "

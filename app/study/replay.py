@@ -76,6 +76,21 @@ class ReplayReport:
                 "runs": [r.__dict__ for r in self.runs]}
 
 
+#: fields added to a recipe's Params after logs were written with it, with the value that
+#: reproduces what a log without the field ran (logs hold every field of the Params they ran
+#: with, so a missing field means the log predates it). Paparazzi's ``remesh_scope`` (issue 23,
+#: fourth pass): before it every remeshing re-placed the whole surface ("all").
+ADDED_FIELDS: dict[str, dict] = {"Paparazzi": {"remesh_scope": "all"}}
+
+
+def logged_params(recipe_name: str, values: dict | None) -> dict:
+    """A run's logged Params dict, with the fields its log predates set as they then ran."""
+    values = dict(values or {})
+    for k, v in ADDED_FIELDS.get(recipe_name, {}).items():
+        values.setdefault(k, v)
+    return values
+
+
 def files_dir(log_path) -> Path:
     p = Path(log_path).with_suffix("")
     return p.parent / (p.name + "_files")
@@ -172,7 +187,7 @@ class _Replayer:
             before = load_state(src)
             options = run.get("options", {}) or {}
             _load_blobs(self.base, options)
-            params = recipe.make_params(run.get("params", {}))
+            params = recipe.make_params(logged_params(name, run.get("params", {})))
             last = None
             for last in recipe.steps(before, params, options, {}):
                 pass

@@ -1,0 +1,37 @@
+"""A study log holds every field of the Params its runs used; a field added to a recipe's Params
+later is missing from older logs, and the replay must run it as the log's version did
+(app.study.replay.ADDED_FIELDS), not with today's default."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from algorithms.mesh import icosphere
+from algorithms.params import params_to_dict
+from app.study.replay import ADDED_FIELDS, logged_params
+
+
+def test_a_log_older_than_remesh_scope_replays_with_the_whole_surface_remeshed():
+    import app.recipes
+    from algorithms.paparazzi import PaparazziParams
+    from app.document import MeshState
+
+    assert ADDED_FIELDS["Paparazzi"] == {"remesh_scope": "all"}
+    assert "Paparazzi" in app.recipes.recipes()
+    old = params_to_dict(PaparazziParams(iterations=12, resolution=32, remesh_every=6,
+                                         monitor_every=0))
+    del old["remesh_scope"]                       # what a log written before the field holds
+    assert logged_params("Paparazzi", old)["remesh_scope"] == "all"
+    assert logged_params("Paparazzi", {**old, "remesh_scope": "bad"})["remesh_scope"] == "bad"
+    assert logged_params("Cubic", {"lam": 0.2}) == {"lam": 0.2}
+    # and it matters: on a slightly bumpy sphere the two scopes give different meshes
+    V, F = icosphere(2)
+    V = V * (1 + 0.05 * np.random.default_rng(0).random((len(V), 1)))
+    state = MeshState(V=V, F=F)
+    results = {}
+    for scope in ("all", "bad"):
+        res = app.recipes.run("Paparazzi", state, logged_params("Paparazzi", {
+            **old, "remesh_scope": scope}), {"filter": "quantize", "filter_params": {}})
+        results[scope] = res.state
+    a, b = results["all"], results["bad"]
+    assert a.V.shape != b.V.shape or not np.array_equal(a.V, b.V)
