@@ -40,6 +40,9 @@ def test_registered_with_the_thesis_settings():
     # measured: 2e-4 barely moves 0.1-wide views in 1000 iterations; 1e-3 makes the blob's
     # 16-view energy rise since remeshing moves only bad elements (the test below)
     assert spec.learning_rate == 5e-4
+    # no creases kept through remeshing: the input's creases made the orange's energy rise
+    # (docs/paparazzi.md, "Remeshing only bad elements")
+    assert spec.crease_angle == 0.0
     assert not spec.is_single_view(NeuralStyleParams())
     # grey, one white light along the camera's y axis: a face facing camera-up is 1, facing
     # camera-down 0, facing the viewer 1/2 (the authors' (n.l + 1)/2)
