@@ -141,7 +141,7 @@ def test_neural_style_takes_a_painting_of_any_shape_and_runs_without_one(window,
     assert panel._path_edits["style_image"].placeholderText().startswith("optional")
     # its learning rate left at 0 is the filter's own, shown as such
     lr = panel.form.editors["learning_rate"].spin
-    assert lr.value() == 0 and lr.text() == lr.specialValueText() == "auto (0.001)"
+    assert lr.value() == 0 and lr.text() == lr.specialValueText() == "auto (0.0005)"
     # a painting that is not square is read as the filter reads it (central square), not refused
     wide = tmp_path / "wide.png"
     Image.new("RGB", (400, 200), (200, 10, 10)).save(wide)
