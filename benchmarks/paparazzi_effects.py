@@ -9,6 +9,7 @@ beats remeshing alone (the control) and leaves a clean 2-manifold with the input
     python benchmarks/paparazzi_effects.py --noisy [--save DIR] [--sheet-tag _noisy]
     python benchmarks/paparazzi_effects.py --pretzel [--iterations 1000]
     python benchmarks/paparazzi_effects.py --noise-variance
+    python benchmarks/paparazzi_effects.py --barrier [--meshes ...] [--filters guided l0]
 
 For each mesh (tests/data, ../shared/meshes or resources/samples; Loop-subdivided until it has at
 least 5,000 vertices, e.g. spot 829 -> 13,234; the bundled samples are used as they are) and each
@@ -274,7 +275,8 @@ def effects(a) -> int:
                   f"{crease:<16}{'manifold' if is_manifold(Fo) else 'NOT-MANIFOLD'} "
                   f"{'same-topology' if same else 'TOPOLOGY-CHANGED'} crossings "
                   f"{run.input_intersections}->{crossings} (rollbacks {int(m['rollbacks'])}, "
-                  f"rejected remeshes {int(m['remesh_rejected'])})", flush=True)
+                  f"rejected remeshes {int(m['remesh_rejected'])}) step {run.learning_rate:g}"
+                  f"{' rough' if m.get('rough_input') else ''}", flush=True)
             if not a.no_sheets:       # written after each row: a long run stopped early
                 rows = sheets.setdefault(name, [])   # keeps the rows it has
                 rows.append((f"{Path(mesh).stem}\n{len(V):,} V", view_picture(V, F),
@@ -500,6 +502,47 @@ def noise_variance(a) -> int:
     return 0
 
 
+def barrier(a) -> int:
+    """Why a filter's energy rises on a noisy scan at a small step (docs/paparazzi.md, "Rough
+    scans"): the 16-view energy along the straight path from each noisy scan (t = 0) to its
+    clean mesh (t = 1), per filter, and ``Paparazzi.rough_probe`` (the relative change of the
+    energy after one small full-batch step along the filter's own pull; > 0 = rough) on the
+    clean meshes and on noisy copies at 0.1, 0.2 and 0.3 mean edge lengths of noise."""
+    import os
+
+    from algorithms.paparazzi import Paparazzi, get_filter
+    from algorithms.paparazzi.measures import noisy_scan
+
+    print(f"load average {os.getloadavg()[0]:.2f}; 16 monitor views", flush=True)
+    ts = np.linspace(0.0, 1.0, 11)
+    for name in a.meshes:
+        got = load(name)
+        if got is None:
+            print(f"{name} not found; skipping")
+            continue
+        V, F = got
+        for filt in a.filters:
+            spec = get_filter(filt)
+            row = []
+            for amount in (0.0, 0.1, 0.2, 0.3):
+                X = noisy_scan(V, F, amount, NOISE_SEED) if amount else V
+                run = Paparazzi(X, F, spec, None, PP(iterations=1))
+                row.append(f"{amount:g}: {100 * run.rough_probe(run.V0, run.F0):+.3f} %")
+            print(f"  {name:<18} {filt:<13} rough probe at noise (edge lengths) "
+                  + ", ".join(row), flush=True)
+            W = noisy_scan(V, F, NOISE, NOISE_SEED)
+            run = Paparazzi(W, F, spec, None, PP(iterations=1))
+            cams = run.monitor_cameras()
+            e = [run.monitor_energy(((1 - t) * W + t * V - run.center) / run.scale, F, cams)
+                 for t in ts]
+            k = int(np.argmax(e))
+            print(f"  {name:<18} {filt:<13} energy from noisy ({NOISE:g}) to clean: "
+                  + " ".join(f"{t:.1f}:{x:.4g}" for t, x in zip(ts, e))
+                  + f"  (peak {e[k] / e[0]:.2f} x the noisy scan's at t = {ts[k]:.1f})",
+                  flush=True)
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--meshes", nargs="+", default=None)
@@ -515,18 +558,29 @@ def main() -> int:
                          "the whole surface re-placed, the default before issue 23's fourth pass)")
     ap.add_argument("--noisy", action="store_true",
                     help="the noisy scans: noisy:fandisk.off noisy:bob.obj")
+    ap.add_argument("--noise", type=float, default=None,
+                    help="noise of the noisy: meshes, in mean edge lengths (default 0.3)")
     ap.add_argument("--suspects", action="store_true")
+    ap.add_argument("--barrier", action="store_true",
+                    help="each filter's energy from the noisy scans to the clean meshes, and "
+                         "the rough probe at three noise levels")
     ap.add_argument("--pretzel", action="store_true",
                     help="why the pretzel's guided energy rises (each suspect)")
     ap.add_argument("--noise-variance", action="store_true",
                     help="window colour variance of noise and creases (fandisk)")
     a = ap.parse_args()
-    global SCOPE
+    global SCOPE, NOISE
     SCOPE = a.remesh_scope
+    if a.noise is not None:
+        NOISE = a.noise
     if a.pretzel:
         return pretzel(a)
     if a.noise_variance:
         return noise_variance(a)
+    if a.barrier:
+        a.meshes = a.meshes or ["fandisk.off", "bob.obj", "spot_lowres.obj", "camelhead.off",
+                                "armadillo.obj", "blob.obj", "bumpy.obj", "pretzel.obj"]
+        return barrier(a)
     if a.suspects:
         a.meshes = a.meshes or ["bob.obj", "fandisk.off"]
         return suspects(a)

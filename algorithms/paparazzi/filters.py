@@ -129,6 +129,14 @@ class FilterSpec:
     input's creases alone, tried in issue 23's third pass, made the orange sample's energy rise
     with 3 rollbacks, against a fall without creases, now that remeshing moves only bad
     elements). Ignored for an input that already crosses itself (see ``Paparazzi._remesh``).
+
+    ``rough_learning_rate`` (0 = none): the step used instead of ``learning_rate`` when the run's
+    step is "auto", ``PaparazziParams.rough_step`` is on, and the input is *rough* for this
+    filter: a small step along the filter's own pull, summed over the monitor views, raises the
+    filter's energy (``Paparazzi.rough_probe``). An edge-preserving filter's energy has a
+    barrier between a noisy scan and its smooth surface (it takes noise stronger than its
+    threshold for edges, so smoothing the noise first raises the energy); a small step stays on
+    the near side of it. The guided filter: 2e-4 (docs/paparazzi.md, "Rough scans").
     """
 
     name: str
@@ -147,6 +155,7 @@ class FilterSpec:
                                                           hash=False)
     optional_files: tuple[str, ...] = ()
     crease_angle: float = 0.0
+    rough_learning_rate: float = 0.0
 
     def make_shading(self, params) -> Shading:
         return self.shading(params) if self.shading is not None else LambertianShading()
@@ -368,6 +377,9 @@ GUIDED_RADIUS = 4
 GUIDED_EPSILON = 2e-3
 GUIDED_SUBSAMPLE = 1
 GUIDED_LEARNING_RATE = 1e-5
+#: the guided filter's step on a rough scan (``FilterSpec.rough_learning_rate``; issue 23's
+#: fifth pass, docs/paparazzi.md "Rough scans: the guided filter's energy barrier")
+GUIDED_ROUGH_LEARNING_RATE = 2e-4
 
 
 @dataclass(frozen=True)
@@ -388,6 +400,7 @@ class GuidedParams:
 
 @register_filter("guided", kind="iterative", params=GuidedParams, resolution=128,
                  learning_rate=GUIDED_LEARNING_RATE, crease_angle=45.0,
+                 rough_learning_rate=GUIDED_ROUGH_LEARNING_RATE,
                  description="Guided filter: edge-preserving smoothing")
 def _guided(image, params: GuidedParams, ctx: FilterContext):
     """Self-guided filter (He et al. 2010; He and Sun 2015 with ``subsample`` > 1) of the

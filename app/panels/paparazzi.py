@@ -325,6 +325,10 @@ class PaparazziPanel(MethodPanel):
                 continue
             # "auto" as elsewhere in the app (cubic, spectral)
             text = f"auto ({value:g})"
+            rough = getattr(spec, "rough_learning_rate", 0.0)
+            if name == "learning_rate" and rough and getattr(self.form.params(), "rough_step",
+                                                             True):
+                text = f"auto ({value:g}; rough {rough:g})"   # PaparazziParams.rough_step
             editor.spin.setSpecialValueText(text)
             wide = editor.spin.fontMetrics().horizontalAdvance(text + "  ") + 34  # + arrows
             editor.spin.setMinimumWidth(max(editor.spin.minimumWidth(), wide))
@@ -525,6 +529,8 @@ class PaparazziPanel(MethodPanel):
             parts.append(plural(int(m["remeshes"]), "remesh", "remeshes"))
         if m.get("rollbacks"):
             parts.append(plural(int(m["rollbacks"]), "rollback"))
+        if m.get("rough_input"):
+            parts.append(f"rough surface: step {m.get('base_learning_rate', 0):g}")
         text = " · ".join(parts)
         if step.message:
             text += f"\n{step.message}"
@@ -563,5 +569,8 @@ class PaparazziPanel(MethodPanel):
             extra.append(plural(int(m["rollbacks"]), "self-intersection rollback")
                          + (f" ({plural(held, 'vertex', 'vertices')} near the crossings held "
                             "still)" if held else ""))
+        if m.get("rough_input"):
+            extra.append(f"rough surface: the filter's larger step "
+                         f"({m.get('base_learning_rate', 0):g}) was used")
         if extra:
             self.status_label.setText(self.status_label.text() + "\n" + "; ".join(extra) + ".")

@@ -173,3 +173,32 @@ def test_the_report_logs_the_monitor_energy_averaged_over_16_views(sphere, tmp_p
                                                         rel=1e-5)
     one = run.evaluate(norm(d.V), d.F, run.monitor_cameras()[0])[0]
     assert rep["initial_monitor_energy"] != pytest.approx(one)
+
+
+def test_the_report_says_which_step_a_rough_scan_got(tmp_path, capsys):
+    # issue 23, fifth pass: the guided filter's step on "auto" is its rough step on a noisy
+    # scan; --no-rough-step keeps the filter's own; a typed learning rate is used as it is
+    from algorithms.paparazzi.measures import noisy_scan
+    from tests.conftest import ROOT
+
+    d = read_mesh(ROOT / "resources" / "samples" / "blob.obj")
+    noisy = tmp_path / "noisy.obj"
+    write_mesh(noisy, noisy_scan(d.V, d.F, 0.3, seed=0), d.F)
+    short = ["--iterations", "2", "--monitor-every", "0"]
+    reports = {}
+    for tag, extra in (("auto", []), ("off", ["--no-rough-step"]),
+                       ("typed", ["--learning-rate", "3e-5"])):
+        out = tmp_path / f"{tag}.obj"
+        assert main(["paparazzi", str(noisy), "-o", str(out), "--filter", "guided", "--json",
+                     *short, *extra]) == 0
+        reports[tag] = json.loads(capsys.readouterr().out)
+    assert reports["auto"]["rough_input"] is True
+    assert reports["auto"]["learning_rate_used"] == pytest.approx(2e-4)
+    assert reports["off"]["rough_input"] is False and reports["off"]["params"]["rough_step"] is False
+    assert reports["off"]["learning_rate_used"] == pytest.approx(1e-5)
+    assert reports["typed"]["rough_input"] is False
+    assert reports["typed"]["learning_rate_used"] == pytest.approx(3e-5)
+    # plain-text report
+    assert main(["paparazzi", str(noisy), "-o", str(tmp_path / "t.obj"), "--filter", "guided",
+                 *short]) == 0
+    assert "step 0.0002 (rough surface)" in capsys.readouterr().out

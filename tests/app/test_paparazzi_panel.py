@@ -452,3 +452,37 @@ def test_default_run_on_the_blob_sample_shows_a_visible_change(window, dialogs, 
     dist = np.sqrt(igl.point_mesh_squared_distance(np.array(doc.V), V0, F0)[0])
     assert dist.max() >= 0.005 * diag and np.percentile(dist, 90) >= 0.003 * diag
     assert "mean of 16 views" in panel.status_label.text()
+
+
+def test_guided_on_a_noisy_scan_says_it_takes_its_rough_step(window, dialogs, qtbot, tmp_path):
+    # issue 23, fifth pass (docs/paparazzi.md, "Rough scans"): the learning rate's "auto" says
+    # both steps; a run on a noisy scan says it took the larger one; unticking the option (a
+    # key press on the focused check box) brings the single value back
+    from PySide6.QtCore import Qt as _Qt
+
+    from algorithms.mesh import read_mesh, write_mesh
+    from algorithms.paparazzi.measures import noisy_scan
+    from app.panels.paparazzi import PaparazziPanelParams
+
+    d = read_mesh(ROOT / "resources" / "samples" / "blob.obj")
+    path = tmp_path / "noisy_blob.obj"
+    write_mesh(path, noisy_scan(d.V, d.F, 0.3, seed=0), d.F)
+    assert window.open_path(path)
+    panel = window.panels["Paparazzi"]
+    panel.raise_()
+    panel.set_filter("guided")
+    lr = panel.form.editors["learning_rate"].spin
+    assert lr.value() == 0 and lr.text() == "auto (1e-05; rough 0.0002)"
+    panel.form.set_params(PaparazziPanelParams(iterations=60, monitor_every=30))
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    text = panel.status_label.text()
+    assert "rough surface: the filter's larger step (0.0002) was used" in text, text
+    mon = panel.plot.series["monitor_energy"]
+    assert len(mon) == 3
+    box = panel.form.editors["rough_step"]
+    assert box.isChecked()
+    box.setFocus()
+    qtbot.keyClick(box, _Qt.Key.Key_Space)
+    assert not box.isChecked() and not panel.form.params().rough_step
+    assert lr.text() == "auto (1e-05)"

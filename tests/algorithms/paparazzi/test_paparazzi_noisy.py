@@ -113,3 +113,66 @@ def test_every_filter_beats_remeshing_alone_on_a_noisy_scan(name, iterations, fa
     control = run_to_end(Paparazzi(W, d.F, control_spec(spec), None, pp).steps())
     assert f(last.V, last.F) > factor * max(f(control.V, control.F), f(W, d.F)), (
         f(W, d.F), f(last.V, last.F), f(control.V, control.F))
+
+
+def _noisy_blob():
+    d = read_mesh(ROOT / "resources" / "samples" / "blob.obj")
+    return d.V, noisy_scan(d.V, d.F, 0.3, seed=0), d.F
+
+
+def test_the_guided_energy_has_a_barrier_between_a_noisy_scan_and_its_smooth_surface():
+    # docs/paparazzi.md, "Rough scans": the guided filter takes noise stronger than its epsilon
+    # for edges, so its energy rises along the straight path from the noisy scan to the clean
+    # surface before it falls (fandisk: 2.99 -> 3.85 at 70 % of the way -> 0.34)
+    V, W, F = _noisy_blob()
+    run = Paparazzi(W, F, "guided", None, PaparazziParams())
+    cams = run.monitor_cameras()
+
+    def energy(t):
+        return run.monitor_energy(((1 - t) * W + t * V - run.center) / run.scale, F, cams)
+
+    e = [energy(t) for t in (0.0, 0.5, 1.0)]
+    assert e[1] > 1.05 * e[0] and e[2] < 0.9 * e[0], e
+
+
+def test_the_rough_probe_tells_a_noisy_scan_from_a_clean_surface():
+    V, W, F = _noisy_blob()
+    for X, rough in ((W, True), (V, False)):
+        run = Paparazzi(X, F, "guided", None, PaparazziParams())
+        probe = run.rough_probe(run.V0, run.F0)
+        assert (probe > 0) == rough, probe          # noisy blob +0.45 %, clean -4.1 %
+
+
+def test_guided_takes_its_rough_step_on_a_noisy_scan_and_its_energy_then_falls():
+    # at the former fixed step (1e-5) the run stays on the barrier's rising side: the noisy
+    # blob's energy rises (300 iterations: 3.104 -> 3.128); the rough step (2e-4) crosses it
+    # (-> 2.827; 1000 iterations on the noisy fandisk: 2.989 -> 0.958, docs/paparazzi.md)
+    from algorithms.paparazzi.filters import GUIDED_LEARNING_RATE, GUIDED_ROUGH_LEARNING_RATE
+
+    _, W, F = _noisy_blob()
+    pp = PaparazziParams(iterations=300, monitor_every=0)
+    run = Paparazzi(W, F, "guided", None, pp)
+    steps = list(run.steps())
+    assert run.rough > 0 and run.learning_rate == GUIDED_ROUGH_LEARNING_RATE
+    assert steps[0].message.startswith("Rough surface")
+    assert steps[-1].metrics["rough_input"] == 1.0
+    m = steps[-1].metrics
+    assert m["monitor_energy"] < 0.95 * m["initial_monitor_energy"], m
+    fixed = Paparazzi(W, F, "guided", None, dataclasses.replace(pp, rough_step=False))
+    last = run_to_end(fixed.steps())
+    assert fixed.rough is None and fixed.learning_rate == GUIDED_LEARNING_RATE
+    assert last.metrics["rough_input"] == 0.0
+    assert last.metrics["monitor_energy"] > last.metrics["initial_monitor_energy"], last.metrics
+
+
+def test_a_chosen_step_or_a_clean_surface_keeps_the_filters_own_step():
+    V, W, F = _noisy_blob()
+    chosen = Paparazzi(W, F, "guided", None, PaparazziParams(iterations=1, learning_rate=3e-5))
+    run_to_end(chosen.steps())
+    assert chosen.rough is None and chosen.learning_rate == 3e-5
+    clean = Paparazzi(V, F, "guided", None, PaparazziParams(iterations=1))
+    first = run_to_end(clean.steps())
+    assert clean.rough < 0 and clean.learning_rate == 1e-5 and first.message == ""
+    other = Paparazzi(W, F, "quantize", None, PaparazziParams(iterations=1))   # no rough step
+    run_to_end(other.steps())
+    assert other.rough is None and other.learning_rate == get_filter("quantize").learning_rate

@@ -16,7 +16,7 @@ def test_a_log_older_than_remesh_scope_replays_with_the_whole_surface_remeshed()
     from algorithms.paparazzi import PaparazziParams
     from app.document import MeshState
 
-    assert ADDED_FIELDS["Paparazzi"] == {"remesh_scope": "all"}
+    assert ADDED_FIELDS["Paparazzi"] == {"remesh_scope": "all", "rough_step": False}
     assert "Paparazzi" in app.recipes.recipes()
     old = params_to_dict(PaparazziParams(iterations=12, resolution=32, remesh_every=6,
                                          monitor_every=0))
@@ -35,3 +35,24 @@ def test_a_log_older_than_remesh_scope_replays_with_the_whole_surface_remeshed()
         results[scope] = res.state
     a, b = results["all"], results["bad"]
     assert a.V.shape != b.V.shape or not np.array_equal(a.V, b.V)
+
+
+def test_a_log_older_than_rough_step_replays_with_the_filters_own_step():
+    import app.recipes
+    from algorithms.mesh import read_mesh
+    from algorithms.paparazzi import PaparazziParams
+    from algorithms.paparazzi.measures import noisy_scan
+    from app.document import MeshState
+    from tests.conftest import ROOT
+
+    old = params_to_dict(PaparazziParams(iterations=3, monitor_every=0))
+    del old["rough_step"]
+    assert logged_params("Paparazzi", old)["rough_step"] is False
+    assert "remesh_scope" in old and logged_params("Paparazzi", old)["remesh_scope"] == "bad"
+    # on a noisy scan the two give different meshes (the guided filter's rough step)
+    d = read_mesh(ROOT / "resources" / "samples" / "blob.obj")
+    state = MeshState(V=noisy_scan(d.V, d.F, 0.3, seed=0), F=d.F)
+    out = [app.recipes.run("Paparazzi", state, logged_params("Paparazzi", {**old, **extra}),
+                           {"filter": "guided", "filter_params": {}}).state.V
+           for extra in ({}, {"rough_step": True})]
+    assert not np.array_equal(out[0], out[1])
