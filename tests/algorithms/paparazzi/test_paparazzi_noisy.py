@@ -66,7 +66,8 @@ def test_noisy_scan_moves_vertices_along_their_normals_by_the_asked_amount():
 
 def test_guided_at_its_defaults_ends_a_noisy_scan_smoother_than_remeshing_alone():
     # issue 23's noisy bob (0.3 mean edge lengths of noise along the normals); 1000-iteration
-    # figures in docs/paparazzi.md (bending 6647 -> 5485, control 6969)
+    # figures in docs/paparazzi.md, "Rough scans" (bending 6647 -> 618, control 6937; at the
+    # fixed step before the rough step, 5498)
     from benchmarks.paparazzi_effects import control_spec
 
     d = read_mesh(shared_mesh("bob.obj"))
@@ -75,8 +76,8 @@ def test_guided_at_its_defaults_ends_a_noisy_scan_smoother_than_remeshing_alone(
     spec = get_filter("guided")
     last = run_to_end(Paparazzi(W, d.F, spec, None, pp).steps())
     control = run_to_end(Paparazzi(W, d.F, control_spec(spec), None, pp).steps())
-    # (120 iterations: 6807 against 6992)
-    assert bending_energy(last.V, last.F) < 0.985 * bending_energy(control.V, control.F)
+    # (120 iterations: 4055 against 6944; at the fixed step 1e-5: 6807 against 6992)
+    assert bending_energy(last.V, last.F) < 0.7 * bending_energy(control.V, control.F)
 
 
 def test_bilateral_normal_filtering_denoises_fandisk_and_brings_its_creases_back():
