@@ -383,9 +383,10 @@ class Paparazzi:
         pull summed over the monitor views (the full-batch update direction; the vertex that
         moves most moves ``edge_length / 32``; ``free``: the vertices that may move). Above 0
         the input is *rough* for this filter: its pull raises its own energy there. Measured
-        (guided, issue 23's fifth pass, 16 views): +0.03 % to +0.6 % on the 7 noisy scans
-        (0.3 mean edge lengths of noise), -1.5 % to -21 % on the 10 clean meshes
-        (docs/paparazzi.md, "Rough scans")."""
+        (guided, issue 23's fifth pass, 16 views; benchmarks/paparazzi_effects.py --barrier):
+        fandisk, bob, bumpy, pretzel -1.9 % to -20 % clean, -1.8 % to -2.5 % with 0.1 mean edge
+        lengths of noise (there the energy falls at the filter's own step), +0.03 % to +1.2 %
+        with 0.2 and 0.3 (docs/paparazzi.md, "Rough scans")."""
         cams = self.monitor_cameras() if cameras is None else cameras
         g = np.zeros_like(V)
         energies = []
