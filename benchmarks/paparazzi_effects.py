@@ -276,7 +276,8 @@ def effects(a) -> int:
                   f"{'same-topology' if same else 'TOPOLOGY-CHANGED'} crossings "
                   f"{run.input_intersections}->{crossings} (rollbacks {int(m['rollbacks'])}, "
                   f"rejected remeshes {int(m['remesh_rejected'])}) step {run.learning_rate:g}"
-                  f"{' rough' if m.get('rough_input') else ''}", flush=True)
+                  f"{' rough' if m.get('rough_input') else ''} halvings "
+                  f"{int(m.get('step_halvings', 0))}", flush=True)
             if not a.no_sheets:       # written after each row: a long run stopped early
                 rows = sheets.setdefault(name, [])   # keeps the rows it has
                 rows.append((f"{Path(mesh).stem}\n{len(V):,} V", view_picture(V, F),

@@ -257,7 +257,7 @@ def stylize(grey: np.ndarray, params: NeuralStyleParams, vector=None) -> np.ndar
 
 @register_filter("neural-style", kind="iterative", params=NeuralStyleParams, prepare=_prepare,
                  shading=neural_style_shading, resolution=128, width=0.1, sigma=0.02,
-                 learning_rate=5e-4,
+                 learning_rate=5e-4, halve_on_climb=False,
                  file_readers={"style_image": read_style_image},
                  optional_files=("style_image",),
                  description="Neural style: the brush strokes of a painting as surface texture "

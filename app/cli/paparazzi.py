@@ -251,7 +251,8 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
             "remeshes": int(outcome["remeshes"]),
             "rollbacks": int(outcome["rollbacks"]),
             **{k: int(outcome.get(k, 0))
-               for k in ("remesh_rejected", "remesh_retries", "held_vertices")}})
+               for k in ("remesh_rejected", "remesh_retries", "held_vertices",
+                         "step_halvings")}})
     else:
         print(f"Paparazzi '{options['filter']}' on {args.mesh}: {it} iterations in "
               f"{seconds:.1f} s; monitor energy {outcome['initial_monitor_energy']:.4g} -> "

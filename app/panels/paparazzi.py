@@ -531,6 +531,8 @@ class PaparazziPanel(MethodPanel):
             parts.append(plural(int(m["rollbacks"]), "rollback"))
         if m.get("rough_input"):
             parts.append(f"rough surface: step {m.get('base_learning_rate', 0):g}")
+        if m.get("step_halvings"):
+            parts.append(plural(int(m["step_halvings"]), "step halving"))
         text = " · ".join(parts)
         if step.message:
             text += f"\n{step.message}"
@@ -572,5 +574,8 @@ class PaparazziPanel(MethodPanel):
         if m.get("rough_input"):
             extra.append(f"rough surface: the filter's larger step "
                          f"({m.get('base_learning_rate', 0):g}) was used")
+        if m.get("step_halvings"):
+            extra.append(f"the energy climbed again, so the step was halved "
+                         f"{plural(int(m['step_halvings']), 'time')}")
         if extra:
             self.status_label.setText(self.status_label.text() + "\n" + "; ".join(extra) + ".")

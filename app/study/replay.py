@@ -80,9 +80,10 @@ class ReplayReport:
 #: reproduces what a log without the field ran (logs hold every field of the Params they ran
 #: with, so a missing field means the log predates it). Paparazzi's ``remesh_scope`` (issue 23,
 #: fourth pass): before it every remeshing re-placed the whole surface ("all"); its
-#: ``rough_step`` (fifth pass): before it the step on "auto" was the filter's own on any surface
-#: (False).
-ADDED_FIELDS: dict[str, dict] = {"Paparazzi": {"remesh_scope": "all", "rough_step": False}}
+#: ``rough_step`` and ``plateau_step`` (fifth pass): before them the step on "auto" was the
+#: filter's own on any surface and was never halved when the energy climbed (False, False).
+ADDED_FIELDS: dict[str, dict] = {"Paparazzi": {"remesh_scope": "all", "rough_step": False,
+                                               "plateau_step": False}}
 
 
 def logged_params(recipe_name: str, values: dict | None) -> dict:

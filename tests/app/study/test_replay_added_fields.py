@@ -16,7 +16,8 @@ def test_a_log_older_than_remesh_scope_replays_with_the_whole_surface_remeshed()
     from algorithms.paparazzi import PaparazziParams
     from app.document import MeshState
 
-    assert ADDED_FIELDS["Paparazzi"] == {"remesh_scope": "all", "rough_step": False}
+    assert ADDED_FIELDS["Paparazzi"] == {"remesh_scope": "all", "rough_step": False,
+                                         "plateau_step": False}
     assert "Paparazzi" in app.recipes.recipes()
     old = params_to_dict(PaparazziParams(iterations=12, resolution=32, remesh_every=6,
                                          monitor_every=0))
@@ -46,8 +47,9 @@ def test_a_log_older_than_rough_step_replays_with_the_filters_own_step():
     from tests.conftest import ROOT
 
     old = params_to_dict(PaparazziParams(iterations=3, monitor_every=0))
-    del old["rough_step"]
+    del old["rough_step"], old["plateau_step"]
     assert logged_params("Paparazzi", old)["rough_step"] is False
+    assert logged_params("Paparazzi", old)["plateau_step"] is False
     assert "remesh_scope" in old and logged_params("Paparazzi", old)["remesh_scope"] == "bad"
     # on a noisy scan the two give different meshes (the guided filter's rough step)
     d = read_mesh(ROOT / "resources" / "samples" / "blob.obj")
