@@ -87,8 +87,8 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   lowest check halves the step (at most four times, to 1/16). A run whose energy keeps falling
   never halves and runs bit for bit as without the option. The filter's target moves with the
   surface (an iterative filter's f(R)), so past some point the steps can add more than they
-  remove: l0 on the noisy fandisk fell from 23.55 to 19.6 in 150 iterations and climbed back to 27.4
-  (ending at 24.5); with halving it ends at 19.87 (docs/paparazzi.md). Not for a filter whose
+  remove: l0 on the noisy fandisk fell from 23.55 to 19.6 in 150 iterations and climbed back to
+  27.4 (ending at 24.5); with halving it ends at 19.87 (docs/paparazzi.md). Not for a filter whose
   energy is no measure of progress (``FilterSpec.halve_on_climb`` False: neural-style). Off
   by default: re-running the effects table with it on, slic's energy (its superpixels re-form
   from picture to picture, so a 2 % rise is often a jump, not a trend) ended higher on 7 of
