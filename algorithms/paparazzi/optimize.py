@@ -406,15 +406,9 @@ class Paparazzi:
         cams = self.monitor_cameras() if cameras is None else cameras
         return float(np.mean([self.evaluate(V, F, c)[0] for c in cams]))
 
-    def rough_probe(self, V, F, cameras=None, free=None) -> float:
-        """Relative change of the monitor energy after one small step along the filter's own
-        pull summed over the monitor views (the full-batch update direction; the vertex that
-        moves most moves ``edge_length / 32``; ``free``: the vertices that may move). Above 0
-        the input is *rough* for this filter: its pull raises its own energy there. Measured
-        (guided, issue 23's fifth pass, 16 views; benchmarks/paparazzi_effects.py --barrier):
-        fandisk, bob, bumpy, pretzel -1.9 % to -20 % clean, -1.8 % to -2.5 % with 0.1 mean edge
-        lengths of noise (there the energy falls at the filter's own step), +0.03 % to +1.2 %
-        with 0.2 and 0.3 (docs/paparazzi.md, "Rough scans")."""
+    def monitor_pull(self, V, F, cameras=None) -> tuple[float, np.ndarray]:
+        """(:meth:`monitor_energy`, the filter's pull summed over the same views): the mean
+        energy and its full-batch gradient with respect to ``V``, from one pass over the views."""
         cams = self.monitor_cameras() if cameras is None else cameras
         g = np.zeros_like(V)
         energies = []
@@ -422,14 +416,33 @@ class Paparazzi:
             E, G, r, _ = self.evaluate(V, F, c)
             energies.append(E)
             g += image_vjp(V, F, r, G)
+        return float(np.mean(energies)), g
+
+    def rough_probe(self, V, F, cameras=None, free=None, start=None) -> float:
+        """Relative change of the monitor energy after one small step along the filter's own
+        pull summed over the monitor views (the full-batch update direction; the vertex that
+        moves most moves ``edge_length / 32``; ``free``: the vertices that may move; ``start``:
+        :meth:`monitor_pull` of ``V`` when the caller has it already). Above 0 the input is
+        *rough* for this filter: its pull raises its own energy there. Measured (guided, issue
+        23's fifth pass, 16 views; benchmarks/paparazzi_effects.py --barrier): fandisk, bob,
+        bumpy, pretzel -1.9 % to -20 % clean, -1.8 % to -2.5 % with 0.1 mean edge lengths of
+        noise (there the energy falls at the filter's own step), +0.03 % to +1.2 % with 0.2
+        and 0.3 (docs/paparazzi.md, "Rough scans")."""
+        cams = self.monitor_cameras() if cameras is None else cameras
+        e0, g = start if start is not None else self.monitor_pull(V, F, cams)
+        g = g.copy()
         if free is not None:
             g[~free] = 0.0
-        e0 = float(np.mean(energies))
         top = float(np.linalg.norm(g, axis=1).max())
         if not (top > 0.0 and e0 > 0.0):
             return 0.0
         step = g * (self.edge_length / 32.0 / top)
         return (self.monitor_energy(V - step, F, cams) - e0) / e0
+
+    @property
+    def rough_input(self) -> bool:
+        """Whether this run took its filter's rough step (:meth:`rough_probe` above 0)."""
+        return self.rough is not None and self.rough > 0
 
     def evaluate(self, V, F, camera):
         """(energy, dE/dR, rendering, filtered image or None) for one view."""
@@ -539,8 +552,14 @@ class Paparazzi:
         lr_scale = 1.0
         secs = {"render": 0.0, "filter": 0.0, "derivative": 0.0, "remesh": 0.0, "monitor": 0.0}
         counts = {"remeshes": 0, "rollbacks": 0, "remesh_rejected": 0, "remesh_retries": 0}
+        # the step: the run's, else the filter's; on a rough input the filter's rough step
+        # (FilterSpec.rough_learning_rate; docs/paparazzi.md "Rough scans"), probed below from
+        # the same pass over the monitor views as the starting energy
+        probing = bool(not p.learning_rate and p.rough_step and self.spec.rough_learning_rate
+                       and not self.single_view)
         tm = time.perf_counter()
-        monitor0 = monitor = self.monitor_energy(V, F, monitor_cams)
+        start = self.monitor_pull(V, F, monitor_cams) if probing else None
+        monitor0 = monitor = start[0] if probing else self.monitor_energy(V, F, monitor_cams)
         secs["monitor"] += time.perf_counter() - tm
         hold = np.zeros((0, 3))          # where steps made the surface cross itself
         remesh_hold = np.zeros((0, 3))   # where a remeshing did
@@ -552,17 +571,14 @@ class Paparazzi:
 
         counts["held_vertices"] = 0
         free = movable(V, F)
-        # the step: the run's, else the filter's; on a rough input the filter's rough step
-        # (FilterSpec.rough_learning_rate; docs/paparazzi.md "Rough scans")
         self.learning_rate = p.learning_rate or self.spec.learning_rate
         self.rough = None
         first_message = ""
-        if (not p.learning_rate and p.rough_step and self.spec.rough_learning_rate
-                and not self.single_view):
+        if probing:
             tm = time.perf_counter()
-            self.rough = self.rough_probe(V, F, monitor_cams, free)
+            self.rough = self.rough_probe(V, F, monitor_cams, free, start)
             secs["monitor"] += time.perf_counter() - tm
-            if self.rough > 0:
+            if self.rough_input:
                 self.learning_rate = self.spec.rough_learning_rate
                 first_message = (f"Rough surface: the {self.spec.name} filter's pull first "
                                  f"raises its energy here, so the step is "
@@ -658,7 +674,7 @@ class Paparazzi:
                        "initial_monitor_energy": monitor0, "learning_rate": lr,
                        "monitor_views": float(len(monitor_cams)),
                        "base_learning_rate": self.learning_rate,
-                       "rough_input": float(bool(self.rough is not None and self.rough > 0)),
+                       "rough_input": float(self.rough_input),
                        "vertices": float(len(V)), **{k: float(c) for k, c in counts.items()}}
             yield PaparazziStep(it, N, self.to_world(V), metrics, message, F=F.copy(),
                                 image=r.image, filtered=filtered if filtered is not None

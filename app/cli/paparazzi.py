@@ -239,7 +239,7 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
             "seconds_per_iteration": {k: sec.get(k, 0.0) / it for k in
                                       ("render", "filter", "derivative", "remesh")},
             "learning_rate_used": run.learning_rate,
-            "rough_input": bool(run.rough is not None and run.rough > 0),
+            "rough_input": run.rough_input,
             "initial_monitor_energy": outcome["initial_monitor_energy"],
             "final_monitor_energy": outcome["monitor_energy"],
             "vertices": int(len(after.V)), "faces": int(len(after.F)),
@@ -257,6 +257,6 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
         print(f"Paparazzi '{options['filter']}' on {args.mesh}: {it} iterations in "
               f"{seconds:.1f} s; monitor energy {outcome['initial_monitor_energy']:.4g} -> "
               f"{outcome['monitor_energy']:.4g}; step {run.learning_rate:g}"
-              f"{' (rough surface)' if run.rough is not None and run.rough > 0 else ''}; "
+              f"{' (rough surface)' if run.rough_input else ''}; "
               f"{len(after.V)} vertices; wrote {args.output}.")
     return 0
