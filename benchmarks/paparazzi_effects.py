@@ -232,7 +232,8 @@ def effects(a) -> int:
                       f"(its optional packages are missing)", flush=True)
                 continue
             spec = get_filter(name)
-            params = PaparazziParams(iterations=a.iterations, remesh_scope=SCOPE)
+            params = PaparazziParams(iterations=a.iterations, remesh_scope=SCOPE,
+                                     learning_rate=a.learning_rate)
             run, last, sec = run_filter(V, F, spec, spec.params(), params)
             # the control's vertices move only by remeshing (its gradient is zero), so it depends
             # on the filter only through the remeshing's crease angle: one run per angle
@@ -277,7 +278,9 @@ def effects(a) -> int:
                   f"{run.input_intersections}->{crossings} (rollbacks {int(m['rollbacks'])}, "
                   f"rejected remeshes {int(m['remesh_rejected'])}) step {run.learning_rate:g}"
                   f"{' rough' if m.get('rough_input') else ''} halvings "
-                  f"{int(m.get('step_halvings', 0))}", flush=True)
+                  f"{int(m.get('step_halvings', 0))} kept "
+                  f"{int(m.get('kept_iteration', a.iterations))} (last "
+                  f"{m.get('last_monitor_energy', e1):.4g})", flush=True)
             if not a.no_sheets:       # written after each row: a long run stopped early
                 rows = sheets.setdefault(name, [])   # keeps the rows it has
                 rows.append((f"{Path(mesh).stem}\n{len(V):,} V", view_picture(V, F),
@@ -550,6 +553,8 @@ def main() -> int:
     ap.add_argument("--filters", nargs="+",
                     default=["guided", "quantize", "slic", "l0", "neural-style"])
     ap.add_argument("--iterations", type=int, default=1000)
+    ap.add_argument("--learning-rate", type=float, default=0.0,
+                    help="every run's learning rate (0: each filter's own, the default)")
     ap.add_argument("--no-sheets", action="store_true")
     ap.add_argument("--sheet-tag", default="",
                     help="docs/images/paparazzi_<filter><TAG>.png (e.g. _noisy)")

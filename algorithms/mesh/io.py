@@ -63,7 +63,6 @@ import stat
 import struct
 import sys
 import tempfile
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO, Callable
@@ -176,27 +175,34 @@ def _reject_binary(data: bytes) -> None:
         raise _ParseError("it contains binary data, not text. Is it really this kind of file?")
 
 
+def _fromstring(text: str, dtype, expected: int) -> np.ndarray:
+    """``np.fromstring(text, sep=" ")`` that raises ValueError unless it read exactly
+    ``expected`` values to the end. ``np.fromstring`` stops silently (with a
+    DeprecationWarning) at the first token it cannot read, so a sentinel value is appended: a
+    stop anywhere before the end loses it. No warning filter is touched (``catch_warnings`` is
+    process-wide, not thread-safe: a mesh read in a worker thread turned another thread's
+    warnings into errors)."""
+    try:
+        arr = np.fromstring(text + " 0", dtype=dtype, sep=" ")
+    except DeprecationWarning:      # where warnings are errors
+        raise ValueError("unreadable value") from None
+    if arr.size != expected + 1:
+        raise ValueError("wrong number of values")
+    return arr[:-1]
+
+
 def _parse_floats(text: str, expected: int) -> np.ndarray:
     """Parse whitespace-separated floats (fast C path); raise ValueError if anything is off."""
     if expected == 0:
         return np.zeros(0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        arr = np.fromstring(text, dtype=np.float64, sep=" ")
-    if arr.size != expected:
-        raise ValueError("wrong number of values")
-    return arr
+    return _fromstring(text, np.float64, expected)
 
 
 def _parse_ints(text: str, expected: int) -> np.ndarray:
     """Parse whitespace-separated integers; raise ValueError/OverflowError if anything is off."""
     if expected == 0:
         return np.zeros(0, dtype=np.int64)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        arr = np.fromstring(text, dtype=np.int64, sep=" ")
-    if arr.size != expected:
-        raise ValueError("wrong number of values")
+    arr = _fromstring(text, np.int64, expected)
     if arr.size and (arr.max() == _INT64_MAX or arr.min() == _INT64_MIN):
         # np.fromstring saturates instead of failing; check the extreme tokens exactly.
         for tok in text.split():

@@ -144,6 +144,11 @@ class FilterSpec:
     shape is from the style (lower on the noisy fandisk than on the clean one, 299.8 against
     406.5), and halving on its climbs cut the change of the Gram loss (armadillo -8.1 % ->
     -1.0 %, 1000 iterations; docs/paparazzi.md).
+
+    ``panel_iterations`` (0 = the panel's own, 300): how many iterations the panel starts a run
+    of this filter with. l0: 1000 -- on a smooth shape its energy rises before it falls (the
+    blob sample: 29.9 -> 41 at iteration 175, back below its start from iteration 650, 20.1 at
+    1000), so 300 iterations end above the start and the run fails (issue 23, sixth pass).
     """
 
     name: str
@@ -164,6 +169,7 @@ class FilterSpec:
     crease_angle: float = 0.0
     rough_learning_rate: float = 0.0
     halve_on_climb: bool = True
+    panel_iterations: int = 0
 
     def make_shading(self, params) -> Shading:
         return self.shading(params) if self.shading is not None else LambertianShading()
@@ -599,6 +605,7 @@ class L0Params:
 
 
 @register_filter("l0", kind="iterative", crease_angle=45.0, params=L0Params, resolution=256,
+                 panel_iterations=1000,
                  description="L0 gradient smoothing: piecewise-constant images, planar shapes")
 def _l0(image, params: L0Params, ctx: FilterContext):
     return l0_smooth(image, params.l0_lambda, params.kappa)

@@ -79,7 +79,11 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   3.06). So with the step on auto and ``rough_step`` on, :meth:`Paparazzi.rough_probe` takes one
   small full-batch step at the start; if the energy rises the filter's
   ``FilterSpec.rough_learning_rate`` is used (guided 2e-4: the noisy fandisk 2.99 -> 0.96; the
-  metric ``rough_input`` says so).
+  metric ``rough_input`` says so). The rough step was measured on meshes whose mean edge, in
+  the cube of side 2, is 0.0226-0.04; on a finer mesh it shrinks in proportion below
+  ``ROUGH_EDGE`` = 0.02 (a step is about ``lr`` per coordinate, so a fixed one is a larger share
+  of a shorter edge and of its noise: a 155,813-vertex noisy scan at 2e-4 crossed itself, 7
+  rollbacks, and its energy rose; issue 23, sixth pass).
   *A smaller step when the energy climbs* (``plateau_step``, an option; issue 23, fifth
   pass): every ``PLATEAU_EVERY`` = 50 iterations the monitor energy is checked (the command
   line's monitor schedule, every 25, evaluates it then anyway; the panel's, every 50, too); once
@@ -93,6 +97,16 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   by default: re-running the effects table with it on, slic's energy (its superpixels re-form
   from picture to picture, so a 2 % rise is often a jump, not a trend) ended higher on 7 of
   its 10 runs (spot 186.1 -> 216.5) and its effect weaker.
+* A run must lower its monitor energy (below): a result whose energy is not below the start's
+  did not converge. With ``lowest_fallback`` on (the default; issue 23, sixth pass) the monitor
+  checks' shapes below the start are remembered (the lowest one, and the lowest one taken at a
+  self-intersection check); if the last shape's energy is not below the start, the run returns
+  the lowest of them instead (checked for new crossings first; the metric ``kept_iteration``
+  says which, ``last_monitor_energy`` what the last one had). If none got below the start, the
+  last shape is returned and the recipe (:func:`app.recipes.paparazzi.paparazzi_steps`) fails
+  the run with :class:`EnergyNotLowered`, changing nothing. A run whose energy ends below its
+  start runs bit for bit as without the option. Measured (docs/paparazzi.md): l0 on the noisy
+  fandisk fell to 19.6 and climbed back above its start (23.55 -> 25.33 at iteration 1000).
 * Boundary vertices do not move (their gradient is zeroed), so a boundary loop stays where it is.
 * Monitor energy (thesis 353-356, made multi-view): the thesis watches one fixed camera; one
   view sees a sixth of the shape at most and its energy can rise while the rest falls (issue
@@ -124,6 +138,7 @@ from .filters import FilterContext, FilterSpec, front_camera, get_filter
 from .offset import OffsetSurface, monitor_cameras, offset_surface, sample_camera
 
 __all__ = ["PaparazziParams", "PaparazziStep", "Paparazzi", "paparazzi_iter", "paparazzi",
+           "EnergyNotLowered", "require_lowered",
            "FilterFailed", "count_self_intersections", "nadam_step"]
 
 
@@ -146,6 +161,11 @@ REMESH_ATTEMPTS = 3
 PLATEAU_EVERY = 50
 PLATEAU_RISE = 0.02
 PLATEAU_MIN = 1.0 / 16.0
+#: the rough step (``FilterSpec.rough_learning_rate``) is for a mesh whose mean edge, in the
+#: cube of side 2, is at least this long (it was measured on meshes of 0.0226-0.04: armadillo
+#: to bob); on a finer mesh it shrinks in proportion, so that a step stays the same share of an
+#: edge and of the noise (issue 23, sixth pass)
+ROUGH_EDGE = 0.02
 
 
 def crease_edges(V, F, degrees: float) -> np.ndarray:
@@ -167,6 +187,32 @@ class FilterFailed(Stylize3DError):
     exit_code = 6
 
 
+class EnergyNotLowered(Stylize3DError):
+    """The run ended without lowering its monitor energy: it did not converge, so nothing is
+    changed (:func:`require_lowered`)."""
+
+    exit_code = 6
+
+
+def require_lowered(metrics: dict, spec: FilterSpec | None = None) -> None:
+    """Raise :class:`EnergyNotLowered` unless the last step's ``monitor_energy`` is below its
+    ``initial_monitor_energy`` (a step without them, e.g. an empty run, passes); ``spec``, the
+    run's filter, adds its advice (``FilterSpec.panel_iterations``)."""
+    try:
+        e0, e1 = float(metrics["initial_monitor_energy"]), float(metrics["monitor_energy"])
+    except (KeyError, TypeError, ValueError):
+        return
+    if not e1 < e0:
+        n = getattr(spec, "panel_iterations", 0)
+        more = (f" (on a smooth shape the {spec.name} filter's energy rises before it falls: "
+                f"give it {n} or more)" if n else "")
+        raise EnergyNotLowered(
+            f"Paparazzi did not lower the filter's energy (the mean over its fixed monitor "
+            f"views: {e0:.4g} at the start, {e1:.4g} at the end, and no usable shape "
+            f"measured on the way got below the start), so it did not converge and nothing "
+            f"was changed. Try more iterations{more} or another learning rate.")
+
+
 @dataclass(frozen=True)
 class PaparazziParams:
     iterations: int = param(1000, label="Iterations", minimum=1, maximum=100000, step=100,
@@ -184,8 +230,9 @@ class PaparazziParams:
                                      "makes its energy rise at the start (a noisy scan whose "
                                      "noise an edge-preserving filter takes for edges), use the "
                                      "filter's larger step for rough surfaces (guided: 2e-4 "
-                                     "instead of 1e-5), which carries the surface past that "
-                                     "rise to a smooth one.")
+                                     "instead of 1e-5, smaller in proportion on a mesh whose "
+                                     "edges are shorter than a 100th of its size), which "
+                                     "carries the surface past that rise to a smooth one.")
     plateau_step: bool = param(False, label="Smaller step when the energy climbs", advanced=True,
                                tooltip="Every 50 iterations the monitor energy is checked; once "
                                        "the run has lowered it, a rise of more than 2 % above "
@@ -194,6 +241,16 @@ class PaparazziParams:
                                        "Off by default: it weakened slic on most shapes. "
                                        "Not for neural-style, whose energy is no measure of "
                                        "progress.")
+    lowest_fallback: bool = param(True, label="Lowest shape if the energy ends higher",
+                                  advanced=True,
+                                  tooltip="A run must end with its monitor energy below its "
+                                          "start. If the last shape's energy is not (an "
+                                          "iterative filter's target moves with the surface, "
+                                          "so its energy can climb back up), the result is the "
+                                          "measured shape whose energy was lowest; if no shape "
+                                          "got below the start, the run did not converge: it "
+                                          "fails and changes nothing. Off: always the last "
+                                          "shape, whatever its energy.")
     sigma: float = param(0.0, label="Camera offset σ", minimum=0.0, maximum=1.0, decimals=3,
                          tooltip="Distance of the camera cage from the shape (shape in a cube of "
                                  "side 2). 0 = the filter's default (0.1).")
@@ -579,13 +636,20 @@ class Paparazzi:
             self.rough = self.rough_probe(V, F, monitor_cams, free, start)
             secs["monitor"] += time.perf_counter() - tm
             if self.rough_input:
-                self.learning_rate = self.spec.rough_learning_rate
+                self.learning_rate = self.spec.rough_learning_rate * min(
+                    1.0, self.edge_length / ROUGH_EDGE)
                 first_message = (f"Rough surface: the {self.spec.name} filter's pull first "
                                  f"raises its energy here, so the step is "
                                  f"{self.learning_rate:g} instead of "
                                  f"{self.spec.learning_rate:g}.")
         N = p.iterations
         plateau, lowest = 1.0, monitor0      # PaparazziParams.plateau_step
+        # PaparazziParams.lowest_fallback: the lowest monitored shape below the start (energy,
+        # iteration, V, F), and the lowest one known free of new crossings (checked in the
+        # iteration it was taken); used only if the last shape's energy is not below the start
+        best = best_ok = None
+        best_checked = False
+        end: dict = {}                       # the last step's extra metrics
         counts["step_halvings"] = 0
         for it in range(1, N + 1):
             cam = self.camera(rng)
@@ -607,7 +671,8 @@ class Paparazzi:
             t4 = time.perf_counter()
             secs["derivative"] += t4 - t3
             message = first_message if it == 1 else ""
-            if (p.remesh_every and it % p.remesh_every == 0) or it == N:
+            crossing_checked = bool((p.remesh_every and it % p.remesh_every == 0) or it == N)
+            if crossing_checked:
                 tr = time.perf_counter()
                 checked = False              # V, F known free of new self-intersections
                 if p.remesh_every and it < N and (
@@ -656,10 +721,35 @@ class Paparazzi:
                 secs["remesh"] += time.perf_counter() - tr
             check = (p.plateau_step and self.spec.halve_on_climb and it % PLATEAU_EVERY == 0
                      and it < N)
-            if (p.monitor_every and it % p.monitor_every == 0) or it == N or check:
+            measured = bool((p.monitor_every and it % p.monitor_every == 0) or it == N or check)
+            if measured:
                 tm = time.perf_counter()
                 monitor = self.monitor_energy(V, F, monitor_cams)
                 secs["monitor"] += time.perf_counter() - tm
+            kept = N
+            if p.lowest_fallback and measured and it < N and monitor < (
+                    best[0] if best is not None else monitor0):
+                if best is not None and best_checked:
+                    best_ok = best
+                best, best_checked = (monitor, it, V.copy(), F.copy()), crossing_checked
+                if best_checked:
+                    best_ok = best
+            elif p.lowest_fallback and it == N and best is not None and monitor >= monitor0:
+                tm = time.perf_counter()
+                choice = best
+                if not best_checked and len(self._new_crossing_points(best[2], best[3])):
+                    choice = best_ok         # that shape crosses itself: the lowest checked one
+                if choice is not None and choice[0] < monitor:
+                    message = (message + "; " if message else "") + (
+                        f"the energy ended above its start ({monitor:.4g} against "
+                        f"{monitor0:.4g}): kept the shape of iteration {choice[1]}, whose "
+                        f"energy ({choice[0]:.4g}) was the lowest")
+                    end["last_monitor_energy"] = monitor
+                    monitor, kept, V, F = choice[0], choice[1], choice[2], choice[3]
+                secs["monitor"] += time.perf_counter() - tm
+            if it == N:
+                end.setdefault("last_monitor_energy", monitor)
+                end["kept_iteration"] = kept
             if check:
                 if monitor < lowest:
                     lowest = monitor
@@ -675,7 +765,8 @@ class Paparazzi:
                        "monitor_views": float(len(monitor_cams)),
                        "base_learning_rate": self.learning_rate,
                        "rough_input": float(self.rough_input),
-                       "vertices": float(len(V)), **{k: float(c) for k, c in counts.items()}}
+                       "vertices": float(len(V)), **{k: float(c) for k, c in counts.items()},
+                       **{k: float(c) for k, c in end.items()}}
             yield PaparazziStep(it, N, self.to_world(V), metrics, message, F=F.copy(),
                                 image=r.image, filtered=filtered if filtered is not None
                                 else r.image - G, seconds=dict(secs))

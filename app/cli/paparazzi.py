@@ -242,6 +242,8 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
             "rough_input": run.rough_input,
             "initial_monitor_energy": outcome["initial_monitor_energy"],
             "final_monitor_energy": outcome["monitor_energy"],
+            "last_monitor_energy": outcome.get("last_monitor_energy", outcome["monitor_energy"]),
+            "kept_iteration": int(outcome.get("kept_iteration", it)),
             "vertices": int(len(after.V)), "faces": int(len(after.F)),
             "manifold": manifold, "same_topology": bool(same_topology),
             "self_intersecting_pairs": crossings,
@@ -254,9 +256,12 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
                for k in ("remesh_rejected", "remesh_retries", "held_vertices",
                          "step_halvings")}})
     else:
+        k = int(outcome.get("kept_iteration", it))
+        kept = (f" (the shape of iteration {k}, the lowest; the last one's "
+                f"{outcome['last_monitor_energy']:.4g})" if k < it else "")
         print(f"Paparazzi '{options['filter']}' on {args.mesh}: {it} iterations in "
               f"{seconds:.1f} s; monitor energy {outcome['initial_monitor_energy']:.4g} -> "
-              f"{outcome['monitor_energy']:.4g}; step {run.learning_rate:g}"
+              f"{outcome['monitor_energy']:.4g}{kept}; step {run.learning_rate:g}"
               f"{' (rough surface)' if run.rough_input else ''}; "
               f"{len(after.V)} vertices; wrote {args.output}.")
     return 0

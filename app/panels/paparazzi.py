@@ -72,7 +72,8 @@ class PaparazziPanelParams(PaparazziParams):
         GUI_ITERATIONS, label="Iterations", minimum=1, maximum=100000, step=50,
         tooltip=f"How many views to render and filter. {GUI_ITERATIONS} shows the effect in "
                 "seconds to a minute; the thesis uses 1000-3000 views (the command line's "
-                "default is 1000) for a strong effect.")
+                "default is 1000) for a strong effect. l0 starts at 1000: on a smooth shape "
+                "its energy rises before it falls, and a run that ends above its start fails.")
     monitor_every: int = param(
         GUI_MONITOR_EVERY, label="Monitor every", minimum=0, maximum=10000, advanced=True,
         tooltip="Evaluate the monitor energy (the mean over the fixed monitor views) every this "
@@ -270,6 +271,7 @@ class PaparazziPanel(MethodPanel):
         except Stylize3DError:
             return
         self.filter_about.setText(spec.description or "")
+        self._follow_filter_iterations(spec)
         self._show_filter_defaults()
         files = [s for s in describe(spec.params) if s.type is str and not s.choices]
         form = ParamsForm(spec.params, values=self._filter_values.get(name),
@@ -310,6 +312,17 @@ class PaparazziPanel(MethodPanel):
             none.setStyleSheet("color: #777;")
             self.filter_form_holder.addWidget(none)
 
+    def _follow_filter_iterations(self, spec) -> None:
+        """Each filter starts at its own iteration count (``FilterSpec.panel_iterations``; l0
+        1000, the others 300): a count still at the previous filter's is changed with the
+        filter, one the user typed is kept."""
+        new = int(getattr(spec, "panel_iterations", 0) or GUI_ITERATIONS)
+        old = getattr(self, "_filter_iterations", GUI_ITERATIONS)
+        self._filter_iterations = new
+        p = self.form.params()
+        if new != old and p.iterations == old:
+            self.form.set_params(dataclasses.replace(p, iterations=new))
+
     def _show_filter_defaults(self) -> None:
         """Settings left at 0 mean "the filter's own" (resolution, σ, view width and, where
         the filter has one, learning rate): say which value that is."""
@@ -328,7 +341,8 @@ class PaparazziPanel(MethodPanel):
             rough = getattr(spec, "rough_learning_rate", 0.0)
             if name == "learning_rate" and rough and getattr(self.form.params(), "rough_step",
                                                              True):
-                text = f"auto ({value:g}; rough {rough:g})"   # PaparazziParams.rough_step
+                # PaparazziParams.rough_step; smaller on a fine mesh (optimize.ROUGH_EDGE)
+                text = f"auto ({value:g}; rough up to {rough:g})"
             editor.spin.setSpecialValueText(text)
             wide = editor.spin.fontMetrics().horizontalAdvance(text + "  ") + 34  # + arrows
             editor.spin.setMinimumWidth(max(editor.spin.minimumWidth(), wide))
@@ -440,11 +454,14 @@ class PaparazziPanel(MethodPanel):
             self._filter_values[self.filter_form.filter_name] = self.filter_form.params()
         self._filter_values[name] = p
         self.refresh_filters()
+        run_params = self.form.params()      # restored already: the filter must not change them
         if self.filter_name() == name:
             self.filter_form = None  # rebuilt from the restored values (not saved over them)
             self._rebuild_filter_form()
         else:
             self.filter_combo.setCurrentText(name)
+        if self.form.params() != run_params:
+            self.form.set_params(run_params)
         if problems:
             self.status_label.setText(" ".join(problems))
 
@@ -577,5 +594,9 @@ class PaparazziPanel(MethodPanel):
         if m.get("step_halvings"):
             extra.append(f"the energy climbed again, so the step was halved "
                          f"{plural(int(m['step_halvings']), 'time')}")
+        kept = int(m.get("kept_iteration") or step.iteration)
+        if kept < step.iteration:       # PaparazziParams.lowest_fallback
+            extra.append(f"the result is the shape of iteration {kept}, whose energy was the "
+                         f"lowest (the last one's: {m.get('last_monitor_energy', 0):.3g})")
         if extra:
             self.status_label.setText(self.status_label.text() + "\n" + "; ".join(extra) + ".")

@@ -191,10 +191,15 @@ def paparazzi_steps(state, params, options: dict | None = None, cache: dict | No
     """The Paparazzi panel's run (module docstring). A generator: the filter is found, its
     files read and the optimizer built when the first step is asked for (the worker thread).
     The optimizer object and the seconds its set-up took are left in ``cache`` (``"run"``,
-    ``"setup_seconds"``) for a caller that reports more (the command line's checks)."""
+    ``"setup_seconds"``) for a caller that reports more (the command line's checks).
+
+    A run that ends without lowering its monitor energy did not converge: with
+    ``lowest_fallback`` on (the default) the generator raises, after its last step,
+    :class:`algorithms.paparazzi.EnergyNotLowered`, so every caller (panel, command line,
+    replay, batch) fails with its plain message and changes nothing."""
     import time
 
-    from algorithms.paparazzi import Paparazzi
+    from algorithms.paparazzi import Paparazzi, require_lowered
 
     options = options or {}
     spec = ensure_filter(str(options.get("filter") or DEFAULT_FILTER), options.get("plugin"))
@@ -203,7 +208,11 @@ def paparazzi_steps(state, params, options: dict | None = None, cache: dict | No
     run = Paparazzi(np.asarray(state.V), np.asarray(state.F), spec, fparams, run_params(params))
     if cache is not None:
         cache["run"], cache["setup_seconds"] = run, time.perf_counter() - t0
-    yield from run.steps()
+    last = None
+    for last in run.steps():
+        yield last
+    if last is not None and run.params.lowest_fallback:
+        require_lowered(last.metrics, spec)
 
 
 def paparazzi_result(before, last: Step, options: dict | None = None):

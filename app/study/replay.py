@@ -81,9 +81,11 @@ class ReplayReport:
 #: with, so a missing field means the log predates it). Paparazzi's ``remesh_scope`` (issue 23,
 #: fourth pass): before it every remeshing re-placed the whole surface ("all"); its
 #: ``rough_step`` and ``plateau_step`` (fifth pass): before them the step on "auto" was the
-#: filter's own on any surface and was never halved when the energy climbed (False, False).
+#: filter's own on any surface and was never halved when the energy climbed (False, False);
+#: its ``lowest_fallback`` (sixth pass): before it a run returned its last shape whatever its
+#: energy (False).
 ADDED_FIELDS: dict[str, dict] = {"Paparazzi": {"remesh_scope": "all", "rough_step": False,
-                                               "plateau_step": False}}
+                                               "plateau_step": False, "lowest_fallback": False}}
 
 
 def logged_params(recipe_name: str, values: dict | None) -> dict:

@@ -11,8 +11,10 @@ from algorithms.mesh import icosphere, read_mesh, write_mesh
 from algorithms.mesh.topology import is_manifold
 from app.cli import main
 
-FAST = ["--iterations", "12", "--resolution", "32", "--remesh-every", "6", "--remesh-threshold", "0",
-        "--monitor-every", "0"]
+#: short runs that check the command's mechanics, not the filters' convergence (12 iterations
+#: need not lower an energy; a run that does not fails with lowest_fallback on, tested below)
+FAST = ["--iterations", "12", "--resolution", "32", "--remesh-every", "6",
+        "--remesh-threshold", "0", "--monitor-every", "0", "--no-lowest-fallback"]
 
 
 @pytest.fixture
@@ -184,7 +186,7 @@ def test_the_report_says_which_step_a_rough_scan_got(tmp_path, capsys):
     d = read_mesh(ROOT / "resources" / "samples" / "blob.obj")
     noisy = tmp_path / "noisy.obj"
     write_mesh(noisy, noisy_scan(d.V, d.F, 0.3, seed=0), d.F)
-    short = ["--iterations", "2", "--monitor-every", "0"]
+    short = ["--iterations", "2", "--monitor-every", "0", "--no-lowest-fallback"]
     reports = {}
     for tag, extra in (("auto", []), ("off", ["--no-rough-step"]),
                        ("typed", ["--learning-rate", "3e-5"])):
@@ -202,3 +204,68 @@ def test_the_report_says_which_step_a_rough_scan_got(tmp_path, capsys):
     assert main(["paparazzi", str(noisy), "-o", str(tmp_path / "t.obj"), "--filter", "guided",
                  *short]) == 0
     assert "step 0.0002 (rough surface)" in capsys.readouterr().out
+
+
+def test_a_run_that_does_not_lower_its_energy_fails_and_writes_nothing(sphere, tmp_path,
+                                                                       capsys):
+    # the brief: a result that did not converge is a failure, never a warning. A filter whose
+    # target runs away (it asks for ever more contrast) raises its energy at every step: with
+    # lowest_fallback on (the default) the command exits 6, says so, and leaves the output as it
+    # was; with --no-lowest-fallback it writes the last shape and reports its energy
+    from algorithms.paparazzi import register_filter, unregister_filter
+
+    @register_filter("test-runaway", kind="iterative", learning_rate=1e-2)
+    def runaway(image, params, ctx):
+        return image + 0.5 * (image - image.mean())
+
+    try:
+        out = tmp_path / "o.obj"
+        out.write_text("keep me")
+        args = ["paparazzi", str(sphere), "-o", str(out), "--overwrite", "--filter",
+                "test-runaway", "--iterations", "30", "--resolution", "32",
+                "--remesh-every", "0", "--monitor-every", "10"]
+        assert main(args) == 6
+        err = capsys.readouterr().err
+        assert "did not lower the filter's energy" in err and "nothing was changed" in err
+        assert out.read_text() == "keep me"
+        assert main([*args, "--no-lowest-fallback", "--json"]) == 0
+        rep = json.loads(capsys.readouterr().out)
+        assert rep["final_monitor_energy"] > rep["initial_monitor_energy"]
+        assert rep["kept_iteration"] == 30
+        assert read_mesh(out).V.shape[1] == 3
+    finally:
+        unregister_filter("test-runaway")
+
+
+def test_a_run_whose_energy_climbs_back_writes_its_lowest_shape_and_says_so(tmp_path, capsys):
+    # a filter whose pull weakens and then grows (test_paparazzi_optimize.py's drift) ends
+    # above its start: the command writes the lowest measured shape and reports which
+    from algorithms.paparazzi import register_filter, unregister_filter
+
+    calls = [0]
+
+    @register_filter("test-drift-cli", kind="iterative", learning_rate=1e-4)
+    def drift(image, params, ctx):
+        calls[0] += 1
+        c = max(0.02, 0.2 - calls[0] / 500) + max(0.0, (calls[0] - 400) / 1000)
+        return image + c * (image - 0.5)
+
+    try:
+        src = tmp_path / "sphere.obj"
+        write_mesh(src, *icosphere(2))
+        args = ["paparazzi", str(src), "--filter", "test-drift-cli", "--iterations", "600",
+                "--resolution", "32", "--remesh-every", "0", "--monitor-every", "25"]
+        assert main([*args, "-o", str(tmp_path / "a.obj"), "--json"]) == 0
+        rep = json.loads(capsys.readouterr().out)
+        assert 0 < rep["kept_iteration"] < 600
+        assert rep["final_monitor_energy"] < rep["initial_monitor_energy"]
+        assert rep["last_monitor_energy"] >= rep["initial_monitor_energy"]
+        calls[0] = 0
+        assert main([*args, "-o", str(tmp_path / "b.obj")]) == 0
+        out = capsys.readouterr().out
+        assert f"(the shape of iteration {rep['kept_iteration']}, the lowest; the last " \
+               f"one's {rep['last_monitor_energy']:.4g})" in out
+        np.testing.assert_array_equal(read_mesh(tmp_path / "a.obj").V,
+                                      read_mesh(tmp_path / "b.obj").V)
+    finally:
+        unregister_filter("test-drift-cli")

@@ -31,10 +31,13 @@ def _choose_unreadable_file(panel, dialogs, tmp_path, field):
     assert "cannot be read" in dialogs.errors[-1][1] and "PNG or JPEG" in dialogs.errors[-1][1]
 
 
-def short_run(panel, iterations=30, monitor_every=5):
+def short_run(panel, iterations=30, monitor_every=5, lowest_fallback=True):
+    """A short run. ``lowest_fallback=False`` for a run too short to be sure to lower its energy
+    (with it on, such a run fails: tested on its own)."""
     p = panel.form.params()
     panel.form.set_params(p.__class__(iterations=iterations, resolution=64, remesh_every=10,
-                                      monitor_every=monitor_every, learning_rate=1e-3))
+                                      monitor_every=monitor_every, learning_rate=1e-3,
+                                      lowest_fallback=lowest_fallback))
 
 
 def test_run_streams_mesh_images_and_monitor_then_one_undo_step(window, dialogs, qtbot):
@@ -161,7 +164,7 @@ def test_neural_style_takes_a_painting_of_any_shape_and_runs_without_one(window,
     assert panel.set_filter_file("style_image", "")
     assert panel.filter_params().style_image == "" and len(dialogs.errors) == 2
     # ... and Run does not ask for one: a short run with the built-in style is one undo step
-    short_run(panel, iterations=3, monitor_every=0)
+    short_run(panel, iterations=3, monitor_every=0, lowest_fallback=False)
     with qtbot.waitSignal(window.job_committed, timeout=60000):
         panel.run_button.click()
     assert window.undo_stack.count() == 1 and len(dialogs.errors) == 2
@@ -196,6 +199,36 @@ def test_a_filter_that_raises_stops_the_job_and_leaves_the_document(window, dial
     assert window.undo_stack.count() == 0
     panel.refresh_filters()
     assert panel.filter_combo.findText("test-panel-broken") < 0
+
+
+def test_a_run_that_does_not_lower_its_energy_fails_and_leaves_the_document(window, dialogs,
+                                                                            qtbot):
+    # lowest_fallback (issue 23, sixth pass): a run whose monitor energy never falls below its
+    # start did not converge: the job fails with a plain message, the document is unchanged and
+    # there is nothing to undo (a filter that asks for ever more contrast)
+    panel = open_panel(window, "spot_lowres.obj")
+    doc = window.document
+    V0, F0 = np.array(doc.V), np.array(doc.F)
+
+    @register_filter("test-panel-runaway", kind="iterative", resolution=32, learning_rate=1e-2)
+    def runaway(image, params, ctx):
+        return image + 0.5 * (image - image.mean())
+
+    try:
+        panel.set_filter("test-panel-runaway")
+        p = panel.form.params()
+        assert p.lowest_fallback is True
+        panel.form.set_params(p.__class__(iterations=20, resolution=32, remesh_every=0,
+                                          monitor_every=5, learning_rate=1e-2))
+        with qtbot.waitSignal(window.runner.failed, timeout=60000):
+            panel.run_button.click()
+    finally:
+        unregister_filter("test-panel-runaway")
+    title, text = dialogs.errors[-1]
+    assert "did not lower the filter's energy" in text and "nothing was changed" in text
+    np.testing.assert_array_equal(doc.V, V0)
+    np.testing.assert_array_equal(doc.F, F0)
+    assert window.undo_stack.count() == 0
 
 
 def test_non_manifold_mesh_offers_clean_or_is_refused(window, dialogs, qtbot):
@@ -472,8 +505,10 @@ def test_guided_on_a_noisy_scan_says_it_takes_its_rough_step(window, dialogs, qt
     panel.raise_()
     panel.set_filter("guided")
     lr = panel.form.editors["learning_rate"].spin
-    assert lr.value() == 0 and lr.text() == "auto (1e-05; rough 0.0002)"
-    panel.form.set_params(PaparazziPanelParams(iterations=60, monitor_every=30))
+    assert lr.value() == 0 and lr.text() == "auto (1e-05; rough up to 0.0002)"
+    # 60 iterations stay on the rising side of the barrier (lowest_fallback would fail the run)
+    panel.form.set_params(PaparazziPanelParams(iterations=60, monitor_every=30,
+                                               lowest_fallback=False))
     with qtbot.waitSignal(window.job_committed, timeout=120000):
         qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
     text = panel.status_label.text()
@@ -486,3 +521,34 @@ def test_guided_on_a_noisy_scan_says_it_takes_its_rough_step(window, dialogs, qt
     qtbot.keyClick(box, _Qt.Key.Key_Space)
     assert not box.isChecked() and not panel.form.params().rough_step
     assert lr.text() == "auto (1e-05)"
+
+
+def test_l0_starts_at_its_own_iteration_count_unless_one_was_typed(window, dialogs, qtbot):
+    # issue 23, sixth pass: on a smooth shape l0's energy rises before it falls (the blob: back
+    # below its start only after 650 iterations), so its run starts at 1000
+    # (FilterSpec.panel_iterations); the count follows the filter until the user types one
+    from app.panels.paparazzi import GUI_ITERATIONS
+
+    panel = open_panel(window, "spot_lowres.obj")
+    spin = panel.form.editors["iterations"].spin
+    assert panel.filter_name() == DEFAULT_PANEL_FILTER and spin.value() == GUI_ITERATIONS
+    panel.set_filter("l0")
+    assert spin.value() == 1000 == panel.form.params().iterations
+    assert "l0 starts at 1000" in spin.toolTip() or "l0 starts at 1000" in \
+        panel.form.labels["iterations"].toolTip()
+    panel.set_filter("guided")
+    assert spin.value() == GUI_ITERATIONS
+    spin.setFocus()
+    spin.selectAll()
+    qtbot.keyClicks(spin, "450")
+    qtbot.keyClick(spin, Qt.Key.Key_Return)
+    assert panel.form.params().iterations == 450
+    panel.set_filter("l0")
+    assert spin.value() == 450
+    # restoring a project's panel (its run settings first, then its filter) keeps the saved
+    # count, whatever the filter's own
+    panel.set_filter("quantize")
+    assert spin.value() == 450
+    panel.form.set_params(panel.form.params().__class__(iterations=GUI_ITERATIONS))
+    panel.restore_options({"filter": "l0", "filter_params": {}})
+    assert panel.filter_name() == "l0" and spin.value() == GUI_ITERATIONS

@@ -768,3 +768,41 @@ def test_ply_colours_are_read_from_binary_and_ascii_files(tmp_path):
     assert ply_colors(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n"
                       b"end_header\n") is None  # no colours, truncated: None, no exception
     assert ply_colors(b"garbage") is None
+
+
+def test_number_parsing_reads_to_the_end_and_leaves_the_warning_filters_alone(tmp_path,
+                                                                             monkeypatch):
+    # the fast parser stops silently at an unreadable token; a stop anywhere, the last token
+    # included, is an error. It must not touch the warning filters: in Python 3.11 they are
+    # shared by every thread (a read in a worker thread once turned another thread's
+    # DeprecationWarning into an error, failing unrelated tests)
+    import warnings
+
+    p = tmp_path / "bad.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0x\nf 1 2 3\n")
+    calls = [(mio._parse_floats, "1 2.5\n-3e2"), (mio._parse_ints, "1 2\t3")]
+    calls += [(mio._parse_floats, t) for t in ("1 2 3x", "1 x 3", "1,2,3", "1 2", "1 2 3 4")]
+    calls += [(mio._parse_ints, t) for t in ("1 2 3.5", "1 2.5 3", "1 2 a")]
+    touched, got = [], []
+
+    def spy(name):
+        real = getattr(warnings, name)
+        return lambda *a, **k: touched.append(name) or real(*a, **k)
+
+    with monkeypatch.context() as mp:
+        for name in ("catch_warnings", "simplefilter", "filterwarnings"):
+            mp.setattr(warnings, name, spy(name))
+        for f, text in calls:
+            try:
+                got.append(f(text, 3))
+            except ValueError:
+                got.append(None)
+        try:
+            read_mesh(p)
+        except MeshReadError as e:
+            got.append(str(e))
+    assert touched == []
+    np.testing.assert_array_equal(got[0], [1, 2.5, -300])
+    np.testing.assert_array_equal(got[1], [1, 2, 3])
+    assert got[2:-1] == [None] * (len(calls) - 2)
+    assert "line 3" in got[-1]

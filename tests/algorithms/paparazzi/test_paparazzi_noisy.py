@@ -177,3 +177,28 @@ def test_a_chosen_step_or_a_clean_surface_keeps_the_filters_own_step():
     other = Paparazzi(W, F, "quantize", None, PaparazziParams(iterations=1))   # no rough step
     run_to_end(other.steps())
     assert other.rough is None and other.learning_rate == get_filter("quantize").learning_rate
+
+
+def test_the_rough_step_shrinks_with_the_edges_of_a_fine_mesh(monkeypatch):
+    # issue 23, sixth pass: the rough step was measured on meshes whose mean edge (in the cube
+    # of side 2) is 0.0226-0.04; on a finer mesh a fixed step is a larger share of an edge and
+    # of the noise (a 155,813-vertex scan crossed itself: 7 rollbacks, energy 3.103 -> 3.111),
+    # so it shrinks in proportion below ROUGH_EDGE. Here the probe is told "rough" and
+    # ROUGH_EDGE is raised so that a small sphere counts as fine
+    from algorithms.mesh.primitives import icosphere
+    from algorithms.paparazzi import optimize
+    from algorithms.paparazzi.filters import GUIDED_ROUGH_LEARNING_RATE
+
+    assert optimize.ROUGH_EDGE == 0.02
+    V, F = icosphere(3)
+    pp = PaparazziParams(iterations=1, remesh_every=0, monitor_every=0)
+    for edge, factor in ((0.02, 1.0), (0.3, None)):
+        monkeypatch.setattr(optimize, "ROUGH_EDGE", edge)
+        run = Paparazzi(V, F, "guided", None, pp)
+        run.rough_probe = lambda *a, **k: 0.01
+        first = next(iter(run.steps()))
+        h = run.edge_length
+        assert 0.1 < h < 0.2                      # icosphere(3): 0.151
+        expected = GUIDED_ROUGH_LEARNING_RATE * (factor or h / edge)
+        assert run.learning_rate == pytest.approx(expected)
+        assert f"the step is {expected:g}" in first.message

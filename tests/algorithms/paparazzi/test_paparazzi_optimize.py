@@ -466,3 +466,71 @@ def test_the_step_is_halved_once_the_energy_climbs_back_up():
     assert last.metrics["step_halvings"] == 0
     np.testing.assert_array_equal(runs[0].V, runs[1].V)
     np.testing.assert_array_equal(runs[0].F, runs[1].F)
+
+
+def test_a_run_whose_energy_ends_above_its_start_returns_its_lowest_shape():
+    # PaparazziParams.lowest_fallback (issue 23, sixth pass): a filter whose target drifts away
+    # (its pull weakens, then grows from call 400) makes the monitor energy fall below its start
+    # and climb back above it; the run returns the shape of its lowest check, unless that shape
+    # cannot be shown free of new self-crossings; with a milder drift the energy ends below its
+    # start and the last shape is returned, bit for bit as with the option off
+    from algorithms.paparazzi.optimize import Paparazzi as P
+
+    assert PaparazziParams().lowest_fallback is True
+    calls = [0]
+    growth = [1000.0]
+
+    @register_filter("test-drift-keep", kind="iterative", learning_rate=1e-4)
+    def drift(image, params, ctx):
+        calls[0] += 1
+        c = max(0.02, 0.2 - calls[0] / 500) + max(0.0, (calls[0] - 400) / growth[0])
+        return image + c * (image - 0.5)
+
+    class Poisoned(P):
+        # the end's check of the lowest (unchecked) shape finds a crossing
+        n = 0
+
+        def _new_crossing_points(self, V, F):
+            Poisoned.n += 1
+            return np.zeros((1, 3)) if Poisoned.n == 2 else super()._new_crossing_points(V, F)
+
+    def runs(cases):
+        out = {}
+        for key, cls, on in cases:
+            calls[0] = 0
+            pp = PaparazziParams(iterations=600, resolution=32, remesh_every=0,
+                                 monitor_every=25, lowest_fallback=on)
+            out[key] = list(cls(V, F, "test-drift-keep", None, pp).steps())
+        return out
+
+    try:
+        V, F = icosphere(2)
+        got = runs((("on", P, True), ("poisoned", Poisoned, True), ("off", P, False)))
+        steps = got["on"]
+        m = steps[-1].metrics
+        checks = [s.metrics["monitor_energy"] for s in steps[24:-1:25]]
+        k = int(m["kept_iteration"])
+        assert 25 <= k < 600 and k % 25 == 0
+        assert m["monitor_energy"] == min(checks) < m["initial_monitor_energy"]
+        assert m["last_monitor_energy"] >= m["initial_monitor_energy"]
+        np.testing.assert_array_equal(steps[-1].V, steps[k - 1].V)
+        np.testing.assert_array_equal(steps[-1].F, steps[k - 1].F)
+        assert "kept the shape of iteration" in steps[-1].message
+        assert Poisoned.n == 2
+        for key in ("poisoned", "off"):
+            last = got[key][-1]
+            assert last.metrics["kept_iteration"] == 600
+            assert last.metrics["monitor_energy"] == m["last_monitor_energy"]
+            np.testing.assert_array_equal(last.V, got["poisoned"][-1].V)
+        np.testing.assert_array_equal(got["off"][-2].V, steps[-2].V)   # same run until then
+        # a milder drift: the energy climbs back but ends below its start: the last shape
+        growth[0] = 4000.0
+        got = runs((("on", P, True), ("off", P, False)))
+        m = got["on"][-1].metrics
+        assert m["monitor_energy"] < m["initial_monitor_energy"]
+        assert m["monitor_energy"] > 1.05 * min(s.metrics["monitor_energy"]
+                                                for s in got["on"][24:-1:25])
+        assert m["kept_iteration"] == 600
+        np.testing.assert_array_equal(got["on"][-1].V, got["off"][-1].V)
+    finally:
+        unregister_filter("test-drift-keep")

@@ -5,6 +5,7 @@ later is missing from older logs, and the replay must run it as the log's versio
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from algorithms.mesh import icosphere
 from algorithms.params import params_to_dict
@@ -17,11 +18,11 @@ def test_a_log_older_than_remesh_scope_replays_with_the_whole_surface_remeshed()
     from app.document import MeshState
 
     assert ADDED_FIELDS["Paparazzi"] == {"remesh_scope": "all", "rough_step": False,
-                                         "plateau_step": False}
+                                         "plateau_step": False, "lowest_fallback": False}
     assert "Paparazzi" in app.recipes.recipes()
     old = params_to_dict(PaparazziParams(iterations=12, resolution=32, remesh_every=6,
                                          monitor_every=0))
-    del old["remesh_scope"]                       # what a log written before the field holds
+    del old["remesh_scope"], old["lowest_fallback"]   # what a log written before them holds
     assert logged_params("Paparazzi", old)["remesh_scope"] == "all"
     assert logged_params("Paparazzi", {**old, "remesh_scope": "bad"})["remesh_scope"] == "bad"
     assert logged_params("Cubic", {"lam": 0.2}) == {"lam": 0.2}
@@ -47,7 +48,7 @@ def test_a_log_older_than_rough_step_replays_with_the_filters_own_step():
     from tests.conftest import ROOT
 
     old = params_to_dict(PaparazziParams(iterations=3, monitor_every=0))
-    del old["rough_step"], old["plateau_step"]
+    del old["rough_step"], old["plateau_step"], old["lowest_fallback"]
     assert logged_params("Paparazzi", old)["rough_step"] is False
     assert logged_params("Paparazzi", old)["plateau_step"] is False
     assert "remesh_scope" in old and logged_params("Paparazzi", old)["remesh_scope"] == "bad"
@@ -58,3 +59,31 @@ def test_a_log_older_than_rough_step_replays_with_the_filters_own_step():
                            {"filter": "guided", "filter_params": {}}).state.V
            for extra in ({}, {"rough_step": True})]
     assert not np.array_equal(out[0], out[1])
+
+
+def test_a_log_older_than_lowest_fallback_replays_its_last_shape_without_failing():
+    # before the sixth pass of issue 23 a run returned its last shape whatever its energy; a
+    # log from then replays so (today's default fails a run that does not lower its energy)
+    import app.recipes
+    from algorithms.paparazzi import EnergyNotLowered, PaparazziParams, register_filter
+    from algorithms.paparazzi import unregister_filter
+    from app.document import MeshState
+
+    @register_filter("test-runaway-replay", kind="iterative", learning_rate=1e-2)
+    def runaway(image, params, ctx):
+        return image + 0.5 * (image - image.mean())
+
+    try:
+        V, F = icosphere(2)
+        V = V * (1.0 + 0.15 * np.sin(3.0 * V[:, :1]) * np.cos(2.0 * V[:, 1:2]))
+        state = MeshState(V=V, F=F)
+        old = params_to_dict(PaparazziParams(iterations=20, resolution=32, remesh_every=0,
+                                             monitor_every=5))
+        del old["lowest_fallback"]
+        options = {"filter": "test-runaway-replay", "filter_params": {}}
+        res = app.recipes.run("Paparazzi", state, logged_params("Paparazzi", old), options)
+        assert res.outcome["monitor_energy"] > res.outcome["initial_monitor_energy"]
+        with pytest.raises(EnergyNotLowered):
+            app.recipes.run("Paparazzi", state, {**old, "lowest_fallback": True}, options)
+    finally:
+        unregister_filter("test-runaway-replay")
