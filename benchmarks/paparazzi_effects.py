@@ -254,6 +254,10 @@ def effects(a) -> int:
             if name == "guided":       # against the clean input's angles (a noisy scan's own
                 crease = (f"{crease_fraction(Vc, F, Vo, Fo):.3f} "      # are noise)
                           f"(c {crease_fraction(Vc, F, clast.V, clast.F):.3f})")
+            # the filter's own energy on remeshing alone's output: does the run end lower?
+            print(f"    {mesh} {name}: E16 of the control's output "
+                  f"{run.monitor_energy((clast.V - run.center) / run.scale, clast.F):.4g} "
+                  f"(the run's {e1:.4g})", flush=True)
             if noisy and name == "guided":
                 diag = float(np.linalg.norm(Vc.max(0) - Vc.min(0)))
                 print(f"    {mesh} guided: distance to the clean mesh (mean, / diagonal) "

@@ -273,8 +273,9 @@ def monitor_points(history: Iterable, every: int, iterations: int | None,
                    have_start: bool) -> tuple[list, bool]:
     """The monitor energies to plot from a batch of ``(iteration, metrics)``: the initial one
     (once: ``have_start`` says whether it is plotted already), then the value where it was
-    evaluated (every ``every`` iterations and at the last, ``iterations``), not its repeated
-    value in between. Returns ``(values, have_start)``."""
+    evaluated (every ``every`` iterations and at the last, ``iterations``: the last shape's,
+    ``last_monitor_energy``), not its repeated value in between. Returns
+    ``(values, have_start)``."""
     out = []
     for it, metrics in history:
         if "monitor_energy" not in metrics:
@@ -284,7 +285,11 @@ def monitor_points(history: Iterable, every: int, iterations: int | None,
             if first is not None:
                 out.append(first)
                 have_start = True
-        if (every and it % every == 0) or (iterations is not None and it == iterations):
+        if iterations is not None and it == iterations:
+            # the last shape's energy, not the result's when an earlier, lower shape was kept
+            # (PaparazziParams.lowest_fallback): the plot is the run's trajectory
+            out.append(metrics.get("last_monitor_energy", metrics["monitor_energy"]))
+        elif every and it % every == 0:
             out.append(metrics["monitor_energy"])
     return out, have_start
 

@@ -230,6 +230,10 @@ def test_view_helpers():
     assert vals == [4.0, 3.0] and started       # 6, and the last (7)
     assert monitor_points([(1, {"energy": 1.0})], 1, 1, False) == ([], False)
     assert monitor_points(hist, 0, None, True) == ([], True)
+    # an earlier, lower shape kept (lowest_fallback): the plot ends at the last shape's energy
+    kept = hist[:6] + [(7, {"monitor_energy": 2.0, "last_monitor_energy": 12.0,
+                            "initial_monitor_energy": 10.0})]
+    assert monitor_points(kept, 2, 7, False)[0] == [10.0, 8.0, 6.0, 4.0, 12.0]
 
 
 def test_options_are_json_and_blobs_only_for_readable_files(tmp_path):
