@@ -16,7 +16,9 @@ reductions and no scatter-adds (sums over items are gathered per output, or per-
 results are added up afterwards in a serial loop). So the parallel and the serial kernel give
 the same bits, for any thread count (tested).
 
-* The thread count is Numba's: ``NUMBA_NUM_THREADS`` (default: the number of cores) or
+* The thread count is Numba's: ``NUMBA_NUM_THREADS`` (default: ``OMP_NUM_THREADS`` where that
+  is set, else the number of cores, as OpenMP's, so that a parallel launch does not change the
+  thread count PyTorch then uses on that thread: :func:`_numba_threads_as_openmp`) or
   :func:`numba.set_num_threads` (per Python thread). With 1 thread the serial kernels run:
   ``NUMBA_NUM_THREADS=1`` is the single-thread code of before, without any threading layer.
 * Threading layer: Numba's default choice (``tbb``, then ``omp``, then ``workqueue``). On this
@@ -50,6 +52,29 @@ __all__ = ["numba_wanted", "KernelModule", "use_threads", "thread_count", "threa
 
 # before Numba loads GNU OpenMP (see the module docstring); a value the user set is kept
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+
+def _numba_threads_as_openmp() -> None:
+    """Numba's thread count := ``OMP_NUM_THREADS`` when that is set and ``NUMBA_NUM_THREADS``
+    is not; before Numba loads. Numba's ``omp`` layer sets
+    the calling thread's OpenMP thread count to Numba's at every parallel launch, and PyTorch's
+    CPU kernels use that same per-thread count: with OMP_NUM_THREADS=1 and Numba on 2 threads,
+    one image derivative (``image_vjp``) on a thread made the image classifier's logits on that
+    thread differ in their last bits from another thread's, and a study replay, which runs the
+    logged run on another thread, reported a mismatch (issue 23, sixth pass). With the two
+    counts equal, a launch leaves the count as it was. (``NUMBA_NUM_THREADS`` set alone:
+    OpenMP's default becomes it, where OpenMP is not loaded yet.)"""
+    if "NUMBA_NUM_THREADS" in os.environ:
+        n = os.environ["NUMBA_NUM_THREADS"].strip()
+        if n.isdigit() and int(n) >= 1:
+            os.environ.setdefault("OMP_NUM_THREADS", n)
+        return
+    n = os.environ.get("OMP_NUM_THREADS", "").strip()
+    if n.isdigit() and int(n) >= 1:     # neither set: both default to the number of cores
+        os.environ["NUMBA_NUM_THREADS"] = n
+
+
+_numba_threads_as_openmp()
 
 
 def numba_wanted() -> bool:

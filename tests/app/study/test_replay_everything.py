@@ -224,7 +224,8 @@ def test_a_killed_session_through_every_panel_and_tool_replays_entirely(
                                      "checks": len(rep.runs)}))
     by_kind = rep.counts_by_kind()
     assert rep.counts.get("not replayable", 0) == 0, d
-    assert set(rep.counts) == {"match"}, d
+    assert set(rep.counts) == {"match"}, (d, [(r.method, r.kind, r.status, r.reason)
+                                             for r in rep.runs if r.status != "match"])
     assert not rep.nondeterministic
     recipes = {r.method for r in rep.runs if r.kind == "run"}
     for name in ("Cubic", "Smooth", "Analogies", "Multigrid smoothing", "Spectral coarsening",
