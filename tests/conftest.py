@@ -13,6 +13,7 @@ skip and say why, and Qt falls back to the offscreen platform for the widget-onl
 from __future__ import annotations
 
 import os
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +68,47 @@ def mobius_strip(n: int = 16):
         c, d = (i + 1, n + i + 1) if i < n - 1 else (n, 0)  # the last quad closes with a twist
         F += [[a, c, b], [b, c, d]]
     return V, np.array(F, dtype=np.int64)
+
+
+@contextmanager
+def drift_filter(name: str, growth: float = 1000.0, **options):
+    """A Paparazzi test filter (iterative) whose target drifts: its pull weakens over its first
+    90 calls, so the monitor energy falls below its start, and grows again from call 400 by
+    ``1 / growth`` per call, so the energy climbs back (above its start within 600 calls on
+    ``icosphere(2)`` for growth 1000, not for 4000). Registered while inside; yields its state,
+    ``{"calls", "growth"}`` (set ``calls`` to 0 before each run; ``growth`` may change)."""
+    from algorithms.paparazzi import register_filter, unregister_filter
+
+    state = {"calls": 0, "growth": float(growth)}
+
+    @register_filter(name, kind="iterative", **{"learning_rate": 1e-4, **options})
+    def drift(image, params, ctx):
+        state["calls"] += 1
+        k = state["calls"]
+        c = max(0.02, 0.2 - k / 500) + max(0.0, (k - 400) / state["growth"])
+        return image + c * (image - 0.5)
+
+    try:
+        yield state
+    finally:
+        unregister_filter(name)
+
+
+@contextmanager
+def runaway_filter(name: str, **options):
+    """A Paparazzi test filter (iterative) that asks for ever more contrast around the picture's
+    mean, at a large step: on the tests' bumpy spheres its monitor energy rises at every check,
+    so a run never lowers it. Registered while inside."""
+    from algorithms.paparazzi import register_filter, unregister_filter
+
+    @register_filter(name, kind="iterative", **{"learning_rate": 1e-2, **options})
+    def runaway(image, params, ctx):
+        return image + 0.5 * (image - image.mean())
+
+    try:
+        yield name
+    finally:
+        unregister_filter(name)
 
 
 @pytest.fixture

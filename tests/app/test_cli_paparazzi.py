@@ -10,6 +10,7 @@ import pytest
 from algorithms.mesh import icosphere, read_mesh, write_mesh
 from algorithms.mesh.topology import is_manifold
 from app.cli import main
+from tests.conftest import drift_filter, runaway_filter
 
 #: short runs that check the command's mechanics, not the filters' convergence (12 iterations
 #: need not lower an energy; a run that does not fails with lowest_fallback on, tested below)
@@ -212,13 +213,7 @@ def test_a_run_that_does_not_lower_its_energy_fails_and_writes_nothing(sphere, t
     # target runs away (it asks for ever more contrast) raises its energy at every step: with
     # lowest_fallback on (the default) the command exits 6, says so, and leaves the output as it
     # was; with --no-lowest-fallback it writes the last shape and reports its energy
-    from algorithms.paparazzi import register_filter, unregister_filter
-
-    @register_filter("test-runaway", kind="iterative", learning_rate=1e-2)
-    def runaway(image, params, ctx):
-        return image + 0.5 * (image - image.mean())
-
-    try:
+    with runaway_filter("test-runaway"):
         out = tmp_path / "o.obj"
         out.write_text("keep me")
         args = ["paparazzi", str(sphere), "-o", str(out), "--overwrite", "--filter",
@@ -233,24 +228,12 @@ def test_a_run_that_does_not_lower_its_energy_fails_and_writes_nothing(sphere, t
         assert rep["final_monitor_energy"] > rep["initial_monitor_energy"]
         assert rep["kept_iteration"] == 30
         assert read_mesh(out).V.shape[1] == 3
-    finally:
-        unregister_filter("test-runaway")
 
 
 def test_a_run_whose_energy_climbs_back_writes_its_lowest_shape_and_says_so(tmp_path, capsys):
     # a filter whose pull weakens and then grows (test_paparazzi_optimize.py's drift) ends
     # above its start: the command writes the lowest measured shape and reports which
-    from algorithms.paparazzi import register_filter, unregister_filter
-
-    calls = [0]
-
-    @register_filter("test-drift-cli", kind="iterative", learning_rate=1e-4)
-    def drift(image, params, ctx):
-        calls[0] += 1
-        c = max(0.02, 0.2 - calls[0] / 500) + max(0.0, (calls[0] - 400) / 1000)
-        return image + c * (image - 0.5)
-
-    try:
+    with drift_filter("test-drift-cli", growth=1000.0) as drift:
         src = tmp_path / "sphere.obj"
         write_mesh(src, *icosphere(2))
         args = ["paparazzi", str(src), "--filter", "test-drift-cli", "--iterations", "600",
@@ -260,12 +243,10 @@ def test_a_run_whose_energy_climbs_back_writes_its_lowest_shape_and_says_so(tmp_
         assert 0 < rep["kept_iteration"] < 600
         assert rep["final_monitor_energy"] < rep["initial_monitor_energy"]
         assert rep["last_monitor_energy"] >= rep["initial_monitor_energy"]
-        calls[0] = 0
+        drift["calls"] = 0
         assert main([*args, "-o", str(tmp_path / "b.obj")]) == 0
         out = capsys.readouterr().out
         assert f"(the shape of iteration {rep['kept_iteration']}, the lowest; the last " \
                f"one's {rep['last_monitor_energy']:.4g})" in out
         np.testing.assert_array_equal(read_mesh(tmp_path / "a.obj").V,
                                       read_mesh(tmp_path / "b.obj").V)
-    finally:
-        unregister_filter("test-drift-cli")

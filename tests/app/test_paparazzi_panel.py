@@ -8,7 +8,7 @@ from PySide6.QtCore import Qt
 from algorithms.mesh.topology import boundary_loops, is_manifold
 from algorithms.paparazzi import register_filter, unregister_filter
 from app.panels.paparazzi import DEFAULT_PANEL_FILTER, THUMB
-from tests.conftest import ROOT
+from tests.conftest import ROOT, runaway_filter
 
 DATA = ROOT / "tests" / "data"
 
@@ -210,11 +210,7 @@ def test_a_run_that_does_not_lower_its_energy_fails_and_leaves_the_document(wind
     doc = window.document
     V0, F0 = np.array(doc.V), np.array(doc.F)
 
-    @register_filter("test-panel-runaway", kind="iterative", resolution=32, learning_rate=1e-2)
-    def runaway(image, params, ctx):
-        return image + 0.5 * (image - image.mean())
-
-    try:
+    with runaway_filter("test-panel-runaway", resolution=32):
         panel.set_filter("test-panel-runaway")
         p = panel.form.params()
         assert p.lowest_fallback is True
@@ -222,8 +218,6 @@ def test_a_run_that_does_not_lower_its_energy_fails_and_leaves_the_document(wind
                                           monitor_every=5, learning_rate=1e-2))
         with qtbot.waitSignal(window.runner.failed, timeout=60000):
             panel.run_button.click()
-    finally:
-        unregister_filter("test-panel-runaway")
     title, text = dialogs.errors[-1]
     assert "did not lower the filter's energy" in text and "nothing was changed" in text
     np.testing.assert_array_equal(doc.V, V0)

@@ -16,6 +16,7 @@ from algorithms.steps import Step
 from app.document import MeshState
 from app.recipes import get_recipe, outcome_hash, put_blob, put_blob_file, run
 from app.recipes.paparazzi import (filter_options, monitor_points, paparazzi_result, rgb8)
+from tests.conftest import runaway_filter
 
 #: a short run: a few views, small images, remeshing and the monitor inside it; it checks the
 #: recipe's mechanics, not convergence (six views need not lower an energy, and with
@@ -275,17 +276,12 @@ def test_a_run_that_does_not_lower_its_energy_fails_after_its_last_step(sphere):
     # lowest_fallback on (the default): the recipe's generator raises EnergyNotLowered after the
     # last step, so every caller (panel, command line, replay, batch) fails and changes nothing;
     # off, the last shape is the result whatever its energy (old study logs replay so)
-    from algorithms.paparazzi import EnergyNotLowered, register_filter
+    from algorithms.paparazzi import EnergyNotLowered
 
-    @register_filter("test-runaway-recipe", kind="iterative", learning_rate=1e-2,
-                     panel_iterations=700)
-    def runaway(image, params, ctx):
-        return image + 0.5 * (image - image.mean())
-
-    try:
+    with runaway_filter("test-runaway-recipe", panel_iterations=700):
         params = {"iterations": 20, "resolution": 32, "remesh_every": 0, "monitor_every": 5}
         steps = []
-        with pytest.raises(EnergyNotLowered, match="did not lower(.|\n)*give it 700 or more"):
+        with pytest.raises(EnergyNotLowered, match="did not lower.*give it 700 or more"):
             for s in get_recipe("paparazzi").steps(sphere, PaparazziParams(**params),
                                                    {"filter": "test-runaway-recipe"}):
                 steps.append(s)
@@ -296,5 +292,3 @@ def test_a_run_that_does_not_lower_its_energy_fails_after_its_last_step(sphere):
         res = run("paparazzi", sphere, dict(params, lowest_fallback=False),
                   {"filter": "test-runaway-recipe"})
         assert res.outcome["monitor_energy"] > res.outcome["initial_monitor_energy"]
-    finally:
-        unregister_filter("test-runaway-recipe")

@@ -18,7 +18,7 @@ from algorithms.paparazzi import (FilterFailed, Paparazzi, PaparazziParams,
                                   sample_camera, unregister_filter)
 from algorithms.paparazzi.optimize import nadam_step
 from algorithms.steps import run_to_end
-from tests.conftest import shared_mesh
+from tests.conftest import drift_filter, shared_mesh
 
 
 def test_offset_surface_is_at_distance_sigma_and_cameras_look_inwards():
@@ -428,19 +428,11 @@ def test_the_step_is_halved_once_the_energy_climbs_back_up():
 
     assert (PLATEAU_EVERY, PLATEAU_RISE, PLATEAU_MIN) == (50, 0.02, 1 / 16)
     assert PaparazziParams().plateau_step is False
-    calls = [0]
-
-    @register_filter("test-drift", kind="iterative", learning_rate=1e-4)
-    def drift(image, params, ctx):
-        calls[0] += 1
-        c = max(0.02, 0.2 - calls[0] / 500) + max(0.0, (calls[0] - 400) / 2000)
-        return image + c * (image - 0.5)
-
-    try:
+    with drift_filter("test-drift", growth=2000.0) as drift:
         V, F = icosphere(2)
         rates = {}
         for on in (True, False):
-            calls[0] = 0
+            drift["calls"] = 0
             pp = PaparazziParams(iterations=600, resolution=32, remesh_every=0, monitor_every=0,
                                  plateau_step=on)
             steps = list(Paparazzi(V, F, "test-drift", None, pp).steps())
@@ -453,8 +445,6 @@ def test_the_step_is_halved_once_the_energy_climbs_back_up():
             else:
                 assert m["step_halvings"] == 0 and set(rates[on]) == {1e-4}
         assert rates[True][:PLATEAU_EVERY] == rates[False][:PLATEAU_EVERY]
-    finally:
-        unregister_filter("test-drift")
     # quantize on a bumpy sphere: its energy falls, nothing is halved, and the run is the same
     # bit for bit as without the option (the checks only read the surface)
     V = V * (1 + 0.05 * np.random.default_rng(0).random((len(V), 1)))
@@ -477,14 +467,6 @@ def test_a_run_whose_energy_ends_above_its_start_returns_its_lowest_shape():
     from algorithms.paparazzi.optimize import Paparazzi as P
 
     assert PaparazziParams().lowest_fallback is True
-    calls = [0]
-    growth = [1000.0]
-
-    @register_filter("test-drift-keep", kind="iterative", learning_rate=1e-4)
-    def drift(image, params, ctx):
-        calls[0] += 1
-        c = max(0.02, 0.2 - calls[0] / 500) + max(0.0, (calls[0] - 400) / growth[0])
-        return image + c * (image - 0.5)
 
     class Poisoned(P):
         # the end's check of the lowest (unchecked) shape finds a crossing
@@ -497,13 +479,13 @@ def test_a_run_whose_energy_ends_above_its_start_returns_its_lowest_shape():
     def runs(cases):
         out = {}
         for key, cls, on in cases:
-            calls[0] = 0
+            drift["calls"] = 0
             pp = PaparazziParams(iterations=600, resolution=32, remesh_every=0,
                                  monitor_every=25, lowest_fallback=on)
             out[key] = list(cls(V, F, "test-drift-keep", None, pp).steps())
         return out
 
-    try:
+    with drift_filter("test-drift-keep", growth=1000.0) as drift:
         V, F = icosphere(2)
         got = runs((("on", P, True), ("poisoned", Poisoned, True), ("off", P, False)))
         steps = got["on"]
@@ -524,7 +506,7 @@ def test_a_run_whose_energy_ends_above_its_start_returns_its_lowest_shape():
             np.testing.assert_array_equal(last.V, got["poisoned"][-1].V)
         np.testing.assert_array_equal(got["off"][-2].V, steps[-2].V)   # same run until then
         # a milder drift: the energy climbs back but ends below its start: the last shape
-        growth[0] = 4000.0
+        drift["growth"] = 4000.0
         got = runs((("on", P, True), ("off", P, False)))
         m = got["on"][-1].metrics
         assert m["monitor_energy"] < m["initial_monitor_energy"]
@@ -532,5 +514,3 @@ def test_a_run_whose_energy_ends_above_its_start_returns_its_lowest_shape():
                                                 for s in got["on"][24:-1:25])
         assert m["kept_iteration"] == 600
         np.testing.assert_array_equal(got["on"][-1].V, got["off"][-1].V)
-    finally:
-        unregister_filter("test-drift-keep")

@@ -65,15 +65,11 @@ def test_a_log_older_than_lowest_fallback_replays_its_last_shape_without_failing
     # before the sixth pass of issue 23 a run returned its last shape whatever its energy; a
     # log from then replays so (today's default fails a run that does not lower its energy)
     import app.recipes
-    from algorithms.paparazzi import EnergyNotLowered, PaparazziParams, register_filter
-    from algorithms.paparazzi import unregister_filter
+    from algorithms.paparazzi import EnergyNotLowered, PaparazziParams
     from app.document import MeshState
+    from tests.conftest import runaway_filter
 
-    @register_filter("test-runaway-replay", kind="iterative", learning_rate=1e-2)
-    def runaway(image, params, ctx):
-        return image + 0.5 * (image - image.mean())
-
-    try:
+    with runaway_filter("test-runaway-replay"):
         V, F = icosphere(2)
         V = V * (1.0 + 0.15 * np.sin(3.0 * V[:, :1]) * np.cos(2.0 * V[:, 1:2]))
         state = MeshState(V=V, F=F)
@@ -85,5 +81,3 @@ def test_a_log_older_than_lowest_fallback_replays_its_last_shape_without_failing
         assert res.outcome["monitor_energy"] > res.outcome["initial_monitor_energy"]
         with pytest.raises(EnergyNotLowered):
             app.recipes.run("Paparazzi", state, {**old, "lowest_fallback": True}, options)
-    finally:
-        unregister_filter("test-runaway-replay")
