@@ -64,6 +64,8 @@ GLOSSARY: dict[str, str] = {
     "midpoint": "Midpoint: simplification that collapses the shortest edges to their middles.",
     "PolyCube": "PolyCube: a shape made only of axis-aligned flat faces.",
     "developable": "Developable: can be bent from a flat sheet of paper without stretching.",
+    "gram": "Gram (style) energy: compares which of a network's feature detectors fire together "
+            "across a picture (its texture, wherever it is) with the style's.",
 }
 
 

@@ -30,8 +30,10 @@ per run:
 
 Measures (algorithms/paparazzi/measures.py): quantize palette15 (up); slic, l0 planar3 (up;
 also flat1); guided bending sum |L V|^2 / M (down); neural-style Gram16: the Gram loss of each
-monitor view (of the 16 the shape covers at least half of) against its stylization, averaged
-(down; until 26 November 2026 monitor view 0 alone).
+monitor view (of the 16 the shape covers at least half of) against the style (its ``gram``
+energy, the default since issue 23's seventh pass) or, with ``--energy network``, against the
+network's stylization of the view, averaged (down; until 26 November 2026 monitor view 0
+alone).
 
 Unless --no-sheets, writes one contact sheet per filter, docs/images/paparazzi_<filter>.png:
 one row per mesh, before / after / control, rendered off-screen with a grey light from a fixed
@@ -100,10 +102,11 @@ def clean_of(name):
 
 
 def _gram_monitor(run, V, F, views=1):
-    """Gram loss between a monitor view of world-frame V and the filter's stylization of it:
-    view 0 (``views=1``), or the mean over the first ``views`` monitor views that the shape
-    covers at least half of (``views=16``: *Gram16*; one view is a noisy judge, see
-    docs/paparazzi.md)."""
+    """Gram loss of a monitor view of world-frame V: against the style's Gram matrices (the
+    ``gram`` energy's own: the filter's energy of that view), or, with the ``network`` energy,
+    against the network's stylization of the view; view 0 (``views=1``), or the mean over the
+    first ``views`` monitor views that the shape covers at least half of (``views=16``:
+    *Gram16*; one view is a noisy judge, see docs/paparazzi.md)."""
     from algorithms.paparazzi.filters import FilterContext
     from algorithms.paparazzi.neural_style import gram_style_loss
     from algorithms.render import render
@@ -115,8 +118,9 @@ def _gram_monitor(run, V, F, views=1):
         if views > 1 and r.mask.mean() < 0.5:
             continue
         ctx = FilterContext(camera=cam, mask=r.mask, state=run.state)
-        styled = run.spec.function(r.image, run.filter_params, ctx)
-        losses.append(gram_style_loss(r.image, styled))
+        E, _, styled = run.spec.function(r.image, run.filter_params, ctx)
+        losses.append(E if run.filter_params.energy == "gram"
+                      else gram_style_loss(r.image, styled))
     return float(np.mean(losses))
 
 
@@ -234,12 +238,15 @@ def effects(a) -> int:
             spec = get_filter(name)
             params = PaparazziParams(iterations=a.iterations, remesh_scope=SCOPE,
                                      learning_rate=a.learning_rate)
-            run, last, sec = run_filter(V, F, spec, spec.params(), params)
+            fparams = spec.params()
+            if name == "neural-style":
+                fparams = dataclasses.replace(fparams, energy=a.energy)
+            run, last, sec = run_filter(V, F, spec, fparams, params)
             # the control's vertices move only by remeshing (its gradient is zero), so it depends
             # on the filter only through the remeshing's crease angle: one run per angle
             key = (mesh, float(spec.crease_angle or 0.0))
             if key not in controls:
-                controls[key] = run_filter(V, F, control_spec(spec), spec.params(), params)
+                controls[key] = run_filter(V, F, control_spec(spec), fparams, params)
             crun, clast, csec = controls[key]
             Vo, Fo = last.V, last.F
             m = last.metrics
@@ -557,6 +564,8 @@ def main() -> int:
     ap.add_argument("--filters", nargs="+",
                     default=["guided", "quantize", "slic", "l0", "neural-style"])
     ap.add_argument("--iterations", type=int, default=1000)
+    ap.add_argument("--energy", choices=("gram", "network"), default="gram",
+                    help="neural-style's energy (default: its default, gram)")
     ap.add_argument("--learning-rate", type=float, default=0.0,
                     help="every run's learning rate (0: each filter's own, the default)")
     ap.add_argument("--no-sheets", action="store_true")

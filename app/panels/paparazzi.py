@@ -272,13 +272,15 @@ class PaparazziPanel(MethodPanel):
             return
         self.filter_about.setText(spec.description or "")
         self._follow_filter_iterations(spec)
-        self._show_filter_defaults()
         files = [s for s in describe(spec.params) if s.type is str and not s.choices]
         form = ParamsForm(spec.params, values=self._filter_values.get(name),
                           exclude=tuple(s.name for s in files))
         form.filter_name = name
         form.changed.connect(self._on_params_changed)
+        # the filter's own step may follow its settings (neural-style's energy)
+        form.changed.connect(lambda _p: self._show_filter_defaults())
         self.filter_form = form
+        self._show_filter_defaults()
         if files:
             rows = QWidget()
             fl = QFormLayout(rows)
@@ -334,6 +336,8 @@ class PaparazziPanel(MethodPanel):
                            ("view_width", "width"), ("learning_rate", "learning_rate")):
             editor = self.form.editors.get(name)
             value = getattr(spec, attr, None)
+            if attr == "learning_rate" and value is not None:
+                value = spec.step(self.filter_params())     # may depend on them (neural-style)
             if editor is None or value is None or editor.spin.minimum() != 0:
                 continue
             # "auto" as elsewhere in the app (cubic, spectral)

@@ -88,6 +88,26 @@ ADDED_FIELDS: dict[str, dict] = {"Paparazzi": {"remesh_scope": "all", "rough_ste
                                                "plateau_step": False, "lowest_fallback": False}}
 
 
+#: the same for a Paparazzi filter's Params (``options["filter_params"]``): neural-style's
+#: ``energy`` (issue 23, seventh pass): before it the filter pulled each view towards the style
+#: network's repainting of it ("network").
+ADDED_FILTER_FIELDS: dict[str, dict] = {"neural-style": {"energy": "network"}}
+
+
+def logged_options(recipe_name: str, options: dict | None) -> dict:
+    """A run's logged ``options``, with the filter Params' fields its log predates set as they
+    then ran (:data:`ADDED_FILTER_FIELDS`)."""
+    options = dict(options or {})
+    added = ADDED_FILTER_FIELDS.get(str(options.get("filter") or "")) if (
+        recipe_name == "Paparazzi") else None
+    if added:
+        values = dict(options.get("filter_params") or {})
+        for k, v in added.items():
+            values.setdefault(k, v)
+        options["filter_params"] = values
+    return options
+
+
 def logged_params(recipe_name: str, values: dict | None) -> dict:
     """A run's logged Params dict, with the fields its log predates set as they then ran."""
     values = dict(values or {})
@@ -190,7 +210,7 @@ class _Replayer:
             return
         try:
             before = load_state(src)
-            options = run.get("options", {}) or {}
+            options = logged_options(name, run.get("options", {}) or {})
             _load_blobs(self.base, options)
             params = recipe.make_params(logged_params(name, run.get("params", {})))
             last = None

