@@ -17,7 +17,8 @@ the features are those of the ImageNet EfficientNet-lite0 the project already sh
 (:mod:`algorithms.adversarial.classifiers`): its stem and the first block of each later stage
 stand in for ``conv1_1 ... conv5_1``. The style ``S`` (:func:`style_exemplar`): the painting
 (``style_image``), or for a built-in style a texture of it, the style network below applied
-to white noise. One call (forward and backward at 128 px) ~40 ms on one thread. Learning rate
+to white noise. One call (forward and backward at 128 px, the style's Gram matrices prepared
+once) ~14 ms on one thread. Learning rate
 1e-3 (:data:`LEARNING_RATES`; measured against 5e-4 and 2e-3, docs/paparazzi.md).
 
 ``network`` (the filter until then; issue 12): the *iterative* filter form of thesis 235-248,

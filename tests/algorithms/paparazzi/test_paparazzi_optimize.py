@@ -139,6 +139,35 @@ def test_a_filter_that_raises_stops_the_run_with_its_message():
         unregister_filter("test-broken")
 
 
+def test_an_energy_filter_may_say_what_to_show_and_a_wrong_return_is_a_plain_error():
+    shown = []
+
+    @register_filter("test-shows", kind="energy", learning_rate=lambda p: 3e-4)
+    def shows(image, params, ctx):
+        G = image - 0.25
+        pic = np.full_like(image, 0.75)
+        shown.append(pic)
+        return 0.5 * float((G * G).sum()), G, pic
+
+    @register_filter("test-four", kind="energy")
+    def four(image, params, ctx):
+        return 0.0, np.zeros_like(image), image, image
+
+    try:
+        V, F = icosphere(2)
+        run = Paparazzi(V, F, "test-shows", None, PaparazziParams(iterations=2, resolution=16,
+                                                                   monitor_every=0))
+        assert run.learning_rate == 3e-4        # a filter's step may be a function of its Params
+        last = run_to_end(run.steps())
+        np.testing.assert_array_equal(last.filtered, shown[-1])   # not R - dE/dR
+        with pytest.raises(FilterFailed, match="test-four.*picture to show"):
+            run_to_end(paparazzi_iter(V, F, "test-four", None,
+                                      PaparazziParams(iterations=2, resolution=16)))
+    finally:
+        unregister_filter("test-shows")
+        unregister_filter("test-four")
+
+
 def test_an_unreadable_target_image_is_refused_before_running(tmp_path):
     from algorithms.paparazzi import ImageReadError
 
