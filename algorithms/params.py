@@ -43,6 +43,7 @@ def param(
     advanced: bool = False,
     cli_aliases: Sequence[str] = (),
     slider_range: tuple[float, float] | None = None,
+    enabled_when: tuple[str, Any] | None = None,
 ) -> Any:
     """A dataclass field carrying the metadata the CLI and the GUI need.
 
@@ -60,11 +61,14 @@ def param(
     cli_aliases : extra CLI flags for the same field (e.g. ``("--lambda",)`` for ``lam``).
     slider_range : the part of [minimum, maximum] the GUI slider spans (the useful values), when
         the allowed range is much wider; the number field still takes any allowed value.
+    enabled_when : ``(other field, value)``: this field is used only while the other field has
+        that value (the GUI greys it out otherwise, e.g. a setting of one of two methods).
     """
     meta = dict(label=label, tooltip=tooltip, minimum=minimum, maximum=maximum, step=step,
                 decimals=decimals, choices=tuple(choices) if choices else None,
                 log_scale=log_scale, advanced=advanced, cli_aliases=tuple(cli_aliases),
-                slider_range=tuple(slider_range) if slider_range else None)
+                slider_range=tuple(slider_range) if slider_range else None,
+                enabled_when=tuple(enabled_when) if enabled_when else None)
     return field(default=default, metadata={"stylize3d": meta})
 
 
@@ -86,6 +90,7 @@ class ParamSpec:
     advanced: bool
     cli_aliases: tuple[str, ...] = ()
     slider_range: tuple[float, float] | None = None
+    enabled_when: tuple[str, Any] | None = None
 
     @property
     def flag(self) -> str:

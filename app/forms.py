@@ -347,6 +347,14 @@ class ParamsForm(QWidget):
         self._enable_when = {k: v for k, v in (enable_when or {}).items() if k in self.editors}
         for controller in set(self._enable_when.values()):
             self.editors[controller].toggled.connect(lambda _on: self._update_enabled())
+        # a field's own ``enabled_when`` (algorithms.params.param): (other field, value)
+        self._enable_if = {s.name: s.enabled_when for s in self.specs
+                           if s.enabled_when and s.enabled_when[0] in self.editors}
+        for controller in {c for c, _ in self._enable_if.values()}:
+            w = self.editors[controller]
+            signal = w.toggled if isinstance(w, QCheckBox) else (
+                w.currentTextChanged if isinstance(w, QComboBox) else w.valueChanged)
+            signal.connect(lambda *_: self._update_enabled())
         self._auto_text = {k: f for k, f in (auto_text or {}).items() if k in self.editors}
         self._loading = False
         self.set_params(values if values is not None else params_cls())
@@ -367,6 +375,12 @@ class ParamsForm(QWidget):
             on = self.editors[controller].isChecked()
             self.editors[name].setEnabled(on)
             self.labels[name].setEnabled(on)
+        if self._enable_if:
+            p = self.params()
+            for name, (controller, value) in self._enable_if.items():
+                on = getattr(p, controller) == value
+                self.editors[name].setEnabled(on)
+                self.labels[name].setEnabled(on)
 
     def _emit(self, *_):
         self._update_auto_text()

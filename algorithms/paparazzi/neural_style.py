@@ -96,6 +96,7 @@ class NeuralStyleParams:
                                      "surface should take on. It is made grey and cropped to its "
                                      "central square.")
     strength: float = param(1.0, label="Strength", minimum=0.0, maximum=1.0, decimals=2,
+                            enabled_when=("energy", "network"),
                             tooltip="With the 'network' energy: how far each view is pushed "
                                     "towards its repainted version (1 = all the way, smaller = "
                                     "gentler texture). The 'gram' energy ignores it: use fewer "

@@ -47,3 +47,15 @@ def test_fields_must_use_param():
 
     with pytest.raises(TypeError):
         describe(Bad)
+
+
+def test_a_field_may_say_which_value_of_another_field_it_needs():
+    @dataclass(frozen=True)
+    class Two:
+        method: str = param("a", label="Method", tooltip="t", choices=("a", "b"))
+        weight: float = param(1.0, label="Weight", tooltip="t", enabled_when=("method", "b"))
+
+    specs = {s.name: s for s in describe(Two)}
+    assert specs["weight"].enabled_when == ("method", "b")
+    assert specs["method"].enabled_when is None
+

@@ -159,3 +159,21 @@ def test_slider_spans_the_useful_range_and_the_field_takes_the_rest(qtbot):
     assert form.params().lam == 1000.0 and ed.slider.value() == SLIDER_STEPS
     ed.slider.setValue(0)
     assert form.params().lam == 0.0
+
+
+def test_a_form_greys_out_a_field_while_its_other_field_has_another_value(qtbot):
+    from app.forms import ParamsForm
+
+    @dataclass(frozen=True)
+    class Two:
+        method: str = param("a", label="Method", tooltip="t", choices=("a", "b"))
+        weight: float = param(1.0, label="Weight", tooltip="t", enabled_when=("method", "b"))
+
+    form = ParamsForm(Two)
+    qtbot.addWidget(form)
+    assert not form.editors["weight"].isEnabled()
+    form.editors["method"].setCurrentText("b")
+    assert form.editors["weight"].isEnabled() and form.labels["weight"].isEnabled()
+    form.set_params(Two(method="a", weight=2.0))
+    assert not form.editors["weight"].isEnabled()
+    assert form.params() == Two(method="a", weight=2.0)    # greyed out, still kept
