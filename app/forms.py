@@ -4,7 +4,8 @@ Numbers get a spin box plus a slider (logarithmic where the field says so) for i
 booleans a check box; strings with choices a drop-down. Fields marked ``advanced`` go into a
 folded "Advanced" section (one line of text while folded), panels may fold other rarely used
 fields into sections of their own (``groups``) and grey out fields that need a switch
-(``enable_when``). ``changed`` fires on every edit with the new Params instance;
+(``enable_when``); a field declared with ``param(..., enabled_when=(other, value))`` is greyed
+out while the other field has another value. ``changed`` fires on every edit with the new Params instance;
 ``params()`` returns the current one; ``set_params`` loads one.
 """
 

@@ -95,17 +95,17 @@ class NeuralStyleParams:
                              tooltip="Optional: a painting (PNG or JPEG) whose brush strokes the "
                                      "surface should take on. It is made grey and cropped to its "
                                      "central square.")
+    energy: str = param("gram", label="Energy", choices=ENERGIES,
+                        tooltip="gram (the thesis's): the texture statistics (Gram matrices of a "
+                                "network's features) of each view are pulled towards the "
+                                "style's, a clear relief. network: each view is pulled towards "
+                                "the style network's repainting of it, a subtler relief.")
     strength: float = param(1.0, label="Strength", minimum=0.0, maximum=1.0, decimals=2,
                             enabled_when=("energy", "network"),
                             tooltip="With the 'network' energy: how far each view is pushed "
                                     "towards its repainted version (1 = all the way, smaller = "
                                     "gentler texture). The 'gram' energy ignores it: use fewer "
                                     "iterations for a gentler texture.")
-    energy: str = param("gram", label="Energy", choices=ENERGIES,
-                        tooltip="gram (the thesis's): the texture statistics (Gram matrices of a "
-                                "network's features) of each view are pulled towards the "
-                                "style's, a clear relief. network: each view is pulled towards "
-                                "the style network's repainting of it, a subtler relief.")
 
 
 def neural_style_shading(params=None) -> Shading:
