@@ -148,6 +148,10 @@ class FilterSpec:
     406.5), and halving on its climbs cut the change of the Gram loss (armadillo -8.1 % ->
     -1.0 %, 1000 iterations; docs/paparazzi.md).
 
+    ``shown_caption`` (default "Filtered"; may be a function of the Params): the panel's
+    caption of the picture beside the rendered view (neural-style's Gram energy shows the
+    style's texture there: "Style").
+
     ``panel_iterations`` (0 = the panel's own, 300): how many iterations the panel starts a run
     of this filter with. l0: 1000 -- on a smooth shape its energy rises before it falls (the
     blob sample: 29.9 -> 41 at iteration 175, back below its start from iteration 650, 20.1 at
@@ -173,9 +177,16 @@ class FilterSpec:
     rough_learning_rate: float = 0.0
     halve_on_climb: bool = True
     panel_iterations: int = 0
+    shown_caption: str | Callable[[Any], str] = "Filtered"
 
     def make_shading(self, params) -> Shading:
         return self.shading(params) if self.shading is not None else LambertianShading()
+
+    def shown(self, params) -> str:
+        """What the panel calls the picture an energy filter shows beside the rendered view
+        (``shown_caption``, or its value for these Params)."""
+        c = self.shown_caption
+        return str(c(params) if callable(c) else c)
 
     def step(self, params) -> float:
         """The filter's learning rate for ``params`` (``learning_rate``, or its value for these

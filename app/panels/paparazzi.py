@@ -204,7 +204,8 @@ class PaparazziPanel(MethodPanel):
         box = QGroupBox("This iteration's view")
         box.setToolTip("Left: the shape as this iteration's camera sees it (its colours are the "
                        "lighting the filter works on). Right: that picture after the filter, "
-                       "i.e. what the step moves the shape towards.")
+                       "i.e. what the step moves the shape towards (neural-style's Gram "
+                       "energy shows the style whose texture the views should take on).")
         g = QGridLayout(box)
         self.render_label = QLabel("no run yet")
         self.filtered_label = QLabel("")
@@ -217,6 +218,7 @@ class PaparazziPanel(MethodPanel):
             c = QLabel(cap)
             c.setAlignment(Qt.AlignmentFlag.AlignHCenter)
             g.addWidget(c, 1, col)
+        self.filtered_caption = c           # the filter may call its picture otherwise
         self.views_box = box
         lay.insertWidget(lay.indexOf(self.plot), box)
 
@@ -332,6 +334,8 @@ class PaparazziPanel(MethodPanel):
             spec = get_filter(self.filter_name())
         except Stylize3DError:
             return
+        if getattr(self, "filtered_caption", None) is not None:
+            self.filtered_caption.setText(spec.shown(self.filter_params()))
         for name, attr in (("resolution", "resolution"), ("sigma", "sigma"),
                            ("view_width", "width"), ("learning_rate", "learning_rate")):
             editor = self.form.editors.get(name)

@@ -148,15 +148,21 @@ def test_neural_style_takes_a_painting_of_any_shape_and_runs_without_one(window,
     energy = panel.filter_form.editors["energy"]
     strength = panel.filter_form.editors["strength"]
     assert energy.currentText() == "gram" and "Gram (style) energy" in energy.toolTip()
-    # Strength is the network energy's: greyed out with the Gram energy
+    # Strength is the network energy's: greyed out with the Gram energy, whose picture beside
+    # the rendered view is the style's texture
     assert not strength.isEnabled() and not panel.filter_form.labels["strength"].isEnabled()
+    assert panel.filtered_caption.text() == "Style"
     energy.setFocus()
     qtbot.keyClick(energy, Qt.Key.Key_Down)           # a person picks the other energy
     assert panel.filter_params().energy == "network" and strength.isEnabled()
     assert lr.text() == lr.specialValueText() == "auto (0.0005)"
+    assert panel.filtered_caption.text() == "Filtered"
     qtbot.keyClick(energy, Qt.Key.Key_Up)
     assert panel.filter_params().energy == "gram" and lr.text() == "auto (0.001)"
-    assert not strength.isEnabled()
+    assert not strength.isEnabled() and panel.filtered_caption.text() == "Style"
+    panel.set_filter("quantize")
+    assert panel.filtered_caption.text() == "Filtered"
+    panel.set_filter("neural-style")
     # a painting that is not square is read as the filter reads it (central square), not refused
     wide = tmp_path / "wide.png"
     Image.new("RGB", (400, 200), (200, 10, 10)).save(wide)
