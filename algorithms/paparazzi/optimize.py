@@ -66,7 +66,8 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   comparing pair counts rejected every remeshing of camelhead, since resampling an existing
   intersection changes its pair count).
 * Learning rate: the thesis gives none; each filter has its own default (``FilterSpec.
-  learning_rate``: 2e-4, the guided filter 1e-5, slic 6e-5, neural-style 5e-4). NAdam's steps
+  learning_rate``: 2e-4, the guided filter 1e-5, slic 6e-5, neural-style 1e-3 (5e-4 with its
+  network energy)). NAdam's steps
   are about ``lr`` per coordinate whatever the gradient's size, so where a filter asks for
   little a large step is mostly noise: with the guided filter's former defaults (epsilon 1e-8)
   the displacement a view asked for was 163 times smaller than a 5e-5 step on the blob sample,
@@ -222,7 +223,7 @@ class PaparazziParams:
                                  log_scale=True, decimals=7,
                                  tooltip="NAdam step size (in units of the shape normalized to "
                                          "a cube of side 2). 0 = the filter's default (2e-4; "
-                                         "guided 1e-5, slic 6e-5, neural-style 5e-4). Larger "
+                                         "guided 1e-5, slic 6e-5, neural-style 1e-3). Larger "
                                          "moves faster but adds noise and "
                                          "may need more self-intersection rollbacks.")
     rough_step: bool = param(True, label="Larger step on rough scans", advanced=True,
