@@ -148,6 +148,12 @@ class FilterSpec:
     406.5), and halving on its climbs cut the change of the Gram loss (armadillo -8.1 % ->
     -1.0 %, 1000 iterations; docs/paparazzi.md).
 
+    ``quick_look``: the panel's *quick look* preset for this filter, over its generic values
+    (100 iterations at 64 px): l0 1000 iterations, slic 300 (their energies rise before they
+    fall on a smooth shape, so fewer end above the start and the run fails), neural-style its own
+    resolution (``{"resolution": 0}``: at 64 px its Gram energy hardly moves); measured on the
+    four samples, issue 23's seventh pass (docs/paparazzi.md).
+
     ``shown_caption`` (default "Filtered"; may be a function of the Params): the panel's
     caption of the picture beside the rendered view (neural-style's Gram energy shows the
     style's texture there: "Style").
@@ -178,6 +184,7 @@ class FilterSpec:
     halve_on_climb: bool = True
     panel_iterations: int = 0
     shown_caption: str | Callable[[Any], str] = "Filtered"
+    quick_look: dict = field(default_factory=dict, compare=False, hash=False)
 
     def make_shading(self, params) -> Shading:
         return self.shading(params) if self.shading is not None else LambertianShading()
@@ -519,7 +526,7 @@ class SlicParams:
 
 
 @register_filter("slic", kind="iterative", params=SlicParams, resolution=256, width=1.0,
-                 learning_rate=6e-5, crease_angle=45.0,
+                 learning_rate=6e-5, crease_angle=45.0, quick_look={"iterations": 300},
                  description="SLIC superpixels: each superpixel takes its mean colour")
 def _slic(image, params: SlicParams, ctx: FilterContext):
     """SLIC superpixels of the foreground, each painted with its mean colour (thesis 414-418).
@@ -625,7 +632,7 @@ class L0Params:
 
 
 @register_filter("l0", kind="iterative", crease_angle=45.0, params=L0Params, resolution=256,
-                 panel_iterations=1000,
+                 panel_iterations=1000, quick_look={"iterations": 1000},
                  description="L0 gradient smoothing: piecewise-constant images, planar shapes")
 def _l0(image, params: L0Params, ctx: FilterContext):
     return l0_smooth(image, params.l0_lambda, params.kappa)

@@ -301,6 +301,7 @@ def _learning_rate(params: NeuralStyleParams) -> float:
                  shading=neural_style_shading, resolution=128, width=0.1, sigma=0.02,
                  learning_rate=_learning_rate, halve_on_climb=False,
                  shown_caption=lambda p: "Style" if p.energy == "gram" else "Filtered",
+                 quick_look={"resolution": 0},
                  file_readers={"style_image": read_style_image},
                  optional_files=("style_image",),
                  description="Neural style: the brush strokes of a painting as surface texture "

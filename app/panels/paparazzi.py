@@ -165,6 +165,8 @@ class PaparazziPanel(MethodPanel):
         self._build_views_box()
         self._rebuild_filter_form()
         self.form.changed.connect(lambda _p: self._show_filter_defaults())
+        # after the form's own reset (connected first): the chosen filter's iteration count
+        self.defaults_button.clicked.connect(self._defaults_for_filter)
 
     # -- widgets -------------------------------------------------------------------------------
     def _add_plain_words(self) -> None:
@@ -315,6 +317,31 @@ class PaparazziPanel(MethodPanel):
             none = QLabel("This filter has no settings.")
             none.setStyleSheet("color: #777;")
             self.filter_form_holder.addWidget(none)
+
+    def presets(self) -> dict[str, dict]:
+        """The presets, for the chosen filter: *Defaults* with its own iteration count (l0
+        1000) and *quick look* with its own values (``FilterSpec.quick_look``)."""
+        out = super().presets()
+        if getattr(self, "filter_combo", None) is None:     # the base class asks while building
+            return out
+        try:
+            spec = get_filter(self.filter_name())
+        except Stylize3DError:
+            return out
+        n = int(getattr(spec, "panel_iterations", 0) or GUI_ITERATIONS)
+        if n != GUI_ITERATIONS:
+            out["Defaults"] = {"iterations": n}
+        if "quick look" in self.builtin_presets and "quick look" not in self.user_presets():
+            out["quick look"] = {**self.builtin_presets["quick look"],
+                                 **(getattr(spec, "quick_look", None) or {})}
+        return out
+
+    def _defaults_for_filter(self) -> None:
+        """The Defaults button: every run setting's default, the filter's iteration count."""
+        values = self.presets().get("Defaults") or {}
+        if values:
+            self.form.set_params(dataclasses.replace(self.form.params(), **values))
+            self.form.changed.emit(self.form.params())
 
     def _follow_filter_iterations(self, spec) -> None:
         """Each filter starts at its own iteration count (``FilterSpec.panel_iterations``; l0

@@ -564,3 +564,32 @@ def test_l0_starts_at_its_own_iteration_count_unless_one_was_typed(window, dialo
     panel.form.set_params(panel.form.params().__class__(iterations=GUI_ITERATIONS))
     panel.restore_options({"filter": "l0", "filter_params": {}})
     assert panel.filter_name() == "l0" and spin.value() == GUI_ITERATIONS
+
+
+def test_defaults_and_quick_look_follow_the_filter(window, dialogs, qtbot):
+    # issue 23, seventh pass: the Defaults button gave l0 300 iterations (too few: its run
+    # fails on a smooth shape), and the quick look (100 iterations at 64 px) failed l0 on the
+    # blob and the pretzel, slic on the pretzel, and left neural-style's Gram energy still
+    from app.panels.paparazzi import GUI_ITERATIONS
+
+    panel = open_panel(window, "spot_lowres.obj")
+    spin = panel.form.editors["iterations"].spin
+    res = panel.form.editors["resolution"].spin
+    panel.set_filter("l0")
+    spin.setFocus()
+    spin.selectAll()
+    qtbot.keyClicks(spin, "450")
+    qtbot.keyClick(spin, Qt.Key.Key_Return)
+    assert panel.form.params().iterations == 450
+    qtbot.mouseClick(panel.defaults_button, Qt.MouseButton.LeftButton)
+    assert panel.form.params().iterations == 1000       # l0's own, not the panel's 300
+    expected = {"l0": (1000, 64), "slic": (300, 64), "neural-style": (100, 0),
+                "guided": (100, 64), "quantize": (100, 64)}
+    for name, (iterations, resolution) in expected.items():
+        panel.set_filter(name)
+        assert panel.apply_preset("quick look")
+        assert (spin.value(), res.value()) == (iterations, resolution), name
+        assert panel.apply_preset("Defaults")
+        assert spin.value() == (1000 if name == "l0" else GUI_ITERATIONS), name
+    # the preset list itself is the same whatever the filter
+    assert list(panel.presets())[:3] == ["Defaults", "quick look", "thesis length"]
