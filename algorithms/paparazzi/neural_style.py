@@ -321,7 +321,12 @@ def _neural_style(image, params: NeuralStyleParams, ctx: FilterContext):
             grams = style_grams(exemplar)
         E, g = gram_style_loss(R, None, gradient=True, target_grams=grams)
         g = np.where(ctx.mask, g, 0.0)
-        return E, g[..., None], _fit(exemplar, R.shape)[..., None]
+        shown = state.get("shown")
+        if shown is None or shown.shape[:2] != R.shape:     # resized once per run, not per view
+            shown = _fit(exemplar, R.shape)[..., None]
+            shown.setflags(write=False)                      # shared by every step's picture
+            state["shown"] = shown
+        return E, g[..., None], shown
     S = stylize(R, params, state.get("vector"))
     out = np.where(ctx.mask, R + params.strength * (S - R), R)
     D = out - R
