@@ -54,7 +54,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from .._numba import njit, prange
 
 from ..compiled import use_threads
 
@@ -274,10 +274,10 @@ def _procrustes_ser(S, idx, R):
         _procrustes_block(S, idx, b * BLOCK, min(BLOCK, m - b * BLOCK), R)
 
 
-@njit(**_OPTS)
 def _procrustes_indices(S, idx, R, par):
     """R[i] = Procrustes(S[i]) for i in idx, blocks on threads when ``par`` (and there are
-    at least ``MIN_PARALLEL`` blocks)."""
+    at least ``MIN_PARALLEL`` blocks). Python: a parallel kernel is only ever called from
+    Python (:mod:`algorithms.compiled`, "cached kernels")."""
     if par and idx.shape[0] > (MIN_PARALLEL - 1) * BLOCK:
         _procrustes_par(S, idx, R)
     else:
@@ -389,15 +389,12 @@ def _admm_wave_ser(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, 
 
 
 @njit(**_OPTS)
-def _admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_rel, mu, tau,
-                          max_iter, R, iters, frames, par):
-    n = S.shape[0]
-    plain = np.empty(n, dtype=np.int64)
-    active = np.empty(n, dtype=np.int64)
-    done = np.empty(n, dtype=np.bool_)
+def _admm_split(use, iters, plain, active):
+    """Zero ``iters``; the vertices not running ADMM into ``plain``, the others into
+    ``active`` (in vertex order); returns their counts."""
     n_plain = 0
     n_active = 0
-    for i in range(n):
+    for i in range(use.shape[0]):
         iters[i] = 0
         if use[i]:
             active[n_active] = i
@@ -405,24 +402,62 @@ def _admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_
         else:
             plain[n_plain] = i
             n_plain += 1
-    _procrustes_indices(S, plain[:n_plain], R, par)
+    return n_plain, n_active
 
+
+@njit(**_OPTS)
+def _admm_keep_active(active, done, n_active):
+    """Keep the vertices that did not stop, in their order; returns how many."""
+    n_next = 0
+    for t in range(n_active):
+        if not done[t]:
+            active[n_next] = active[t]
+            n_next += 1
+    return n_next
+
+
+@njit(**_OPTS)
+def _admm_cube_local_step_ser(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_rel, mu,
+                              tau, max_iter, R, iters, frames):
+    """The whole local step on one thread, in one compiled call (calls serial kernels only)."""
+    n = S.shape[0]
+    plain = np.empty(n, dtype=np.int64)
+    active = np.empty(n, dtype=np.int64)
+    done = np.empty(n, dtype=np.bool_)
+    n_plain, n_active = _admm_split(use, iters, plain, active)
+    _procrustes_ser(S, plain[:n_plain], R)
     e_abs = math.sqrt(3.0) * eps_abs
     for _ in range(max_iter):
         if n_active == 0:
             break
-        if par and n_active > (MIN_PARALLEL - 1) * BLOCK:  # late waves: a few vertices
-            _admm_wave_par(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, R, iters,
-                           frames, active, n_active, done)
-        else:
-            _admm_wave_ser(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, R, iters,
-                           frames, active, n_active, done)
-        n_next = 0
-        for t in range(n_active):  # keep the vertices that did not stop, in their order
-            if not done[t]:
-                active[n_next] = active[t]
-                n_next += 1
-        n_active = n_next
+        _admm_wave_ser(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, R, iters,
+                       frames, active, n_active, done)
+        n_active = _admm_keep_active(active, done, n_active)
+
+
+def _admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_rel, mu, tau,
+                          max_iter, R, iters, frames, par):
+    """The local step; with ``par`` the waves are driven from Python (a parallel kernel is only
+    ever called from Python: :mod:`algorithms.compiled`, "cached kernels"), the same
+    operations in the same order as :func:`_admm_cube_local_step_ser`."""
+    if not par:
+        _admm_cube_local_step_ser(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_rel, mu,
+                                  tau, max_iter, R, iters, frames)
+        return
+    n = S.shape[0]
+    plain = np.empty(n, dtype=np.int64)
+    active = np.empty(n, dtype=np.int64)
+    done = np.empty(n, dtype=np.bool_)
+    n_plain, n_active = _admm_split(use, iters, plain, active)
+    _procrustes_indices(S, plain[:n_plain], R, par)
+    e_abs = math.sqrt(3.0) * eps_abs
+    for _ in range(int(max_iter)):
+        if n_active == 0:
+            break
+        wave = _admm_wave_par if n_active > (MIN_PARALLEL - 1) * BLOCK else _admm_wave_ser
+        wave(S, normals, lam_a, diag, z, u, rho, e_abs, eps_rel, mu, tau, R, iters, frames,
+             active, n_active, done)             # late waves (a few vertices): serial
+        n_active = _admm_keep_active(active, done, n_active)
 
 
 def admm_cube_local_step(S, normals, lam_a, use, diag, z, u, rho, eps_abs, eps_rel, mu, tau,
@@ -500,14 +535,30 @@ def _energy_terms_ser(R, C, S, quad, lin):
 
 
 @njit(**_OPTS)
+def _sum_in_order(x):
+    """``sum(x)`` added up in index order (whatever the thread count that filled ``x``)."""
+    t = 0.0
+    for i in range(x.shape[0]):
+        t += x[i]
+    return t
+
+
 def _arap_energy_terms(R, C, S, par):
+    if not par:
+        return _arap_energy_terms_ser(R, C, S)
     n = R.shape[0]
     quad = np.empty(n)
     lin = np.empty(n)
-    if par:
-        _energy_terms_par(R, C, S, quad, lin)
-    else:
-        _energy_terms_ser(R, C, S, quad, lin)
+    _energy_terms_par(R, C, S, quad, lin)
+    return _sum_in_order(quad), _sum_in_order(lin)
+
+
+@njit(**_OPTS)
+def _arap_energy_terms_ser(R, C, S):
+    n = R.shape[0]
+    quad = np.empty(n)
+    lin = np.empty(n)
+    _energy_terms_ser(R, C, S, quad, lin)
     tq = 0.0
     tl = 0.0
     for i in range(n):  # one order, whatever the thread count
@@ -547,17 +598,19 @@ def _quadratic_ser(indptr, indices, data, U, out):
         _quadratic_rows(indptr, indices, data, U, c * CHUNK, min(n, (c + 1) * CHUNK), out)
 
 
-@njit(**_OPTS)
 def _quadratic_form(indptr, indices, data, U, par):
+    if not par:
+        return _quadratic_form_ser(indptr, indices, data, U)
     out = np.empty(U.shape[0])
-    if par:
-        _quadratic_par(indptr, indices, data, U, out)
-    else:
-        _quadratic_ser(indptr, indices, data, U, out)
-    t = 0.0
-    for i in range(out.shape[0]):
-        t += out[i]
-    return t
+    _quadratic_par(indptr, indices, data, U, out)
+    return _sum_in_order(out)
+
+
+@njit(**_OPTS)
+def _quadratic_form_ser(indptr, indices, data, U):
+    out = np.empty(U.shape[0])
+    _quadratic_ser(indptr, indices, data, U, out)
+    return _sum_in_order(out)
 
 
 def quadratic_form(indptr, indices, data, U):
@@ -595,17 +648,19 @@ def _cube_l1_ser(R, normals, frames, diag, lam_a, out):
         _cube_l1_rows(R, normals, frames, diag, lam_a, c * CHUNK, min(n, (c + 1) * CHUNK), out)
 
 
-@njit(**_OPTS)
 def _cube_l1_energy(R, normals, frames, diag, lam_a, par):
+    if not par:
+        return _cube_l1_energy_ser(R, normals, frames, diag, lam_a)
     out = np.empty(R.shape[0])
-    if par:
-        _cube_l1_par(R, normals, frames, diag, lam_a, out)
-    else:
-        _cube_l1_ser(R, normals, frames, diag, lam_a, out)
-    t = 0.0
-    for i in range(out.shape[0]):
-        t += out[i]
-    return t
+    _cube_l1_par(R, normals, frames, diag, lam_a, out)
+    return _sum_in_order(out)
+
+
+@njit(**_OPTS)
+def _cube_l1_energy_ser(R, normals, frames, diag, lam_a):
+    out = np.empty(R.shape[0])
+    _cube_l1_ser(R, normals, frames, diag, lam_a, out)
+    return _sum_in_order(out)
 
 
 def cube_l1_energy(R, normals, frames, diag, lam_a):
@@ -658,14 +713,20 @@ def _displacement_ser(U_new, U_old, U_rest, parts):
         _displacement_rows(U_new, U_old, U_rest, c * CHUNK, min(n, (c + 1) * CHUNK), parts[c])
 
 
-@njit(**_OPTS)
 def _displacement_maxima(U_new, U_old, U_rest, par):
+    if not par:
+        return _displacement_maxima_ser(U_new, U_old, U_rest)
     n = U_new.shape[0]
     parts = np.empty(((n + CHUNK - 1) // CHUNK, 9))
-    if par:
-        _displacement_par(U_new, U_old, U_rest, parts)
-    else:
-        _displacement_ser(U_new, U_old, U_rest, parts)
+    _displacement_par(U_new, U_old, U_rest, parts)
+    return _combine_displacement(parts, n)
+
+
+@njit(**_OPTS)
+def _displacement_maxima_ser(U_new, U_old, U_rest):
+    n = U_new.shape[0]
+    parts = np.empty(((n + CHUNK - 1) // CHUNK, 9))
+    _displacement_ser(U_new, U_old, U_rest, parts)
     return _combine_displacement(parts, n)
 
 
@@ -778,23 +839,35 @@ def _cube_after_solve_ser(ptr, col, val, U, S, R, normals, frames, diag, lam_a, 
                                min(n, (c + 1) * CHUNK))
 
 
-@njit(**_OPTS)
 def _cube_after_solve(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old, U_rest,
                       scale, center, V_out, par):
+    if not par:
+        return _cube_after_solve_all_ser(ptr, col, val, U, S, R, normals, frames, diag, lam_a,
+                                         U_old, U_rest, scale, center, V_out)
     n = U.shape[0]
     l1 = np.empty(n)
     parts = np.empty(((n + CHUNK - 1) // CHUNK, 9))
-    if par:
-        _cube_after_solve_par(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old,
-                              U_rest, scale, center, V_out, l1, parts)
-    else:
-        _cube_after_solve_ser(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old,
-                              U_rest, scale, center, V_out, l1, parts)
-    e_l1 = 0.0
-    for i in range(n):  # vertex order, as cube_l1_energy
-        e_l1 += l1[i]
+    _cube_after_solve_par(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old,
+                          U_rest, scale, center, V_out, l1, parts)
+    return _after_solve_totals(l1, parts, n)
+
+
+@njit(**_OPTS)
+def _after_solve_totals(l1, parts, n):
+    e_l1 = _sum_in_order(l1)  # vertex order, as cube_l1_energy
     step, total, bbox = _combine_displacement(parts, n)
     return e_l1, step, total, bbox
+
+
+@njit(**_OPTS)
+def _cube_after_solve_all_ser(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old,
+                              U_rest, scale, center, V_out):
+    n = U.shape[0]
+    l1 = np.empty(n)
+    parts = np.empty(((n + CHUNK - 1) // CHUNK, 9))
+    _cube_after_solve_ser(ptr, col, val, U, S, R, normals, frames, diag, lam_a, U_old,
+                          U_rest, scale, center, V_out, l1, parts)
+    return _after_solve_totals(l1, parts, n)
 
 
 def cube_after_solve(ptr, col, val, U, R, normals, frames, diag, lam_a, U_old, U_rest, scale,

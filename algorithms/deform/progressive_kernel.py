@@ -13,7 +13,7 @@ bob 5k splits 0.2 ms against 24-109 ms. The NumPy replay stays as the fallback w
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from .._numba import njit
 
 _OPTS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
 

@@ -21,7 +21,7 @@ _ENABLED = numba_wanted()
 try:
     if not _ENABLED:
         raise ImportError
-    from numba import njit  # noqa: F401
+    from .._numba import njit  # noqa: F401
 
     COMPILED = True
 except ImportError:  # pragma: no cover - exercised with STYLIZE3D_NUMBA=0

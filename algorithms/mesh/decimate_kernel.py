@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from .._numba import njit
 
 _DET_REL = 1e-9
 _DEGENERATE = 1e-24

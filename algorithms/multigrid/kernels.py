@@ -19,7 +19,7 @@ sequential by nature and stay on one thread.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from .._numba import njit, prange
 
 from ..compiled import use_threads
 
@@ -213,15 +213,28 @@ def _color_ser(indptr, indices, data, inv, rows, lo, hi, x, b):
 
 
 @njit(cache=True, nogil=True)
-def _multicolor_sweeps(indptr, indices, data, inv, cptr, rows, x, b, sweeps, backward, par):
+def _multicolor_sweeps_ser(indptr, indices, data, inv, cptr, rows, x, b, sweeps, backward):
     nc = cptr.shape[0] - 1
     for s in range(sweeps):
         for t in range(nc):
             c = nc - 1 - t if backward else t
-            if par and cptr[c + 1] - cptr[c] > CHUNK:
-                _color_par(indptr, indices, data, inv, rows, cptr[c], cptr[c + 1], x, b)
-            else:
-                _color_ser(indptr, indices, data, inv, rows, cptr[c], cptr[c + 1], x, b)
+            _color_ser(indptr, indices, data, inv, rows, cptr[c], cptr[c + 1], x, b)
+
+
+def _multicolor_sweeps(indptr, indices, data, inv, cptr, rows, x, b, sweeps, backward, par):
+    """The sweeps; with ``par`` driven from Python, colour by colour (a parallel kernel is
+    only ever called from Python: :mod:`algorithms.compiled`, "cached kernels")."""
+    if not par:
+        _multicolor_sweeps_ser(indptr, indices, data, inv, cptr, rows, x, b, sweeps, backward)
+        return
+    nc = cptr.shape[0] - 1
+    bounds = cptr.tolist()
+    for s in range(sweeps):
+        for t in range(nc):
+            c = nc - 1 - t if backward else t
+            lo, hi = bounds[c], bounds[c + 1]
+            kernel = _color_par if hi - lo > CHUNK else _color_ser
+            kernel(indptr, indices, data, inv, rows, lo, hi, x, b)
 
 
 def multicolor_sweeps(indptr, indices, data, inv, cptr, rows, x, b, sweeps, backward):

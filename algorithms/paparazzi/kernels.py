@@ -10,7 +10,7 @@ array operations, this one well under a millisecond.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from .._numba import njit
 
 
 @njit(cache=True, nogil=True)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from .._numba import njit, prange
 
 from ..compiled import use_threads
 
@@ -751,18 +751,24 @@ def face_sums(slot, G, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _lambert_image_vjp(V, F, slot, faces, G, A, par):  # pragma: no cover - compiled
+def _lambert_image_vjp_ser(V, F, slot, faces, G, A):  # pragma: no cover - compiled
     gc = np.zeros((faces.shape[0], G.shape[2]))
     face_sums(slot, G, gc)
     out = np.zeros((V.shape[0], 3))
-    _normal_vjp(V, F, faces, gc, A, out, par)
+    _normal_vjp_ser(V, F, faces, gc, A, out)
     return out
 
 
 def lambert_image_vjp(V, F, slot, faces, G, A):
     """``dE/dV (n, 3)`` of Lambertian shading without albedo in one call: :func:`face_sums` of
     ``G (H, W, C)`` into ``gc``, then :func:`lambert_normal_vjp`."""
-    return _lambert_image_vjp(V, F, slot, faces, G, A, _threads(faces.shape[0]))
+    if not _threads(faces.shape[0]):
+        return _lambert_image_vjp_ser(V, F, slot, faces, G, A)
+    gc = np.zeros((faces.shape[0], G.shape[2]))
+    face_sums(slot, G, gc)
+    out = np.zeros((V.shape[0], 3))
+    _normal_vjp(V, F, faces, gc, A, out, True)
+    return out
 
 
 def normal_vjp(V, F, faces, g, out):
@@ -855,20 +861,37 @@ def _normal_vjp_terms_par(V, F, faces, g, A, T, ok):  # pragma: no cover - compi
         _normal_vjp_terms(V, F, faces, g, A, c * VJP_CHUNK, min(m, (c + 1) * VJP_CHUNK), T, ok)
 
 
-@njit(cache=True, nogil=True)
-def _normal_vjp(V, F, faces, g, A, out, par):  # pragma: no cover - compiled
+def _normal_vjp(V, F, faces, g, A, out, par):
     """:func:`normal_vjp` (``A`` empty) or :func:`lambert_normal_vjp`.
 
     The terms of the faces are computed first (on threads when ``par``: each face's by one
     thread, the same operations whatever the thread count), then added to ``out`` at the
-    corners in face order, as one serial loop would: the same bits for any thread count."""
+    corners in face order, as one serial loop would: the same bits for any thread count.
+    The parallel kernel is called from Python, never from a compiled function
+    (:mod:`algorithms.compiled`, "cached kernels")."""
+    if not par:
+        _normal_vjp_ser(V, F, faces, g, A, out)
+        return
     m = faces.shape[0]
     T = np.empty((m, 3, 3))
     ok = np.empty((m, 3), np.bool_)
-    if par:
-        _normal_vjp_terms_par(V, F, faces, g, A, T, ok)
-    else:
-        _normal_vjp_terms(V, F, faces, g, A, 0, m, T, ok)
+    _normal_vjp_terms_par(V, F, faces, g, A, T, ok)
+    _add_corner_terms(F, faces, T, ok, out)
+
+
+@njit(cache=True, nogil=True)
+def _normal_vjp_ser(V, F, faces, g, A, out):  # pragma: no cover - compiled
+    m = faces.shape[0]
+    T = np.empty((m, 3, 3))
+    ok = np.empty((m, 3), np.bool_)
+    _normal_vjp_terms(V, F, faces, g, A, 0, m, T, ok)
+    _add_corner_terms(F, faces, T, ok, out)
+
+
+@njit(cache=True, nogil=True)
+def _add_corner_terms(F, faces, T, ok, out):  # pragma: no cover - compiled
+    """``out[v] += T[q, k]`` at the corners ``v = F[faces[q], k]`` in face order."""
+    m = faces.shape[0]
     for q in range(m):
         f = faces[q]
         for k in range(3):

@@ -21,7 +21,7 @@ dot product of 215k numbers take 8-23 ms instead of 0.1 ms here.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from .._numba import njit, prange
 
 from ..compiled import use_threads
 

@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from .._numba import njit
 
 EPS = 1e-12  # the PyTorch path's clamp of a norm
 
