@@ -158,9 +158,39 @@ class _MouseFilter(QObject):
 
 
 class _TimedInteractor(QtInteractor):
-    """pyvistaqt's widget, its paints timed and prepared by the :class:`Viewport`."""
+    """pyvistaqt's widget, its paints timed and prepared by the :class:`Viewport`.
+
+    **No wrapper of the GL surface is kept** (issue 35). pyvistaqt keeps ``self._surface =
+    context.surface()`` from ``initializeGL`` to make its context current later. That surface is
+    the ``QOffscreenSurface`` Qt creates and deletes with the widget's context, and the wrapper
+    PySide makes for it is a plain ``QSurface``: not a ``QObject``, so Shiboken is never told
+    when Qt deletes it. Whenever the context went away without pyvistaqt's clean-up slot running
+    (a window deleted while its interactor lived on in a reference cycle, which the GUI-thread
+    collector of :mod:`app.gc_guard` frees only later), the wrapper stayed in Shiboken's
+    address map; the next C++ object allocated at that address and handed to Python got it
+    back: ``QMenu.addAction`` returned a ``QSurface`` (seen in CI), and making the context
+    current through it would touch freed memory. Here ``_surface`` is a property: pyvistaqt's
+    assignments only record whether there is a surface, and each read asks the (tracked,
+    ``QObject``) context for its current surface, a wrapper that lives for that call only.
+    ``tests/app/test_viewport_lifetime.py`` checks that no ``QSurface`` wrapper outlives a
+    call."""
 
     viewport: "Viewport | None" = None
+
+    @property
+    def _surface(self):  # noqa: D401 - pyvistaqt's attribute
+        ctx = getattr(self, "_ctx", None)
+        if not getattr(self, "_has_surface", False) or ctx is None:
+            return None
+        import shiboken6
+
+        if not shiboken6.isValid(ctx):  # the context is gone (QObject: tracked)
+            return None
+        return ctx.surface()
+
+    @_surface.setter
+    def _surface(self, value) -> None:
+        self._has_surface = value is not None
 
     def paintGL(self) -> None:  # noqa: N802 (Qt API)
         vp = self.viewport

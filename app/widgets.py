@@ -13,9 +13,10 @@ def dock_view_action(dock):
     """``dock.toggleViewAction()``, guarded against a PySide6 stale wrapper.
 
     Shiboken maps C++ addresses to Python wrappers; a wrapper of a non-QObject that Qt deleted
-    behind its back (a ``QSurface`` was seen once in CI) can be handed back for a new QAction at
-    the same address. Such a wrapper is detached (``shiboken6.invalidate``; nothing is deleted)
-    and the action asked for again."""
+    behind its back can be handed back for a new QAction at the same address. The one such
+    wrapper the app held (pyvistaqt's ``QSurface``, seen in CI) is gone since issue 35 (see
+    ``app.viewport._TimedInteractor``); this stays as a second line of defence: such a wrapper is
+    detached (``shiboken6.invalidate``; nothing is deleted) and the action asked for again."""
     from PySide6.QtGui import QAction
 
     action = dock.toggleViewAction()
