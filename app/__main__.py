@@ -4,6 +4,11 @@ Batch sub-commands never import Qt or VTK (tests enforce it); the GUI modules ar
 when the window is opened. A first argument that is neither a sub-command nor something the app
 can open (an existing file, a name with an extension, a path, an option) is a mistyped command:
 ``stylize3d cubc x`` says "unknown command 'cubc'. Did you mean 'cubic'?" and exits with 2.
+
+``main()`` without arguments is the process's entry point (the ``stylize3d`` script, ``python -m
+app``): a sub-command then runs under the crash supervisor of :mod:`app.crashlog` (a segfault is
+a plain sentence, a crash log and exit status 70). ``main(ARGV)`` runs in the calling process and
+installs nothing (tests, scripts).
 """
 
 from __future__ import annotations
@@ -12,7 +17,14 @@ import sys
 
 
 def main(argv: list[str] | None = None) -> int:
+    entry = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
+    if entry:
+        from app import crashlog
+
+        code = crashlog.entry(argv)
+        if code is not None:  # the supervisor: the command ran in its child process
+            return code
     from app import cli
 
     if argv and argv[0] in cli.SUBCOMMANDS:

@@ -12,21 +12,37 @@ from app.main_window import APP_NAME, MainWindow
 
 def run_app(mesh: str | None = None, screenshot: str | None = None,
             study: dict | None = None) -> int:
+    from app import crashlog
+
+    # a segfault or abort leaves every thread's stack in a crash log, said at the next start
+    crashlog.install("app")
     app = QApplication.instance() or QApplication(sys.argv[:1])
     app.setApplicationName(APP_NAME)
     app.setOrganizationName(APP_NAME)
     win = MainWindow()
     sys.excepthook = make_excepthook(win)
     win.show()
+    if not screenshot:  # nobody would read it in a screenshot run; it waits for a real start
+        crashlog.announce_last_crash(lambda text: win.report(text, "warning", 60_000),
+                                     win.show_messages)
     if not screenshot:
         QTimer.singleShot(300, warm_up_in_background)
     status = {"code": 0}
     said: list[tuple[str, str]] = []
     if screenshot:  # nobody is there to answer: questions are declined, messages kept
         _unattended_dialogs(said)
+    recovered = False
+    if not screenshot and not study:  # work autosaved before a crash (app/autosave.py)
+        from app.autosave import offer_recovery
+
+        recovered = offer_recovery(win)
+        if recovered and mesh:
+            win.report(f"{mesh} was not opened: the recovered work is open instead "
+                       "(File > Open opens it).")
+            mesh = None
     if mesh:
         QTimer.singleShot(0, lambda: win.open_path(mesh))
-    elif not screenshot and not study:  # first start (or "Show at start" left on)
+    elif not screenshot and not study and not recovered:  # first start (or "Show at start")
         from app.welcome import WelcomeDialog
 
         if WelcomeDialog.show_at_start(win):

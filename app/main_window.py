@@ -128,6 +128,10 @@ class MainWindow(QMainWindow):
         self.runner.failed.connect(self._on_job_failed)
         self.runner.busy_changed.connect(self._on_busy_changed)
         self.runner.progress.connect(self._on_progress)
+        # the unsaved work is kept in a recovery slot while it changes (app/autosave.py)
+        from app.autosave import Autosaver
+
+        self.autosave = Autosaver(self)
 
         self.resize(1280, 800)
         geo = self.settings.value("window/geometry")
@@ -512,7 +516,6 @@ class MainWindow(QMainWindow):
         """Open a ``.s3d`` project: its mesh, painting and handles become the document (the
         mesh as first opened is the Before / ghost view) and each panel takes its saved
         settings. A damaged or newer file gets a plain message; nothing changes then."""
-        from algorithms.params import params_from_dict, params_to_dict
         from app.project import read_project
 
         if self.runner.busy:
@@ -525,13 +528,32 @@ class MainWindow(QMainWindow):
             return False
         if not self._confirm_discard():
             return False
+        problems = self.load_project(project)
+        self.project_path = Path(path)
+        self._add_recent(str(path))
+        self._update_title()
+        st = project.state
+        msg = (f"Opened the project {Path(path).name}: {len(st.V):,} vertices, "
+               f"{len(st.F):,} triangles, {len(st.fields)} painted field(s), "
+               f"{len(st.handles)} handle(s).")
+        if problems:
+            msg += " Some panel settings were not restored: " + "; ".join(problems)
+        self.report(msg)
+        return True
+
+    def load_project(self, project) -> list[str]:
+        """Make a read :class:`~app.project.Project` the document, with an empty undo history
+        (not modified), and give each panel its saved settings (no live re-run starts). Returns
+        what could not be restored, one line per panel. Used by :meth:`open_project` and by
+        the recovery of autosaved work (app/autosave.py)."""
+        from algorithms.params import params_from_dict, params_to_dict
+
         self.undo_stack.clear()
         orig = project.original or project.state
         self.document.load(orig.V, orig.F, None, validate_mesh(orig.V, orig.F))
         self.document.original = orig
         self.document.set_state(project.state, modified=False)
         self.undo_stack.setClean()
-        self.project_path = Path(path)
         problems = []
         for title, entry in project.panels.items():
             panel = self.panels.get(title)
@@ -548,16 +570,7 @@ class MainWindow(QMainWindow):
         for panel in self.panels.values():  # restoring settings is not a request to re-run
             panel._debounce.stop()
             panel.show_live_state(None)
-        self._add_recent(str(path))
-        self._update_title()
-        st = project.state
-        msg = (f"Opened the project {Path(path).name}: {len(st.V):,} vertices, "
-               f"{len(st.F):,} triangles, {len(st.fields)} painted field(s), "
-               f"{len(st.handles)} handle(s).")
-        if problems:
-            msg += " Some panel settings were not restored: " + "; ".join(problems)
-        self.report(msg)
-        return True
+        return problems
 
     def open_path(self, path: str | os.PathLike) -> bool:
         """Open a mesh file (or a ``.s3d`` project). On any problem the user gets a plain
@@ -1144,6 +1157,7 @@ class MainWindow(QMainWindow):
         self.settings.sync()
         for vp in self.findChildren(Viewport):  # the main view and panel views (Gauss map)
             vp.close_plotter()
+        self.autosave.close()  # a normal close: this window's recovery files go
         event.accept()
         if self._gc_acquired:
             self._gc_acquired = False

@@ -39,6 +39,23 @@ def pytest_configure(config):
         os.environ["QT_QPA_PLATFORM"] = "offscreen"
 
 
+@pytest.fixture(autouse=True)
+def _private_recovery_dir(monkeypatch, tmp_path_factory):
+    """Autosave (app/autosave.py) writes to an empty folder of each test's own, never to the
+    user's recovery folder; with nothing in it, no window offers a recovery."""
+    monkeypatch.setenv("STYLIZE3D_RECOVERY_DIR", str(tmp_path_factory.mktemp("recovery")))
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _crash_logs_in_a_temporary_folder(tmp_path_factory):
+    """Crash logs of the commands and apps the tests run (app/crashlog.py) go to a temporary
+    folder, never the user's; a test that looks at them sets its own."""
+    mp = pytest.MonkeyPatch()
+    mp.setenv("STYLIZE3D_CRASH_DIR", str(tmp_path_factory.mktemp("crash-logs")))
+    yield
+    mp.undo()
+
+
 def find_mesh(name: str) -> Path | None:
     """Path of a real test mesh: ``tests/data/`` first, then the big-mesh folder; None if absent."""
     for folder in (TEST_DATA, SHARED_MESHES):

@@ -15,10 +15,12 @@ are removed before their input runs again.
 A local worker process that dies (kill -9, a crash) breaks the pool: the driver waits for it to
 shut down, finds which process died by itself (exit status other than the pool's SIGTERM) and
 which input it was working on (the run folder's ``pid-*.json``), counts a retry for that input
-only, re-queues every input that was in flight and starts a new pool. A process the watchdog
-ended (memory / time limit, :mod:`app.batch.worker`) fails its input with the reason, without
-retry. With Dask, the scheduler re-runs a task whose worker died by itself; after its allowed
-failures the task's ``KilledWorker`` becomes a failed record.
+only, re-queues every input that was in flight and starts a new pool. A worker that crashed
+(segfault, abort) left a crash log with its Python stacks (:mod:`app.crashlog`): its path goes
+into the mesh's record (``crash_logs``, and the message and ``crash_log`` of a failed record).
+A process the watchdog ended (memory / time limit, :mod:`app.batch.worker`) fails its input
+with the reason, without retry. With Dask, the scheduler re-runs a task whose worker died by
+itself; after its allowed failures the task's ``KilledWorker`` becomes a failed record.
 """
 
 from __future__ import annotations
@@ -137,6 +139,7 @@ class Item:
     attempts: int = 0            # times it was started in this batch
     task_id: str = ""            # the id of its latest start
     previous: dict | None = None
+    crash_logs: list = field(default_factory=list)  # of its worker processes that crashed
 
 
 def plan(job: Job, inputs, outputs, report, redo: bool = False) -> list[Item]:
@@ -220,6 +223,13 @@ def make_executor(job: Job, workers: int, scheduler: str | None):
 def _processes(ex) -> dict:
     """The pool's worker processes by pid (kept to read their exit status after a break)."""
     return dict(getattr(ex, "_processes", None) or {})
+
+
+def _crash_log(path) -> str | None:
+    """The crash log a dead worker left, if it crashed (stacks in it), else None."""
+    from app.crashlog import has_crash
+
+    return str(path) if path and has_crash(path) else None
 
 
 def _remove_temp(output: str) -> None:
@@ -399,6 +409,8 @@ class _Loop:
                "retries": it.deaths}
         rec.pop("attempt", None)
         rec.setdefault("key", it.key)
+        if it.crash_logs:
+            rec["crash_logs"] = list(it.crash_logs)
         if rec["status"] != "done":
             rec.pop("output_sha256", None)
             rec.pop("figures", None)
@@ -510,11 +522,12 @@ class _Loop:
         ended, count a retry for the one whose process died by itself, re-queue the rest."""
         died = {pid for pid, p in procs.items()
                 if p.exitcode is not None and p.exitcode not in (0, -signal.SIGTERM)}
-        working = {}
+        working, logs = {}, {}
         for f in self.run_dir.glob("pid-*.json"):
             with contextlib.suppress(OSError, ValueError, KeyError):
                 d = json.loads(f.read_text())
                 working[d["task_id"]] = int(d["pid"])
+                logs[d["task_id"]] = d.get("crash_log")
         culprits = {t for t, pid in working.items() if pid in died}
         if not culprits and not procs:  # no exit statuses to read: suspect every one
             culprits = set(working)
@@ -534,9 +547,15 @@ class _Loop:
             if it.task_id in culprits:
                 blamed = True
                 it.deaths += 1
+                log = _crash_log(logs.get(it.task_id))
+                if log:
+                    it.crash_logs.append(log)
                 if it.deaths > self.retries:
+                    extra = {"crash_log": it.crash_logs[-1]} if it.crash_logs else {}
                     self.failed(it, f"the worker process died while working on it "
-                                    f"({it.deaths} times); nothing was written.")
+                                    f"({it.deaths} times); nothing was written."
+                                    + (f" It crashed; the details are in {extra['crash_log']}."
+                                       if extra else ""), **extra)
                     continue
             requeue.append(it)
         self.todo.extendleft(reversed(requeue))

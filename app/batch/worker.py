@@ -18,6 +18,12 @@ is working on): after a local pool breaks, the driver reads them to know which m
 died. A finished mesh's record also goes to ``pending/<task id>.json`` (atomically) before the
 task returns, so a driver killed between the worker's write and its own report line still
 counts the mesh as done when it starts again.
+
+A local pool's worker process is crash-logged (:func:`app.crashlog.install`, in
+:func:`init_pool_worker`): a segfault or abort writes every thread's Python stack to its crash
+log, whose path ``pid-<pid>.json`` also holds (``crash_log``), so the driver can name it in the
+mesh's record. A process this module ends itself (watchdog, driver gone) removes its crash log
+first (:func:`app.crashlog.discard`): it did not crash.
 """
 
 from __future__ import annotations
@@ -73,8 +79,12 @@ def limit_file(run_dir, iid: str) -> Path:
 
 # ----------------------------------------------------------------------------- watchdog
 def init_pool_worker(job) -> None:
-    """ProcessPoolExecutor initializer: keep the job, leave Ctrl+C to the driver, watch."""
+    """ProcessPoolExecutor initializer: keep the job, leave Ctrl+C to the driver, watch, and
+    keep a crash log (module docstring)."""
+    from app import crashlog
+
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    crashlog.install("batch-worker")
     _state.update(job=job, pool=True, parent=os.getppid())
     _start_watchdog()
 
@@ -92,6 +102,14 @@ def _gb(n: float) -> str:
     return f"{n / 1e9:.1f} GB" if n >= 1e9 else f"{n / 1e6:.0f} MB"
 
 
+def _exit(code: int) -> None:
+    """End this worker process now (not a crash: its crash log goes)."""
+    from app import crashlog
+
+    crashlog.discard()
+    os._exit(code)
+
+
 def _watch() -> None:
     import psutil
 
@@ -99,7 +117,7 @@ def _watch() -> None:
     while True:
         time.sleep(WATCH_EVERY)
         if _state["pool"] and os.getppid() != _state["parent"]:
-            os._exit(0)  # the driver is gone: nobody will read what this computes
+            _exit(0)  # the driver is gone: nobody will read what this computes
         with _lock:
             running = list(_current.values())
         if not running:
@@ -126,7 +144,7 @@ def _stop(c: dict, code: int, kind: str, message: str) -> None:
                     {"kind": kind, "message": message, "task_id": c["task_id"],
                      "pid": os.getpid()})
     finally:
-        os._exit(code)
+        _exit(code)
 
 
 # ----------------------------------------------------------------------------- the task
@@ -238,7 +256,7 @@ def _run(job, task: dict, rec: dict) -> dict:
         raise InvalidMeshError("the result is not a valid mesh (empty, or coordinates that "
                                "are not numbers); nothing was written.")
     if _state["pool"] and os.getppid() != _state["parent"]:
-        os._exit(0)  # the driver is gone: do not write behind its back
+        _exit(0)  # the driver is gone: do not write behind its back
     out = Path(task["output"])
     out.parent.mkdir(parents=True, exist_ok=True)
     write_mesh(out, V, F)
@@ -295,9 +313,11 @@ def run_task(job, task: dict) -> dict:
             return {**rec, "message": reason["message"], "limit": reason.get("kind")}
         except (OSError, ValueError, KeyError):
             pass
+    from app.crashlog import current_log
+
     _write_json(run_dir / f"pid-{os.getpid()}.json",
                 {"pid": os.getpid(), "task_id": task["task_id"], "input": task["input"],
-                 "input_id": iid})
+                 "input_id": iid, "crash_log": current_log()})
     with _lock:
         _current[task["task_id"]] = {
             "task_id": task["task_id"], "input_id": iid, "run_dir": str(run_dir),

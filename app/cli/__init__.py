@@ -3,7 +3,8 @@
 Every sub-command prints a plain message and exits non-zero on bad input (the exit status is the
 error's ``exit_code``: 2 unreadable file, 3 unwritable file, 4 invalid mesh, 5 bad parameter,
 6 an iterative solve that did not converge; 70 an unexpected failure, whose traceback goes to a
-crash-log file, never to the screen).
+crash-log file, never to the screen; a segfault or abort too, through the supervisor of
+:mod:`app.crashlog`).
 Method flags are generated from the methods' Params dataclasses (one definition per parameter);
 every method sub-command takes a mesh file or a project (``.s3d``) and ``--params FILE.json``
 (precedence: see :mod:`app.cli.common`).

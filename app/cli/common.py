@@ -269,16 +269,11 @@ def silence_stdout() -> None:
 
 
 def write_crash_log(text: str) -> str | None:
-    """Keep a traceback for the bug report in a temporary file (never on the user's screen)."""
-    import tempfile
+    """Keep a traceback for the bug report (never on the user's screen) in the crash-log folder
+    (:func:`app.crashlog.crash_dir`, ``..._<pid>_error.log``); its path, or None."""
+    from app.crashlog import write_error_log
 
-    try:
-        fd, path = tempfile.mkstemp(prefix="stylize3d-crash-", suffix=".txt")
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        return path
-    except OSError:
-        return None
+    return write_error_log(text)
 
 
 def method_recipe(module: str, title: str):
