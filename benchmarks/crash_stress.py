@@ -47,7 +47,7 @@ COMMANDS: list[tuple[str, list[str]]] = [
     ("info", ["info", "{in}", "--json"]),
     ("clean", ["clean", "{in}", "-o", "{out}.obj"]),
     ("smooth", ["smooth", "{in}", "-o", "{out}.obj", "--iterations", "3"]),
-    ("smooth-multigrid", ["smooth", "{in}", "-o", "{out}.obj", "--signal", "noise",
+    ("smooth-multigrid", ["smooth", "{in}", "-o", "{out}.npy", "--signal", "noise",
                           "--solver", "multigrid"]),
     ("multigrid-info", ["multigrid-info", "{in}", "--json"]),
     ("cubic", ["cubic", "{in}", "-o", "{out}.obj", "--max-iters", "6"]),
