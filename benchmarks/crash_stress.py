@@ -108,7 +108,7 @@ def _inputs(tmp: Path, shared: bool) -> list[Path]:
 
 def _case(rng: random.Random, inputs: list[Path], out_dir: Path, i: int):
     """One random case: (name, argv)."""
-    if rng.random() < 0.12:
+    if RECIPES and (not COMMANDS or rng.random() < 0.12):
         name, title, params = rng.choice(RECIPES)
         project = SAMPLES / "blob-painted.s3d"
         return name, "blob-painted.s3d", [sys.executable, "-c", RECIPE_CODE, title,
@@ -147,7 +147,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--shared", action="store_true", help="also the meshes of ../shared/meshes")
     ap.add_argument("--json", metavar="FILE", help="write every record here")
+    ap.add_argument("--only", metavar="NAMES",
+                    help="comma-separated case names (e.g. smooth-multigrid,recipe-cubic)")
     args = ap.parse_args(argv)
+    if args.only:
+        names = set(args.only.split(","))
+        unknown = names - {c[0] for c in COMMANDS} - {r[0] for r in RECIPES}
+        if unknown:
+            ap.error(f"unknown case(s): {', '.join(sorted(unknown))}")
+        COMMANDS[:] = [c for c in COMMANDS if c[0] in names]
+        RECIPES[:] = [r for r in RECIPES if r[0] in names]
     rng = random.Random(args.seed)
     tmp = Path(tempfile.mkdtemp(prefix="crash-stress-"))
     crash_dir = tmp / "crash-logs"
