@@ -28,6 +28,10 @@ def main(argv: list[str] | None = None) -> int:
     from app import cli
 
     if argv and argv[0] in cli.SUBCOMMANDS:
+        if entry:  # the process is the command: SIGTERM stops it like Ctrl+C (exit 143)
+            from app.cli.common import stop_on_sigterm
+
+            stop_on_sigterm()
         return cli.main(argv)
     if argv:
         message = cli.unknown_command(argv[0])

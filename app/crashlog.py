@@ -430,12 +430,26 @@ def announce_last_crash(report, show=None) -> str | None:
 
 
 # ----------------------------------------------------------------------------- commands
-def _say(text: str) -> None:
+_LAST_SAID: list = [None]
+
+
+def say(text: str) -> None:
+    """Print a message to stderr; a closed stderr is not worth a traceback (the CLI's
+    ``app.cli.common.say`` is this function). The last message is kept (:func:`last_said`)."""
+    _LAST_SAID[0] = text
     try:
         print(text, file=sys.stderr)
         sys.stderr.flush()
     except (OSError, ValueError, AttributeError):
         pass
+
+
+def last_said(reset: bool = False) -> str | None:
+    """The last message :func:`say` printed in this process (None after ``reset``)."""
+    text = _LAST_SAID[0]
+    if reset:
+        _LAST_SAID[0] = None
+    return text
 
 
 def _suffix(word: str) -> str:
@@ -571,13 +585,13 @@ def supervise(argv: list[str], program_name: str) -> int | None:
     command = program_name[4:] if program_name.startswith("cli-") else program_name
     if sig in FATAL_SIGNALS:
         _after_crash(path, sig)
-        _say(f"stylize3d {command} crashed ({FATAL_SIGNALS[sig]}); the details are in {path}. "
+        say(f"stylize3d {command} crashed ({FATAL_SIGNALS[sig]}); the details are in {path}. "
              "Your input files are unchanged. This is a bug in Stylize3D or a library it "
              "uses: please report it with that file.")
         return INTERNAL_ERROR_EXIT
     _unlink(path)
     if sig == signal.SIGKILL:
-        _say(f"stylize3d {command} was killed (SIGKILL) before it finished; nothing more was "
+        say(f"stylize3d {command} was killed (SIGKILL) before it finished; nothing more was "
              "written. If nobody stopped it, the system ran out of memory: try a smaller mesh "
              "(decimate it first) or the options for big meshes.")
         return INTERNAL_ERROR_EXIT

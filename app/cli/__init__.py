@@ -121,42 +121,84 @@ def main(argv: list[str]) -> int:
         return 0
     # through this package's namespace, so that a command replaced here (tests, scripts) runs
     func = globals().get(args.func.__name__, args.func)
+    from app import crashlog
+    from app.cli import common
+
+    common.json_printed(reset=True)
+    crashlog.last_said(reset=True)
+    want_json = bool(getattr(args, "json", False)) or "--json" in argv
+
+    def failed(message: str, code: int) -> int:
+        """Say why the command stopped; with ``--json`` also as the one JSON object on stdout
+        (unless the command printed its own)."""
+        say(f"stylize3d {args.command}: {message}")
+        if want_json and not common.json_printed():
+            try:
+                common.print_json_failure(args.command, message, code)
+                sys.stdout.flush()
+            except (BrokenPipeError, OSError, ValueError):
+                pass
+        return code
+
     try:
         code = int(func(args))
+        if code and want_json and not common.json_printed():  # refused without raising
+            said = crashlog.last_said() or f"the command stopped with exit status {code}."
+            prefix = f"stylize3d {args.command}: "
+            common.print_json_failure(args.command, said[len(prefix):] if
+                                      said.startswith(prefix) else said, code)
         sys.stdout.flush()  # a closed pipe (`stylize3d info MESH | head`) shows up here
         return code
     except Stylize3DError as e:
-        say(f"stylize3d {args.command}: {e}")
-        return e.exit_code
-    except KeyboardInterrupt:
-        say("stylize3d: interrupted; nothing was written.")
-        return 130
+        return failed(str(e), e.exit_code)
+    except KeyboardInterrupt as e:
+        term = isinstance(e, common.Terminated)
+        text = ("stopped (SIGTERM)" if term else "interrupted") + "; nothing was written."
+        code = 143 if term else 130
+        say(f"stylize3d: {text}")
+        if want_json and not common.json_printed():
+            common.print_json_failure(args.command, text, code)
+        return code
     except BrokenPipeError:
         # the reader of our output went away (e.g. `| head`): not an error of ours, and Python
         # must not print a second traceback when it flushes stdout at exit
         silence_stdout()
         return 0
     except MemoryError:
-        say(f"stylize3d {args.command}: this machine ran out of memory; nothing was written. "
-            "Try a smaller mesh (decimate it first) or the options for big meshes "
-            "(e.g. --progressive-faces for cubic, --solver multigrid for smooth).")
-        return INTERNAL_ERROR_EXIT
+        return failed("this machine ran out of memory; nothing was written. Try a smaller mesh "
+                      "(decimate it first) or the options for big meshes (e.g. "
+                      "--progressive-faces for cubic, --solver multigrid for smooth).",
+                      INTERNAL_ERROR_EXIT)
     except Exception as e:  # a defect of ours: say so plainly, never a bare traceback
         import traceback
 
         log = write_crash_log(traceback.format_exc())
-        say(f"stylize3d {args.command}: an unexpected error stopped the command "
-            f"({type(e).__name__}: {e}); nothing was written. This is a bug in Stylize3D"
-            + (f"; the details are in {log}." if log else "."))
-        return INTERNAL_ERROR_EXIT
+        return failed(f"an unexpected error stopped the command ({type(e).__name__}: {e}); "
+                      "nothing was written. This is a bug in Stylize3D"
+                      + (f"; the details are in {log}." if log else "."), INTERNAL_ERROR_EXIT)
 
 
 # ----------------------------------------------------------------------------- GUI
+class _Version(argparse.Action):
+    """``--version``: the installed package's version (looked up only when asked)."""
+
+    def __init__(self, option_strings, dest, **kwargs):
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS,
+                         help="print the version and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        import app
+
+        print(f"stylize3d {app.__version__}")
+        parser.exit()
+
+
 def gui_main(argv: list[str]) -> int:
     p = argparse.ArgumentParser(prog="stylize3d", description="Open the Stylize3D app.",
                                 epilog="Batch sub-commands: " + ", ".join(SUBCOMMANDS)
                                 + " (stylize3d COMMAND --help).")
     p.add_argument("mesh", nargs="?", help="mesh file or project (.s3d) to open")
+    p.add_argument("--version", action=_Version)
     p.add_argument("--screenshot", metavar="PNG",
                    help="save a screenshot of the window once the mesh is shown, then quit")
     g = p.add_argument_group("user-study mode")

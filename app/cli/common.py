@@ -27,6 +27,7 @@ from typing import Any, Iterable
 
 from algorithms.errors import InvalidMeshError, MeshWriteError, ParameterError
 from algorithms.params import describe, params_from_dict, params_to_dict
+from app.crashlog import say  # stderr, never a traceback (one implementation)
 
 #: exit status of an unexpected failure (a defect, or the machine ran out of memory)
 INTERNAL_ERROR_EXIT = 70
@@ -247,17 +248,51 @@ def check_output(path: str, overwrite: bool, inp: str | None = None) -> None:
         raise MeshWriteError(f"{path} is a folder, not a file name.")
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (what SLURM, Kubernetes and ``kill`` send) arrived: stop like Ctrl+C (clean up,
+    say so, exit 143; a batch is resumable) instead of dying without a word."""
+
+
+def stop_on_sigterm() -> None:
+    """In the main thread: SIGTERM raises :class:`Terminated` (issue 39, item 6)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def _raise(signum, frame):
+        raise Terminated()
+
+    try:
+        signal.signal(signal.SIGTERM, _raise)
+    except (ValueError, OSError):  # not the main interpreter's main thread
+        pass
+
+
+_JSON_PRINTED = [False]  # whether this command printed its JSON object (app.cli.main)
+
+
 def print_json(obj: dict) -> None:
+    _JSON_PRINTED[0] = True
     print(json.dumps(obj, indent=2, sort_keys=False, default=float))
 
 
-def say(text: str) -> None:
-    """Print a message to stderr; a closed stderr is not worth a traceback."""
-    try:
-        print(text, file=sys.stderr)
-        sys.stderr.flush()
-    except (BrokenPipeError, OSError, ValueError):
-        pass
+def json_printed(reset: bool = False) -> bool:
+    """Whether :func:`print_json` ran (since the last ``reset``)."""
+    was = _JSON_PRINTED[0]
+    if reset:
+        _JSON_PRINTED[0] = False
+    return was
+
+
+def print_json_failure(command: str, message: str, exit_code: int) -> None:
+    """The one JSON object of a command given ``--json`` that failed before printing its own:
+    ``{"ok": false, "command", "error", "exit_code"}`` (issue 39: a script reading stdout always
+    gets one object)."""
+    print_json({"ok": False, "command": command, "error": message, "exit_code": exit_code})
+
+
 
 
 def silence_stdout() -> None:
@@ -289,6 +324,8 @@ def method_recipe(module: str, title: str):
 
 __all__ = ["INTERNAL_ERROR_EXIT", "MESH_HELP", "add_params_arguments",
            "add_params_file_argument", "check_output", "check_params_file", "field_names",
-           "input_project", "input_state", "method_params", "method_recipe", "params_file",
+           "input_project", "input_state", "json_printed", "method_params", "method_recipe",
+           "params_file", "print_json_failure",
            "params_from_args", "params_to_dict", "print_json", "read_input", "read_valid",
-           "saved_panel", "say", "settings", "silence_stdout", "write_crash_log"]
+           "saved_panel", "say", "settings", "silence_stdout", "stop_on_sigterm",
+           "Terminated", "write_crash_log"]

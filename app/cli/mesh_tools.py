@@ -26,15 +26,19 @@ def cmd_info(args: argparse.Namespace) -> int:
 
     data = _read(args.mesh)
     report = validate_mesh(data.V, data.F, notes=data.notes)
+    # 0: every method accepts the mesh as it is; 4: it has errors or needs cleaning first
+    accepted = report.ok and not report.needs_cleaning
     if args.json:
-        out = {"file": str(args.mesh), "ok": report.ok, "notes": list(data.notes)}
+        out = {"file": str(args.mesh), "notes": list(data.notes)}
         out.update(report.to_dict())
+        # "ok" says what the exit status says (issue 39); "valid": no errors (warnings may
+        # still ask for Clean, "needs_cleaning")
+        out.update(ok=accepted, valid=report.ok)
         print_json(out)
     else:
         print(f"{args.mesh}")
         print(report.summary())
-    # 0: every method accepts the mesh as it is; 4: it has errors or needs cleaning first
-    return 0 if report.ok and not report.needs_cleaning else InvalidMeshError.exit_code
+    return 0 if accepted else InvalidMeshError.exit_code
 
 
 def cmd_clean(args: argparse.Namespace) -> int:

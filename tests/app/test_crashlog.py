@@ -160,16 +160,20 @@ def test_signals_reach_the_command_and_its_status_passes_through(tmp_path, crash
     assert "stylize3d: interrupted; nothing was written." in text and "Traceback" not in text
     assert _wait_for(lambda: _gone(child), timeout=10)
     assert _logs(crash_dir) == []
-    # SIGTERM: the command and its supervisor end as the command alone did (killed by it)
+    # SIGTERM (forwarded to the command): it stops like Ctrl+C, says so, exits 143 (issue 39)
     proc, err = _start_cubic(tmp_path)
     try:
         child = _wait_for(lambda: _child_pid(crash_dir), proc=proc)
+        _wait_for(lambda: "iteration" in _stderr(err), proc=proc)  # past start-up
         proc.terminate()
         proc.wait(60)
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode == -signal.SIGTERM
+    text = _stderr(err)
+    assert proc.returncode == 143, text
+    assert "stylize3d: stopped (SIGTERM); nothing was written." in text
+    assert "Traceback" not in text
     assert _wait_for(lambda: _gone(child), timeout=10)
     assert _logs(crash_dir) == []
     # SIGKILL of the supervisor: the kernel ends the command too (no orphan keeps computing)
