@@ -212,12 +212,69 @@ def make_executor(job: Job, workers: int, scheduler: str | None):
         slots = max(1, sum(client.nthreads().values()))
         job_ref = client.scatter(job, broadcast=True, hash=False)
         return client.get_executor(), client.close, job_ref, slots
-    import multiprocessing
-
-    ex = cf.ProcessPoolExecutor(max_workers=workers,
-                                mp_context=multiprocessing.get_context("spawn"),
+    ex = cf.ProcessPoolExecutor(max_workers=workers, mp_context=_worker_context(),
                                 initializer=init_pool_worker, initargs=(job,))
     return ex, lambda: ex.shutdown(wait=True, cancel_futures=True), None, workers
+
+
+@contextlib.contextmanager
+def _main_hidden():
+    """While a worker process is launched: the caller's ``__main__`` names no file and no
+    module, so that the "spawn" child does not import it (module docstring of
+    :func:`_worker_context`)."""
+    import sys
+
+    main = sys.modules.get("__main__")
+    if main is None:
+        yield
+        return
+    missing = object()
+    saved = {a: main.__dict__.get(a, missing) for a in ("__file__", "__spec__")}
+    main.__dict__.pop("__file__", None)
+    main.__dict__["__spec__"] = None
+    try:
+        yield
+    finally:
+        for a, v in saved.items():
+            if v is missing:
+                main.__dict__.pop(a, None)
+            else:
+                main.__dict__[a] = v
+
+
+def _worker_context():
+    """The "spawn" context of the local workers, whose children never import the caller's
+    main script. A "spawn" child normally re-runs the main script's top level (to find what
+    it defines), so a script that calls :func:`run_batch` without an ``if __name__ ==
+    "__main__":`` guard -- the "From Python" example of docs/batch.md saved as a file -- made
+    every worker start the batch again, and the workers kept dying (issue 39). The workers run
+    only :mod:`app.batch.worker` (the job and the tasks are its objects), so nothing of the
+    main script is needed there. POSIX only; elsewhere the plain "spawn" context."""
+    import multiprocessing
+    import sys
+
+    if sys.platform == "win32":
+        return multiprocessing.get_context("spawn")
+    return _NoMainSpawnContext()
+
+
+from multiprocessing import context as _mp_context  # noqa: E402 - next to its only use
+
+if os.name == "posix":
+    from multiprocessing import popen_spawn_posix as _popen_spawn
+
+    class _NoMainPopen(_popen_spawn.Popen):
+        def _launch(self, process_obj):
+            with _main_hidden():
+                super()._launch(process_obj)
+
+    class _NoMainProcess(_mp_context.SpawnProcess):
+        @staticmethod
+        def _Popen(process_obj):
+            return _NoMainPopen(process_obj)
+
+    class _NoMainSpawnContext(_mp_context.SpawnContext):
+        Process = _NoMainProcess
 
 
 def _processes(ex) -> dict:

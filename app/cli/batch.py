@@ -13,12 +13,13 @@ parameter; 130 when interrupted (what is done is recorded: run the same command 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
 
 from algorithms.errors import ParameterError
-from app.cli.common import print_json, say
+from app.cli.common import Terminated, print_json, say
 
 COMMANDS = ("batch",)
 
@@ -59,12 +60,24 @@ def _dry_run(job, args, inputs, outputs, report) -> int:
     return 0
 
 
+def _substitution(rec: dict) -> str:
+    """``"; Loop subdivision instead of the network"`` for a record whose method fell back to
+    another scheme (its figures' ``fallback``), else ''."""
+    fig = rec.get("figures") or {}
+    if not fig.get("fallback"):
+        return ""
+    from app.recipes.subdivision import method_words
+
+    return "; " + method_words(str(fig.get("method_used", "")), True)
+
+
 class _Progress:
     """A rich progress bar on a terminal (done / failed / skipped / remaining, rate, ETA), or one
     plain line per mesh on stderr otherwise; nothing with --quiet."""
 
     def __init__(self, method: str, quiet: bool, console=None):
         self.quiet, self.bar, self.task = quiet, None, None
+        self.substituted = 0  # meshes a method did with another scheme (said at the end)
         self.t0 = time.perf_counter()
         if not quiet and (console is not None or sys.stderr.isatty()):
             from rich.console import Console
@@ -93,17 +106,22 @@ class _Progress:
             if rec is not None and rec["status"] == "failed":
                 self.bar.console.print(f"[red]failed[/red] {rec['input']}: {rec['message']}",
                                        markup=True, highlight=False)
+            elif rec is not None and rec["status"] == "done" and _substitution(rec):
+                self.bar.console.print(f"done {rec['input']}{_substitution(rec)}",
+                                       markup=False, highlight=False)
         elif not self.quiet and rec is not None:
             tail = f": {rec['message']}" if rec["status"] == "failed" else \
-                f" -> {rec['output']} ({rec['seconds']:.1f} s)"
+                f" -> {rec['output']} ({rec['seconds']:.1f} s{_substitution(rec)})"
             say(f"{rec['status']:6s} {rec['input']}{tail}")
+        if rec is not None and rec["status"] == "done" and _substitution(rec):
+            self.substituted += 1
 
     def close(self) -> None:
         if self.bar is not None and self.task is not None:
             self.bar.stop()
 
 
-def _refuse_replacing(inputs, outputs, report) -> None:
+def _refuse_replacing(inputs, outputs, report, out) -> None:
     """Like every other command, never replace a file without --overwrite: only outputs this
     batch's report says it wrote itself are written again (a resumed or re-run batch)."""
     import os
@@ -112,6 +130,17 @@ def _refuse_replacing(inputs, outputs, report) -> None:
     from app.batch import read_report
 
     recorded = read_report(report)
+    # records the workers of a stopped driver left for the report (what run_batch recovers
+    # first): their outputs were written by this batch too (issue 39, item 1)
+    from app.batch.driver import BATCH_DIR
+
+    for f in sorted((Path(out) / BATCH_DIR / "pending").glob("*.json")):
+        try:
+            rec = json.loads(f.read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(rec, dict) and rec.get("input") and rec.get("output"):
+            recorded.setdefault(rec["input"], rec)
     clash = [str(o) for i, o in zip(inputs, outputs) if Path(o).exists()
              and (recorded.get(os.path.abspath(i)) or recorded.get(str(i)) or {}).get("output")
              not in (str(o), os.path.abspath(o))]
@@ -141,7 +170,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
     if bargs.dry_run:
         return _dry_run(job, bargs, inputs, outputs, report)
     if not bargs.overwrite:
-        _refuse_replacing(inputs, outputs, report)
+        _refuse_replacing(inputs, outputs, report, out)
     memory = batch.parse_size(bargs.memory_limit) if bargs.memory_limit else "auto"
     progress = _Progress(job.method, bargs.quiet)
     try:
@@ -149,20 +178,24 @@ def cmd_batch(args: argparse.Namespace) -> int:
                                   scheduler=bargs.scheduler, report=report, memory_limit=memory,
                                   time_limit=bargs.time_limit, retries=bargs.retries,
                                   redo=bargs.overwrite, outputs=outputs, on_record=progress)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:  # Ctrl+C, or SIGTERM (common.Terminated)
         progress.close()
-        say(f"stylize3d batch: interrupted. What was done is recorded in {report}; run the "
-            "same command again to finish (done meshes are skipped).")
-        return 130
+        term = isinstance(e, Terminated)
+        say(f"stylize3d batch: {'stopped (SIGTERM)' if term else 'interrupted'}. What was done "
+            f"is recorded in {report}; run the same command again to finish (done meshes are "
+            "skipped).")
+        return 143 if term else 130
     progress.close()
     if bargs.json:
         print_json({"method": job.method, "recipe": job.recipe, "source": job.source,
-                    **summary.to_dict()})
+                    **summary.to_dict(), "substituted": progress.substituted})
     else:
+        sub = (f" {progress.substituted} of them with another scheme than asked (their "
+               "records say \"fallback\": true and which ran)." if progress.substituted else "")
         print(f"Batch {job.method}: {summary.done} done, {summary.failed} failed, "
               f"{summary.skipped} skipped of {summary.total} in {summary.seconds:.1f} s "
               f"({60 * summary.throughput:.1f} meshes/min); results in {out}, report "
-              f"{report}.")
+              f"{report}.{sub}")
     return summary.exit_code
 
 

@@ -228,6 +228,48 @@ def test_resume_after_the_driver_is_killed_does_nothing_twice(tmp_path):
                                                                   "pending").iterdir())
 
 
+def test_sigterm_stops_a_batch_like_ctrl_c_and_it_resumes(tmp_path):
+    """SIGTERM (SLURM, Kubernetes, ``kill``; issue 39 item 6): exit 143 with the resume advice,
+    no run folder left, the workers gone; the same command then finishes, nothing done twice."""
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    good = []
+    for k in range(5):
+        V, F = torus(n_major=30 + 2 * k, n_minor=14) if k % 2 else icosphere(3)
+        p = lib / f"m{k}.obj"
+        write_mesh(p, (V @ _rotation(20 + k).T) * (1 + k), F)
+        good.append(p)
+    out = tmp_path / "out"
+    report = out / "batch-report.jsonl"
+    err = tmp_path / "stderr.txt"
+    with open(err, "w") as fh:
+        proc = subprocess.Popen(_batch_cmd("cubic", lib, "-o", out, "--workers", "1",
+                                           "--quiet"), cwd=ROOT, stdout=subprocess.DEVNULL,
+                                stderr=fh)
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None:
+        if report.exists() and sum('"done"' in x for x in report.read_text().splitlines()) >= 1:
+            break
+        time.sleep(0.02)
+    assert proc.poll() is None, "the batch ended before it could be stopped"
+    workers = _worker_pids(out)
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(60)
+    text = err.read_text()
+    assert proc.returncode == 143, text
+    assert "stopped (SIGTERM)" in text and "run the same command again" in text, text
+    assert "Traceback" not in text and "leaked semaphore" not in text, text
+    _wait_gone(workers)
+    assert not list((out / ".batch").glob("run-*"))
+    done_before = {r["input"] for r in _records(report) if r["status"] == "done"}
+    assert 1 <= len(done_before) < len(good)
+    assert main(["batch", "cubic", str(lib), "-o", str(out), "--workers", "1", "--quiet"]) == 0
+    recs = _records(report)
+    for p in good:
+        mine = [r for r in recs if r["input"] == str(p.resolve())]
+        assert sum(r["status"] == "done" for r in mine) == 1, mine
+
+
 def _worker_pids(out: Path) -> set[int]:
     pids = set()
     for f in (out / ".batch").glob("run-*/pid-*.json"):
@@ -434,3 +476,55 @@ def test_existing_files_are_not_replaced_without_overwrite(tmp_path, capsys):
     assert (out / "a.obj").read_text() != "precious"
     # the batch's own results: a run with other settings writes them again without asking
     assert main(args[:-1] + ["4"]) == 0
+
+
+def test_the_docs_from_python_example_runs_as_a_script(tmp_path):
+    """docs/batch.md's "From Python" example, saved as a file and run with ``python FILE``
+    (no ``if __name__ == "__main__":`` guard): the spawned workers must not start the batch
+    again (they did, and the run ended with "worker processes keep stopping"; issue 39)."""
+    import re
+
+    text = (ROOT / "docs" / "batch.md").read_text()
+    section = text[text.index("## From Python"):]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    assert "run_batch" in code and "__main__" not in code
+    lib = tmp_path / "library"
+    lib.mkdir()
+    for name in ("spot_lowres.obj", "hand_lowres.obj"):
+        (lib / name).write_bytes((TEST_DATA / name).read_bytes())
+    (tmp_path / "example.py").write_text(code)
+    p = subprocess.run([sys.executable, "example.py"], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=300,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert "'done': 2" in p.stdout and "'failed': 0" in p.stdout, p.stdout
+    for name in ("spot_lowres.obj", "hand_lowres.obj"):
+        assert (tmp_path / "out" / name).stat().st_size > 0
+
+
+def test_resume_counts_the_records_a_stopped_driver_left_pending(tmp_path):
+    """A driver stopped after its workers finished meshes but before it wrote their report
+    lines (the Dask scheduler stopped, kill -9): the workers' ``pending/`` records say those
+    outputs are this batch's own, so the same command resumes instead of refusing to replace
+    them (it exited 3; issue 39, item 1), and nothing runs twice."""
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    for k in range(3):
+        V, F = icosphere(2)
+        write_mesh(lib / f"m{k}.obj", (V @ _rotation(40 + k).T) * (1 + k), F)
+    out = tmp_path / "out"
+    argv = ["batch", "cubic", str(lib), "-o", str(out), "--workers", "1", "--quiet"]
+    assert main(argv) == 0
+    report = out / "batch-report.jsonl"
+    lines = report.read_text().splitlines()
+    last = json.loads(lines[-1])
+    assert last["status"] == "done"
+    pending = out / ".batch" / "pending"
+    (pending / f"{last['task_id']}.json").write_text(json.dumps(last))
+    report.write_text("\n".join(lines[:-1]) + "\n")   # its line never reached the report
+    assert main(argv) == 0
+    recs = _records(report)
+    mine = [r for r in recs if r["input"] == last["input"]]
+    assert sum(r["status"] == "done" for r in mine) == 1, mine  # recovered, not run again
+    assert any(r.get("recovered") for r in mine)
+    assert not list(pending.iterdir())
