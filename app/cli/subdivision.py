@@ -99,17 +99,22 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
     V, F = after.V, after.F
     write_mesh(args.output, V, F)
     note = str(getattr(last, "note", "") or "")
+    method_used = str(getattr(last, "method_used", "") or params.method)
+    fallback = bool(getattr(last, "fallback", False))
     out = {"input": args.mesh, "output": args.output, "method": params.method,
+           "method_used": method_used, "fallback": fallback,
            "levels": params.levels, "coarsen_first": params.coarsen_first,
            "vertices_in": int(len(data.V)), "faces_in": int(len(data.F)),
            "vertices": int(len(V)), "faces": int(len(F)), "seconds": dt, "note": note}
     if args.json:
         print_json(out)
     else:
+        from app.recipes.subdivision import method_words
+
         if note:
             say(f"stylize3d subdivide: {note}")
-        print(f"Wrote {args.output}: {params.method} subdivision, {params.levels} level(s), "
-              f"{len(data.F):,} -> {len(F):,} triangles in {dt:.2f} s.")
+        print(f"Wrote {args.output}: {method_words(method_used, fallback)}, {params.levels} "
+              f"level(s), {len(data.F):,} -> {len(F):,} triangles in {dt:.2f} s.")
     return 0
 
 

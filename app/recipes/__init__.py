@@ -326,9 +326,11 @@ def run(method: str, state, params=None, options: dict | None = None, *,
         ) -> RunResult:
     """Run a method to its end, headless: ``run("cubic", project_or_state, {"lam": 0.4})``.
 
-    ``state``: a MeshState, a :class:`app.project.Project` (its mesh, painting and, when
-    ``params`` / ``options`` are not given, the method's saved panel settings) or ``(V, F)``.
-    ``params``: a Params instance or a (partial) dict. ``callback`` sees every Step.
+    ``state``: a MeshState, a :class:`app.project.Project` (its mesh, painting and the
+    method's saved panel settings) or ``(V, F)``.
+    ``params``: a Params instance (used as it is) or a (partial) dict whose values replace the
+    project's saved ones (the fields it does not name keep the project's values, as on the
+    command line). ``callback`` sees every Step.
     """
     recipe = get_recipe(method)
     saved = {}
@@ -338,6 +340,8 @@ def run(method: str, state, params=None, options: dict | None = None, *,
     st = _as_state(state)
     if params is None:
         params = saved.get("params", {})
+    elif isinstance(params, dict):  # a partial dict: on top of the saved settings (issue 39)
+        params = {**saved.get("params", {}), **params}
     if isinstance(params, dict):
         params = recipe.make_params(params)
     if options is None:

@@ -67,6 +67,10 @@ class MeshStep(Step):
     #: what neural subdivision did to stay in its network's range ('' when nothing), for the
     #: panel to show (see algorithms.subdivision.inference.scale_plan)
     note: str = ""
+    #: the scheme that made the mesh: "neural", or "loop" when the network was not used
+    #: (``fallback``), or the classic scheme asked for
+    method_used: str = ""
+    fallback: bool = False
 
 
 @dataclass
@@ -176,6 +180,7 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
         V, F = box["value"]
     levels = int(params.levels)
     note = ""
+    method_used, fallback = params.method, False
     if params.method == "neural":
         from algorithms.subdivision.inference import SubdividedStep, neural_subdivision_iter
 
@@ -188,6 +193,8 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
                 step.V = state.V
                 yield step
         V, F, note = last.V, last.F, last.note
+        fallback = bool(getattr(last, "fallback", False))
+        method_used = "loop" if fallback else "neural"
     else:
         from algorithms.subdivision.baselines import subdivide_baseline
 
@@ -199,7 +206,15 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
             V, F = subdivide_baseline(V, F, 1, params.method)
     message = f"{len(F):,} triangles" + (f". {note}" if note else "")
     yield MeshStep(1, 1, np.asarray(V, dtype=np.float64), {}, message,
-                   F=np.asarray(F, dtype=np.int64), note=note)
+                   F=np.asarray(F, dtype=np.int64), note=note, method_used=method_used,
+                   fallback=fallback)
+
+
+def method_words(method_used: str, fallback: bool) -> str:
+    """ "neural subdivision", "Loop subdivision instead of the network", ... (what ran)."""
+    name = {"neural": "neural", "loop": "Loop", "butterfly": "modified butterfly",
+            "midpoint": "mid-point"}.get(method_used, method_used)
+    return f"{name} subdivision" + (" instead of the network" if fallback else "")
 
 
 def _subdivide_params():
@@ -215,6 +230,9 @@ def _subdivision_outcome(last: Step) -> dict:
         out["faces"] = int(len(F))
     if getattr(last, "note", ""):
         out["note"] = str(last.note)
+    if getattr(last, "method_used", ""):   # what ran, said everywhere (issues 36, 39)
+        out["method_used"] = str(last.method_used)
+        out["fallback"] = bool(last.fallback)
     return out
 
 

@@ -274,3 +274,17 @@ def test_the_readme_project_examples_run(tmp_path):
     fine = tmp_path / "fine.obj"
     assert main(["subdivide", str(sample), "-o", str(fine)]) == 0
     assert len(read_mesh(fine).F) == 4 * len(project.state.F)
+
+
+def test_a_partial_params_dict_keeps_the_projects_other_settings(tmp_path, capsys):
+    """``run("cubic", load(project), {"max_iterations": N})`` keeps the project's λ (issue 39,
+    item 3), and gives the bits of the command line with the same flag."""
+    proj = app.recipes.load(SAMPLES / "blob-painted.s3d")
+    saved = proj.panels["Cubic"]["params"]
+    assert saved["lam"] != 0.2                      # not the default: the test can tell
+    r = app.recipes.run("cubic", proj, {"max_iterations": 3})
+    assert r.params.lam == saved["lam"] and r.params.max_iterations == 3
+    out = tmp_path / "cli.obj"
+    assert main(["cubic", str(SAMPLES / "blob-painted.s3d"), "-o", str(out),
+                 "--max-iters", "3"]) == 0
+    assert np.array_equal(read_mesh(out).V, r.state.V)

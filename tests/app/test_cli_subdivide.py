@@ -132,3 +132,36 @@ def test_a_file_that_is_not_a_network_is_refused_plainly(tmp_path):
     r = stylize3d("subdivide", HAND, "-o", tmp_path / "x.obj", "--weights", cut)
     assert r.returncode == 2 and "not a Stylize3D neural-subdivision weights file" in r.stderr
     assert "Traceback" not in r.stderr and not (tmp_path / "x.obj").exists()
+
+
+def test_what_ran_is_said_in_the_line_the_json_and_the_batch_report(tmp_path, capsys):
+    """Never a silent Loop (issue 39, item 4): the last line, ``--json`` (``method_used``,
+    ``fallback``) and each batch record say which scheme made the mesh."""
+    import json as _json
+
+    from app.cli import main as cli_main
+    from tests.conftest import SAMPLES
+
+    blob = str(SAMPLES / "blob.obj")   # denser than the network was trained for: Loop
+    assert cli_main(["subdivide", blob, "-o", str(tmp_path / "a.obj"), "--levels", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "Loop subdivision instead of the network" in out
+    assert cli_main(["subdivide", blob, "-o", str(tmp_path / "b.obj"), "--levels", "1",
+                     "--json"]) == 0
+    d = _json.loads(capsys.readouterr().out)
+    assert d["method"] == "neural" and d["method_used"] == "loop" and d["fallback"] is True
+    assert cli_main(["subdivide", blob, "-o", str(tmp_path / "c.obj"), "--levels", "1",
+                     "--coarsen-first", "300", "--json"]) == 0
+    d = _json.loads(capsys.readouterr().out)
+    assert d["method_used"] == "neural" and d["fallback"] is False
+    assert cli_main(["subdivide", blob, "-o", str(tmp_path / "d.obj"), "--levels", "1",
+                     "--method", "butterfly"]) == 0
+    assert "modified butterfly subdivision, 1 level" in capsys.readouterr().out
+    assert cli_main(["batch", "subdivide", blob, "-o", str(tmp_path / "batch"), "--levels",
+                     "1", "--workers", "1", "--json"]) == 0
+    cap = capsys.readouterr()
+    assert _json.loads(cap.out)["substituted"] == 1
+    (rec,) = [_json.loads(x) for x in (tmp_path / "batch" / "batch-report.jsonl").read_text()
+              .splitlines() if '"done"' in x]
+    assert rec["figures"]["method_used"] == "loop" and rec["figures"]["fallback"] is True
+    assert "Loop subdivision instead of the network" in cap.err

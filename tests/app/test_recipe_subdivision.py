@@ -68,7 +68,8 @@ def test_baselines_are_the_algorithms(spot, method):
     r = run("Subdivision", spot, {"method": method, "levels": 1}, {})
     V, F = subdivide_baseline(spot.V, spot.F, 1, method)
     assert np.array_equal(r.state.V, V) and np.array_equal(r.state.F, F)
-    assert r.outcome == {"vertices": len(V), "faces": 4 * len(spot.F)}
+    assert r.outcome == {"vertices": len(V), "faces": 4 * len(spot.F), "method_used": method,
+                         "fallback": False}
     assert not r.state.fields and r.last.F.dtype == np.int64
 
 
