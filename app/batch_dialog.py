@@ -198,7 +198,7 @@ class BatchDialog(QDialog):
 
     def start(self) -> bool:
         """Start the batch with the chosen panel's settings now (True when it started)."""
-        from app.batch import collect_inputs, output_names, plan
+        from app.batch import collect_inputs_with_roots, output_names, plan
 
         if self.running:
             return False
@@ -209,10 +209,11 @@ class BatchDialog(QDialog):
             return False
         try:
             job = self._job()
-            inputs = collect_inputs(roots, out_dir=out_dir)
-            if not inputs:
+            found = collect_inputs_with_roots(roots, out_dir=out_dir)
+            if not found:
                 raise Stylize3DError("No mesh files were found in what you added.")
-            outputs = output_names(inputs, out_dir)
+            inputs = [p for p, _ in found]
+            outputs = output_names(inputs, out_dir, roots=[r for _, r in found])
             items = plan(job, inputs, outputs, Path(out_dir) / "batch-report.jsonl")
         except Stylize3DError as e:
             dialogs.error(self, "Cannot start the batch", str(e))

@@ -1,11 +1,19 @@
 """The inputs of a batch (files, folders searched recursively, globs) and where their results go.
 
 Naming: a result keeps its input's file name, in the same sub-folder of ``OUT_DIR`` as the
-input is below the inputs' deepest common folder; so ``lib/a/x.obj`` and ``lib/b/x.obj`` give
-``OUT_DIR/a/x.obj`` and ``OUT_DIR/b/x.obj``, and files of one folder land straight in
-``OUT_DIR``. A project (``.s3d``) gives a mesh, ``<name>.obj``. Should two inputs still get the
-same name (``x.s3d`` next to ``x.obj``), the later one gets ``<name>-<8 hex digits of its
-path>.<ext>``.
+input is below its **own root**: the folder given as INPUT (``lib`` for ``lib/a/x.obj`` found in
+``lib``), the folder of a file given by name, or the folder a glob starts from (``lib`` for
+``lib/**/*.obj``). So ``lib/a/x.obj`` and ``lib/b/x.obj`` give ``OUT_DIR/a/x.obj`` and
+``OUT_DIR/b/x.obj``, and adding an input from another folder moves no result (before, results
+were placed below the deepest folder common to all inputs, so one more input could move every
+result and make a resumed batch run everything again; issue 39). A project (``.s3d``) gives a
+mesh, ``<name>.obj``. Should two inputs still get the same name (``x.s3d`` next to ``x.obj``,
+two roots with the same file), the later one gets ``<name>-<8 hex digits of its path>.<ext>``.
+:func:`output_names` without roots keeps the common-folder rule (scripts that call it so).
+
+Searching a folder never enters hidden folders, the batch's own output folder, nor the output
+folder of an earlier batch (a folder holding ``.batch/`` or ``batch-report.jsonl``): results are
+never taken as inputs.
 """
 
 from __future__ import annotations
@@ -28,33 +36,70 @@ def _is_input(p: Path) -> bool:
     return p.is_file() and p.suffix.lower() in INPUT_SUFFIXES and not p.name.startswith(".")
 
 
+def _is_batch_output(folder: Path) -> bool:
+    """A folder an earlier batch wrote its results to (its bookkeeping is there)."""
+    return (folder / ".batch").is_dir() or (folder / "batch-report.jsonl").is_file()
+
+
 def _search(folder: Path, out_dir: Path | None) -> list[Path]:
     found = []
     for root, dirs, files in os.walk(folder):
         here = Path(root)
         dirs[:] = sorted(d for d in dirs if not d.startswith(_SKIP_PREFIX)
-                         and Path(os.path.abspath(here / d)) != out_dir)
+                         and Path(os.path.abspath(here / d)) != out_dir
+                         and not _is_batch_output(here / d))
         found += [here / f for f in sorted(files) if _is_input(here / f)]
     return found
+
+
+def _in_results(path: Path, root: Path, out_dir: Path | None) -> bool:
+    """Whether a glob's match lies in this batch's or an earlier batch's output folder (below
+    the glob's root)."""
+    path, root = Path(os.path.abspath(path)), Path(os.path.abspath(root))
+    for folder in path.parents:
+        if folder == root or root not in folder.parents:
+            break
+        if folder == out_dir or _is_batch_output(folder):
+            return True
+    return False
+
+
+def _glob_root(pattern: str) -> Path:
+    """The folder a glob starts from: its leading parts without wildcards."""
+    parts = []
+    for part in Path(pattern).parts:
+        if glob.has_magic(part):
+            break
+        parts.append(part)
+    return Path(*parts) if parts else Path(".")
 
 
 def collect_inputs(items, out_dir=None) -> list[Path]:
     """The input files (absolute, symbolic links kept, each once, in the order given; a
     folder's sorted), from files, folders (recursively, mesh and project files only, never
-    inside ``out_dir``) and globs. An item that is none of these raises
-    :class:`BatchUsageError` (exit status 2)."""
+    inside ``out_dir`` or an earlier batch's output folder) and globs. An item that is none of
+    these raises :class:`BatchUsageError` (exit status 2)."""
+    return [p for p, _root in collect_inputs_with_roots(items, out_dir)]
+
+
+def collect_inputs_with_roots(items, out_dir=None) -> list[tuple[Path, Path]]:
+    """:func:`collect_inputs` with each input's root (module docstring), both absolute: what
+    :func:`output_names` places the results by."""
     out = Path(os.path.abspath(out_dir)) if out_dir is not None else None
-    seen: dict[Path, None] = {}
+    seen: dict[Path, Path] = {}
     for item in map(str, items):
         p = Path(item)
         if p.is_file():
-            found = [p]
+            found, root = [p], p.parent
         elif p.is_dir():
-            found = _search(p, out)
+            found, root = _search(p, out), p
         else:
+            root = _glob_root(item)
             matches = sorted(glob.glob(item, recursive=True))
             found = []
             for m in map(Path, matches):
+                if _in_results(m, root, out):
+                    continue
                 if m.is_dir():
                     found += _search(m, out)
                 elif _is_input(m):
@@ -63,26 +108,32 @@ def collect_inputs(items, out_dir=None) -> list[Path]:
                 raise BatchUsageError(f"{item}: there is no such file or folder, and no file "
                                       "matches it.")
         for f in found:
-            seen.setdefault(Path(os.path.abspath(f)), None)
-    return list(seen)
+            seen.setdefault(Path(os.path.abspath(f)), Path(os.path.abspath(root)))
+    return list(seen.items())
 
 
-def output_names(inputs: list[Path], out_dir) -> list[Path]:
-    """The result file of each input (module docstring); refuses a result that would replace
-    an input."""
+def output_names(inputs: list[Path], out_dir, roots: list[Path] | None = None) -> list[Path]:
+    """The result file of each input (module docstring): below each input's own root when
+    ``roots`` are given (:func:`collect_inputs_with_roots`), else below the inputs' deepest
+    common folder; refuses a result that would replace an input."""
     out_dir = Path(os.path.abspath(out_dir))
     if not inputs:
         return []
-    parents = [str(p.parent) for p in inputs]
-    try:
-        root = Path(os.path.commonpath(parents))
-    except ValueError:  # different drives: names only
-        root = None
+    common = None
+    if roots is None:
+        try:
+            common = Path(os.path.commonpath([str(p.parent) for p in inputs]))
+        except ValueError:  # different drives: names only
+            common = None
     taken: set[Path] = set()
     outputs = []
     ins = set(inputs)
-    for p in inputs:
-        rel = Path(p.name) if root is None else p.relative_to(root)
+    for k, p in enumerate(inputs):
+        root = roots[k] if roots is not None else common
+        try:
+            rel = Path(p.name) if root is None else p.relative_to(root)
+        except ValueError:  # not below its root (a symbolic link's target): the name only
+            rel = Path(p.name)
         if rel.suffix.lower() == ".s3d":
             rel = rel.with_suffix(".obj")
         target = out_dir / rel
@@ -97,4 +148,4 @@ def output_names(inputs: list[Path], out_dir) -> list[Path]:
     return outputs
 
 
-__all__ = ["INPUT_SUFFIXES", "collect_inputs", "output_names"]
+__all__ = ["INPUT_SUFFIXES", "collect_inputs", "collect_inputs_with_roots", "output_names"]

@@ -160,11 +160,12 @@ def cmd_batch(args: argparse.Namespace) -> int:
         return int(e.code or 0)
     _check(bargs)
     out = Path(bargs.output)
-    inputs = batch.collect_inputs(bargs.inputs, out_dir=out)
-    if not inputs:
+    found = batch.collect_inputs_with_roots(bargs.inputs, out_dir=out)
+    if not found:
         raise batch.BatchUsageError(f"No mesh files ({', '.join(batch.inputs.INPUT_SUFFIXES)}) "
                                     f"in {', '.join(map(str, bargs.inputs))}.")
-    outputs = batch.output_names(inputs, out)
+    inputs = [p for p, _ in found]
+    outputs = batch.output_names(inputs, out, roots=[r for _, r in found])
     report = Path(bargs.report).resolve() if bargs.report else \
         out.resolve() / batch.REPORT_NAME
     if bargs.dry_run:

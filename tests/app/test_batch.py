@@ -528,3 +528,39 @@ def test_resume_counts_the_records_a_stopped_driver_left_pending(tmp_path):
     assert sum(r["status"] == "done" for r in mine) == 1, mine  # recovered, not run again
     assert any(r.get("recovered") for r in mine)
     assert not list(pending.iterdir())
+
+
+def test_results_stay_put_when_an_input_from_another_folder_is_added(tmp_path):
+    """Each result is placed below its own input's root (issue 39, item 8): adding a mesh from
+    another folder moves no result, so a resumed batch skips what it did; an earlier batch's
+    output folder inside the library is never taken as input."""
+    lib = tmp_path / "lib"
+    (lib / "a").mkdir(parents=True)
+    (lib / "b").mkdir()
+    V, F = icosphere(2)
+    write_mesh(lib / "a" / "x.obj", V, F)
+    write_mesh(lib / "b" / "y.obj", V * 2, F)
+    other = tmp_path / "other"
+    other.mkdir()
+    write_mesh(other / "z.obj", V * 3, F)
+    out = tmp_path / "out"
+    base = ["batch", "smooth", "-o", str(out), "--workers", "1", "--quiet", "--iterations", "1"]
+    assert main([base[0], base[1], str(lib), *base[2:]]) == 0
+    first = {p.relative_to(out).as_posix() for p in out.rglob("*.obj")}
+    assert first == {"a/x.obj", "b/y.obj"}
+    # an earlier batch's results inside the library: not inputs
+    assert main([base[0], base[1], str(lib / "a"), "-o", str(lib / "old-results"),
+                 *base[4:]]) == 0
+    assert (lib / "old-results" / "x.obj").exists()
+    assert main([base[0], base[1], str(lib), str(other / "z.obj"), "--json", *base[2:]]) == 0
+    recs = _records(out / "batch-report.jsonl")
+    last = recs[-3:]
+    assert sorted(Path(r["input"]).name for r in last) == ["x.obj", "y.obj", "z.obj"]
+    assert {Path(r["input"]).name: r["status"] for r in last} == {
+        "x.obj": "skipped", "y.obj": "skipped", "z.obj": "done"}
+    assert {p.relative_to(out).as_posix() for p in out.rglob("*.obj")} == first | {"z.obj"}
+    from app.batch import collect_inputs, collect_inputs_with_roots
+
+    assert all("old-results" not in str(p) for p in collect_inputs([lib]))
+    found = dict(collect_inputs_with_roots([str(lib / "*" / "*.obj")], out_dir=out))
+    assert found == {lib / "a" / "x.obj": lib, lib / "b" / "y.obj": lib}
