@@ -112,11 +112,23 @@ def collect_inputs_with_roots(items, out_dir=None) -> list[tuple[Path, Path]]:
     return list(seen.items())
 
 
-def output_names(inputs: list[Path], out_dir, roots: list[Path] | None = None) -> list[Path]:
+def output_names(inputs: list[Path], out_dir, roots: list[Path] | None = None, *,
+                 fmt: str | None = None, name: str | None = None,
+                 command: str = "") -> list[Path]:
     """The result file of each input (module docstring): below each input's own root when
     ``roots`` are given (:func:`collect_inputs_with_roots`), else below the inputs' deepest
-    common folder; refuses a result that would replace an input."""
+    common folder; ``fmt`` (``"ply"``, ...) the results' format instead of the inputs', ``name``
+    a file-name template (``"{stem}_{command}"``; fields ``stem``, ``command``, ``parent``).
+    Refuses a result that would replace an input, and a template that is not a file name."""
     out_dir = Path(os.path.abspath(out_dir))
+    if name is not None:
+        try:
+            probe = name.format(stem="x", command="c", parent="p")
+        except (KeyError, IndexError, ValueError) as e:
+            raise BatchUsageError(f"--name {name!r} is not a usable template ({e}); its fields "
+                                  "are {stem}, {command} and {parent}.") from None
+        if not probe or "/" in probe or os.sep in probe or probe in (".", ".."):
+            raise BatchUsageError(f"--name {name!r} must make a file name (no folders).")
     if not inputs:
         return []
     common = None
@@ -136,6 +148,11 @@ def output_names(inputs: list[Path], out_dir, roots: list[Path] | None = None) -
             rel = Path(p.name)
         if rel.suffix.lower() == ".s3d":
             rel = rel.with_suffix(".obj")
+        if fmt:
+            rel = rel.with_suffix("." + fmt.lower().lstrip("."))
+        if name is not None:
+            rel = rel.with_name(name.format(stem=rel.stem, command=command,
+                                            parent=p.parent.name) + rel.suffix)
         target = out_dir / rel
         if target in taken:
             tag = hashlib.sha256(str(p).encode()).hexdigest()[:8]
@@ -148,4 +165,34 @@ def output_names(inputs: list[Path], out_dir, roots: list[Path] | None = None) -
     return outputs
 
 
-__all__ = ["INPUT_SUFFIXES", "collect_inputs", "collect_inputs_with_roots", "output_names"]
+def read_input_list(path) -> list[str]:
+    """The INPUTs of a ``--from-list`` file: one per line, ``#`` starts a comment, blank lines
+    skipped, relative paths relative to the file's folder."""
+    path = Path(path)
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as e:
+        raise BatchUsageError(f"--from-list {path}: the list cannot be read ({e}).") from None
+    items = []
+    for line in lines:
+        line = line.split("#", 1)[0].strip()
+        if line:
+            p = Path(os.path.expanduser(line))
+            items.append(str(p if p.is_absolute() else path.parent / p))
+    return items
+
+
+def excluded(path: Path, root: Path, patterns) -> bool:
+    """Whether ``--exclude`` GLOBs leave ``path`` out: its path below ``root`` or its file
+    name matches one."""
+    import fnmatch
+
+    try:
+        rel = path.relative_to(root).as_posix()
+    except ValueError:
+        rel = path.name
+    return any(fnmatch.fnmatch(rel, g) or fnmatch.fnmatch(path.name, g) for g in patterns)
+
+
+__all__ = ["INPUT_SUFFIXES", "collect_inputs", "collect_inputs_with_roots", "excluded",
+           "output_names", "read_input_list"]

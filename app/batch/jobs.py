@@ -244,6 +244,22 @@ def add_batch_flags(p: argparse.ArgumentParser) -> None:
                    help="print one JSON summary at the end (counts, seconds, throughput, "
                         "report)")
     g.add_argument("--quiet", action="store_true", help="no progress bar, no per-mesh lines")
+    g.add_argument("--format", choices=("obj", "ply", "stl", "off", "glb"),
+                   help="write every result in this format (default: the input's; a "
+                        "project's as obj)")
+    g.add_argument("--name", metavar="TEMPLATE",
+                   help="result file names without extension, e.g. \"{stem}_{command}\": "
+                        "{stem} the input's name without extension, {command} the method, "
+                        "{parent} the name of the input's folder")
+    g.add_argument("--exclude", metavar="GLOB", action="append", default=[],
+                   help="leave out inputs whose path below their INPUT, or whose file name, "
+                        "matches GLOB (e.g. '*_lowres.obj', 'old/*'); may be given again")
+    g.add_argument("--from-list", metavar="FILE",
+                   help="more INPUTs from a file, one per line ('#' starts a comment; "
+                        "relative paths are relative to the file's folder)")
+    g.add_argument("--max-failures", type=int, metavar="N",
+                   help="stop after N meshes failed (what is done is recorded; the same "
+                        "command goes on later)")
 
 
 # ----------------------------------------------------------------------------- settings

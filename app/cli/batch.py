@@ -27,8 +27,10 @@ COMMANDS = ("batch",)
 def _check(args: argparse.Namespace) -> None:
     from app.batch import BatchUsageError
 
-    if not args.inputs:
+    if not args.inputs and not args.from_list:
         raise BatchUsageError("give at least one INPUT (mesh files, folders or globs).")
+    if args.max_failures is not None and args.max_failures < 1:
+        raise ParameterError(f"--max-failures must be at least 1 (got {args.max_failures}).")
     if not args.output:
         raise BatchUsageError("-o OUT_DIR is required (the folder the results go to).")
     if args.workers is not None and args.workers < 1:
@@ -78,6 +80,7 @@ class _Progress:
     def __init__(self, method: str, quiet: bool, console=None):
         self.quiet, self.bar, self.task = quiet, None, None
         self.substituted = 0  # meshes a method did with another scheme (said at the end)
+        self.failed = 0       # failed meshes of this run (--max-failures)
         self.t0 = time.perf_counter()
         if not quiet and (console is not None or sys.stderr.isatty()):
             from rich.console import Console
@@ -115,6 +118,8 @@ class _Progress:
             say(f"{rec['status']:6s} {rec['input']}{tail}")
         if rec is not None and rec["status"] == "done" and _substitution(rec):
             self.substituted += 1
+        if rec is not None and rec["status"] == "failed":
+            self.failed += 1
 
     def close(self) -> None:
         if self.bar is not None and self.task is not None:
@@ -160,12 +165,18 @@ def cmd_batch(args: argparse.Namespace) -> int:
         return int(e.code or 0)
     _check(bargs)
     out = Path(bargs.output)
-    found = batch.collect_inputs_with_roots(bargs.inputs, out_dir=out)
+    from app.batch.inputs import excluded, read_input_list
+
+    items = list(bargs.inputs) + (read_input_list(bargs.from_list) if bargs.from_list else [])
+    found = [(p, r) for p, r in batch.collect_inputs_with_roots(items, out_dir=out)
+             if not excluded(p, r, bargs.exclude)]
     if not found:
         raise batch.BatchUsageError(f"No mesh files ({', '.join(batch.inputs.INPUT_SUFFIXES)}) "
-                                    f"in {', '.join(map(str, bargs.inputs))}.")
+                                    f"in {', '.join(map(str, items))}"
+                                    + (" (after --exclude)." if bargs.exclude else "."))
     inputs = [p for p, _ in found]
-    outputs = batch.output_names(inputs, out, roots=[r for _, r in found])
+    outputs = batch.output_names(inputs, out, roots=[r for _, r in found], fmt=bargs.format,
+                                 name=bargs.name, command=job.method)
     report = Path(bargs.report).resolve() if bargs.report else \
         out.resolve() / batch.REPORT_NAME
     if bargs.dry_run:
@@ -178,7 +189,9 @@ def cmd_batch(args: argparse.Namespace) -> int:
         summary = batch.run_batch(job, inputs, out, workers=bargs.workers,
                                   scheduler=bargs.scheduler, report=report, memory_limit=memory,
                                   time_limit=bargs.time_limit, retries=bargs.retries,
-                                  redo=bargs.overwrite, outputs=outputs, on_record=progress)
+                                  redo=bargs.overwrite, outputs=outputs, on_record=progress,
+                                  should_stop=lambda: bargs.max_failures is not None
+                                  and progress.failed >= bargs.max_failures)
     except KeyboardInterrupt as e:  # Ctrl+C, or SIGTERM (common.Terminated)
         progress.close()
         term = isinstance(e, Terminated)
@@ -187,6 +200,11 @@ def cmd_batch(args: argparse.Namespace) -> int:
             "skipped).")
         return 143 if term else 130
     progress.close()
+    if summary.stopped and bargs.max_failures is not None \
+            and progress.failed >= bargs.max_failures:
+        say(f"stylize3d batch: stopped after {progress.failed} failed mesh(es) "
+            f"(--max-failures {bargs.max_failures}). What was done is recorded in {report}; "
+            "the same command goes on (done meshes are skipped).")
     if bargs.json:
         print_json({"method": job.method, "recipe": job.recipe, "source": job.source,
                     **summary.to_dict(), "substituted": progress.substituted})
@@ -207,7 +225,8 @@ def add_parsers(sub) -> None:
         "batch", help="run a method on many meshes (local processes or a Dask cluster)",
         usage="stylize3d batch METHOD INPUT... -o OUT_DIR [--workers N] [--scheduler ADDRESS] "
               "[--report FILE] [--memory-limit SIZE] [--time-limit S] [--dry-run] [--json] "
-              "[--quiet] [--clean] [the method's flags]",
+              "[--quiet] [--clean] [--format FMT] [--name TEMPLATE] [--exclude GLOB] "
+              "[--from-list FILE] [--max-failures N] [the method's flags]",
         description="Run one method on every INPUT; results go to OUT_DIR under the inputs' "
                     "file names, one JSON line per input goes to the report. A batch that is "
                     "stopped and started again skips what is done. 'stylize3d batch METHOD "

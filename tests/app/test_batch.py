@@ -564,3 +564,60 @@ def test_results_stay_put_when_an_input_from_another_folder_is_added(tmp_path):
     assert all("old-results" not in str(p) for p in collect_inputs([lib]))
     found = dict(collect_inputs_with_roots([str(lib / "*" / "*.obj")], out_dir=out))
     assert found == {lib / "a" / "x.obj": lib, lib / "b" / "y.obj": lib}
+
+
+def test_format_name_exclude_and_a_list_of_inputs(tmp_path):
+    """--format, --name, --exclude, --from-list (issue 39, item 12): what a pipeline engineer
+    expects of pymeshlab / Blender scripts; a second run skips everything."""
+    from algorithms.mesh import read_mesh
+
+    lib = tmp_path / "lib"
+    (lib / "keep").mkdir(parents=True)
+    (lib / "old").mkdir()
+    V, F = icosphere(2)
+    write_mesh(lib / "keep" / "x.obj", V, F)
+    write_mesh(lib / "old" / "y.obj", V, F)
+    write_mesh(lib / "keep" / "x_lowres.obj", V, F)
+    extra = tmp_path / "extra"
+    extra.mkdir()
+    write_mesh(extra / "z.off", V * 2, F)
+    listing = tmp_path / "list.txt"
+    listing.write_text("# more meshes\nextra/z.off   # relative to this file\n\n")
+    out = tmp_path / "out"
+    argv = ["batch", "smooth", str(lib), "-o", str(out), "--iterations", "1", "--workers", "1",
+            "--quiet", "--format", "ply", "--name", "{stem}_{command}", "--exclude", "old/*",
+            "--exclude", "*_lowres.obj", "--from-list", str(listing)]
+    assert main(argv) == 0
+    made = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.ply"))
+    assert made == ["keep/x_smooth.ply", "z_smooth.ply"]
+    assert read_mesh(out / "keep" / "x_smooth.ply").F.shape == F.shape
+    assert main(argv) == 0
+    recs = _records(out / "batch-report.jsonl")
+    assert [r["status"] for r in recs[-2:]] == ["skipped", "skipped"]
+    with pytest.raises(batch.BatchUsageError, match="fields"):
+        batch.output_names([lib / "keep" / "x.obj"], out, name="{nope}")
+    with pytest.raises(batch.BatchUsageError, match="file name"):
+        batch.output_names([lib / "keep" / "x.obj"], out, name="a/{stem}")
+
+
+def test_max_failures_stops_the_batch_and_it_goes_on_later(tmp_path, capsys):
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    for k in range(3):
+        (lib / f"{k}-broken.obj").write_text("garbage\n")
+    V, F = icosphere(2)
+    for k in range(2):
+        write_mesh(lib / f"good{k}.obj", V, F)
+    out = tmp_path / "out"
+    argv = ["batch", "smooth", str(lib), "-o", str(out), "--iterations", "1", "--workers", "1",
+            "--max-failures", "1"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert "stopped after" in err and "--max-failures 1" in err
+    recs = _records(out / "batch-report.jsonl")
+    assert 1 <= sum(r["status"] == "failed" for r in recs) < 3
+    assert sum(r["status"] == "done" for r in recs) < 2     # it stopped before the end
+    assert main(argv[:-2]) == 1                              # without the limit: the rest runs
+    recs = _records(out / "batch-report.jsonl")
+    assert {Path(r["input"]).name for r in recs if r["status"] == "done"} == {"good0.obj",
+                                                                              "good1.obj"}
