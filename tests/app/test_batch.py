@@ -188,15 +188,21 @@ def test_output_names_keep_folders_and_never_collide(tmp_path):
         batch.output_names([tmp_path / "x.obj"], tmp_path)
 
 
-def test_resume_after_the_driver_is_killed_does_nothing_twice(tmp_path):
+def _mixed_library(tmp_path, n: int, seed: int) -> tuple[Path, list[Path]]:
+    """``tmp_path/lib`` with ``n`` spheres and tori of growing sizes, rotated."""
     lib = tmp_path / "lib"
     lib.mkdir()
     good = []
-    for k in range(6):
+    for k in range(n):
         V, F = torus(n_major=30 + 2 * k, n_minor=14) if k % 2 else icosphere(3)
         p = lib / f"m{k}.obj"
-        write_mesh(p, (V @ _rotation(10 + k).T) * (1 + k), F)
+        write_mesh(p, (V @ _rotation(seed + k).T) * (1 + k), F)
         good.append(p)
+    return lib, good
+
+
+def test_resume_after_the_driver_is_killed_does_nothing_twice(tmp_path):
+    lib, good = _mixed_library(tmp_path, 6, 10)
     out = tmp_path / "out"
     report = out / "batch-report.jsonl"
     proc = subprocess.Popen(_batch_cmd("cubic", lib, "-o", out, "--workers", "1", "--quiet"),
@@ -231,14 +237,7 @@ def test_resume_after_the_driver_is_killed_does_nothing_twice(tmp_path):
 def test_sigterm_stops_a_batch_like_ctrl_c_and_it_resumes(tmp_path):
     """SIGTERM (SLURM, Kubernetes, ``kill``; issue 39 item 6): exit 143 with the resume advice,
     no run folder left, the workers gone; the same command then finishes, nothing done twice."""
-    lib = tmp_path / "lib"
-    lib.mkdir()
-    good = []
-    for k in range(5):
-        V, F = torus(n_major=30 + 2 * k, n_minor=14) if k % 2 else icosphere(3)
-        p = lib / f"m{k}.obj"
-        write_mesh(p, (V @ _rotation(20 + k).T) * (1 + k), F)
-        good.append(p)
+    lib, good = _mixed_library(tmp_path, 5, 20)
     out = tmp_path / "out"
     report = out / "batch-report.jsonl"
     err = tmp_path / "stderr.txt"
