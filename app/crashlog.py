@@ -583,15 +583,16 @@ def supervise(argv: list[str], program_name: str) -> int | None:
         return code
     sig = -code
     command = program_name[4:] if program_name.startswith("cli-") else program_name
+    # the command may have died in the middle of a progress line: the message starts a line
     if sig in FATAL_SIGNALS:
         _after_crash(path, sig)
-        say(f"stylize3d {command} crashed ({FATAL_SIGNALS[sig]}); the details are in {path}. "
+        say(f"\nstylize3d {command} crashed ({FATAL_SIGNALS[sig]}); the details are in {path}. "
              "Your input files are unchanged. This is a bug in Stylize3D or a library it "
              "uses: please report it with that file.")
         return INTERNAL_ERROR_EXIT
     _unlink(path)
     if sig == signal.SIGKILL:
-        say(f"stylize3d {command} was killed (SIGKILL) before it finished; nothing more was "
+        say(f"\nstylize3d {command} was killed (SIGKILL) before it finished; nothing more was "
              "written. If nobody stopped it, the system ran out of memory: try a smaller mesh "
              "(decimate it first) or the options for big meshes.")
         return INTERNAL_ERROR_EXIT
