@@ -8,7 +8,7 @@ bundled samples with that clone's environment and Numba cache (written by the su
 processes: the state in which Paparazzi used to crash). Prints, per round, the suite's summary
 line and time and the commands' outcomes; exits non-zero when anything failed.
 
-    .venv/bin/python benchmarks/repeat_suite.py --rounds 5
+    .venv/bin/python benchmarks/repeat_suite.py --rounds 5 [--rev COMMIT]
 """
 
 from __future__ import annotations
@@ -63,8 +63,11 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--keep", action="store_true", help="keep the clones")
+    ap.add_argument("--rev", default="HEAD",
+                    help="the commit every round checks out (default: HEAD when started), so "
+                         "that commits made while it runs do not change the tree under test")
     args = ap.parse_args(argv)
-    head = subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+    head = subprocess.check_output(["git", "rev-parse", "--short", args.rev], cwd=ROOT,
                                    text=True).strip()
     print(f"{args.rounds} rounds of: git clone ({head}) + bash scripts/setup.sh test + every "
           f"command on the samples", flush=True)
@@ -73,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     for r in range(1, args.rounds + 1):
         clone = base / f"round{r}"
         subprocess.check_call(["git", "clone", "-q", str(ROOT), str(clone)])
+        subprocess.check_call(["git", "checkout", "-q", "--detach", head], cwd=clone)
         rc, summary, seconds = _suite(clone, base / f"round{r}.log")
         out = base / f"round{r}-out"
         out.mkdir()
