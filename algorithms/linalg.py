@@ -35,8 +35,9 @@ class SPDSolver:
     fixed : (k,) int indices of unknowns whose values are given at solve time (may be empty).
     backend : "auto" (CHOLMOD when cholespy is installed, else SuperLU), "cholmod" (CHOLMOD
         supernodal Cholesky; needs ``A_ff`` positive definite), "superlu", or "auto-once" for a
-        matrix factored for a single solve: "auto", or SuperLU (which releases Python's lock
-        while it factors) in a process that asked for that (:mod:`algorithms.offload`).
+        matrix factored for a single solve: SuperLU (which releases Python's lock while it
+        factors) in every process, so that the app, the command line and a study replay get
+        the same bits.
 
     Notes
     -----
@@ -75,15 +76,15 @@ class SPDSolver:
             A_e = A
         self.A_e = A_e
         if backend == "auto-once":
-            # a matrix factored for one solve (a new matrix every step). CHOLMOD through
-            # cholespy keeps Python's lock while it factors (63 ms at 14.6k vertices, 362 ms at
-            # 58k for mean curvature flow), so the desktop app's window froze that long; SuperLU
-            # releases it. Same total time at <= 15k vertices (cMCF, 10 steps: armadillo 0.81 vs
-            # 0.86 s), 22 % slower at 58k; so SuperLU where the process asks for it (the app,
-            # algorithms.offload.keep_lock_free), CHOLMOD elsewhere.
-            from .offload import lock_free
-
-            backend = "superlu" if lock_free() else "auto"
+            # a matrix factored for one solve (a new matrix every step): SuperLU, in every
+            # process. CHOLMOD through cholespy keeps Python's lock while it factors (63 ms at
+            # 14.6k vertices, 362 ms at 58k for mean curvature flow), which froze the desktop
+            # app's window; SuperLU releases it. Same total time at <= 15k vertices (cMCF, 10
+            # steps: armadillo 0.81 vs 0.86 s), 22 % slower at 58k. The choice once depended on
+            # the process (SuperLU in the app, CHOLMOD elsewhere), so a study replay or the
+            # command line got other last bits than the app's run and replay reported a
+            # mismatch: a result must not depend on which process computes it.
+            backend = "superlu"
         if backend == "auto":
             # CHOLMOD: 2.6x faster per ARAP iteration than SuperLU on igea (134k vertices)
             backend = "cholmod" if cholmod_available() else "superlu"

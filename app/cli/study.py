@@ -38,11 +38,30 @@ def cmd_study(args: argparse.Namespace) -> int:
             extra = f" ({r.reason})" if r.reason else ""
             if r.max_difference is not None:
                 extra += f"; largest vertex difference {r.max_difference:.2e} of the diagonal"
-            print(f"run {r.index} [{r.task}] {r.method}: {r.status}{extra}")
-        print(f"{c.get('match', 0)} of {len(report.runs)} finished runs reproduced their "
-              f"logged result exactly; {c.get('mismatch', 0)} differ; "
-              f"{c.get('not replayable', 0)} not replayable; {c.get('failed', 0)} failed.")
+            print(f"{r.kind} {r.index} [{r.task}] {r.method}: {r.status}{extra}")
+        print(replay_summary_line(report))
     return 0 if not c.get("mismatch") and not c.get("failed") else 1
+
+
+#: how each kind of check is named in the summary line (singular, plural)
+_KIND_NAMES = {"run": ("finished run", "finished runs"), "edit": ("edit", "edits"),
+               "undo": ("undo", "undos"), "redo": ("redo", "redos"),
+               "task": ("task end state", "task end states")}
+
+
+def replay_summary_line(report) -> str:
+    """One sentence per kind of check: "5 of 5 finished runs reproduced their logged result
+    exactly; 2 of 2 undos ..." (runs, edits, undo/redo and task checks counted apart)."""
+    parts = []
+    for kind, counts in report.counts_by_kind().items():
+        total = sum(counts.values())
+        one, many = _KIND_NAMES.get(kind, (kind, kind + "s"))
+        s = (f"{counts.get('match', 0)} of {total} {one if total == 1 else many} "
+             f"reproduced exactly")
+        rest = [f"{counts[k]} {k}" for k in ("mismatch", "not replayable", "failed")
+                if counts.get(k)]
+        parts.append(s + (f" ({', '.join(rest)})" if rest else ""))
+    return ("; ".join(parts) + ".") if parts else "Nothing to replay."
 
 
 def add_parsers(sub) -> None:

@@ -140,6 +140,19 @@ def test_session_locks_logs_asks_and_replays(window, dialogs, qtbot, tmp_path):
                                                        ("cube-it", "skipped")]
     assert rows[0]["runs"] == "1" and rows[0]["undo"] == "1" and rows[0]["redo"] == "1"
     assert rows[0]["q_ease"] == "4"
+    # a replay in another process (the command line, no app) gets the same bits: the app and
+    # the command line factor with the same solver (issue 41: CHOLMOD there, SuperLU here
+    # made it "mismatch" and exit 1); the summary line counts runs apart from other checks
+    r = subprocess.run([sys.executable, "-m", "app", "study", "replay", str(log_path)],
+                       capture_output=True, text=True, timeout=300,
+                       cwd=ROOT)
+    assert r.returncode == 0, r.stdout + r.stderr[-2000:]
+    assert "run 1 [smooth-it] Smooth: match" in r.stdout, r.stdout
+    last = r.stdout.strip().splitlines()[-1]
+    assert last.startswith("1 of 1 finished run reproduced exactly;"), last
+    assert "0 of 2 edits reproduced exactly (2 not replayable)" in last, last
+    assert "1 of 1 undo reproduced exactly" in last and "1 of 1 redo" in last, last
+    assert "2 of 2 task end states reproduced exactly" in last, last
     # the CLI: a crash cut the last line off -> a warning, and the intact part still replays
     with open(log_path, "a") as f:
         f.write('{"t_wall": 1, "t_mono": 99.0, "task": "cube-it", "act')
