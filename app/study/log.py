@@ -204,11 +204,17 @@ class SessionLog:
                                else {}))
         return log, data
 
-    def write(self, action: str, **fields) -> dict:
-        """Append one event (flushed and synced before returning)."""
+    def now(self) -> float:
+        """The log's clock (``t_mono``): seconds since the session started, the time the app
+        was not running excluded."""
+        return round(time.monotonic() - self._t0, 6)
+
+    def write(self, action: str, *, at: float | None = None, **fields) -> dict:
+        """Append one event (flushed and synced before returning); ``at``: its ``t_mono``
+        when the caller read :meth:`now` to compute one of the fields from it."""
         if self._fh is None:
             raise StudyError("This session log is closed.")
-        ev = {"t_wall": time.time(), "t_mono": round(time.monotonic() - self._t0, 6),
+        ev = {"t_wall": time.time(), "t_mono": self.now() if at is None else float(at),
               "task": self.task, "action": action}
         ev.update(_jsonable(fields))
         self._write_line(ev)

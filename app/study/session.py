@@ -23,7 +23,6 @@ them). Results are saved next to the log: ``<log>_files/<task>.obj`` and
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -257,7 +256,8 @@ class StudySession(QObject):
         self.remaining = [t for t in self.order if t not in done]
         self.task: Task | None = None
         self.questionnaire_dialog: QuestionnaireDialog | None = None
-        self._task_t0 = 0.0
+        self._resumed = resumed
+        self._task_t0 = 0.0  # the task_start event's t_mono (the log's clock)
         self._locked: dict[str, dict] = {}
         self._saved_states: set[str] = set()
         self._pending_runs: dict[str, dict] = {}
@@ -323,7 +323,14 @@ class StudySession(QObject):
             b.setEnabled(True)
         self.log.task = task.id
         if not resumed:
-            self._log("task_start", title=task.title)
+            ev = self._log("task_start", title=task.title)
+            self._task_t0 = ev["t_mono"] if ev else self.log.now()
+        else:
+            # the task's time goes on from where it was when the app stopped (the log's clock
+            # leaves out the time the app was not running)
+            starts = [e["t_mono"] for e in (self._resumed.events if self._resumed else [])
+                      if e.get("action") == "task_start" and e.get("task") == task.id]
+            self._task_t0 = starts[-1] if starts else self.log.now()
         mesh = task.mesh
         if mesh.startswith("sample:"):
             from algorithms.mesh.samples import sample_path
@@ -352,7 +359,6 @@ class StudySession(QObject):
         self.bar.title.setText(f"Task {len(self.order) - len(self.remaining)} of "
                                f"{len(self.order)}: {task.title}")
         self.bar.instructions.setText(task.instructions)
-        self._task_t0 = time.monotonic()
         self._tick.start()
         self._on_tick()
         self.task_started.emit(task.id)
@@ -380,8 +386,11 @@ class StudySession(QObject):
                 write_mesh(self.log.results_dir / f"{task.id}.obj", st.V, st.F)
             except Stylize3DError as e:
                 self._log("note", message=f"result not saved: {e}")
-        self._log("task_end", status=status, result_hash=h,
-                  seconds=round(time.monotonic() - self._task_t0, 3))
+        # one definition of a task's time (the summary's "seconds"): task_start to task_end on
+        # the log's clock, the time the app was not running left out
+        t = self.log.now()
+        self._log("task_end", at=t, status=status, result_hash=h,
+                  seconds=round(t - self._task_t0, 3))
         self.task_ended.emit(task.id, status)
         if task.questionnaire:
             self.questionnaire_dialog = QuestionnaireDialog(task, self.window)
@@ -437,7 +446,7 @@ class StudySession(QObject):
     def _on_tick(self) -> None:
         if self.task is None:
             return
-        s = int(time.monotonic() - self._task_t0)
+        s = int(self.log.now() - self._task_t0)
         lim = self.task.time_limit_s
         if lim:
             left = max(0, int(lim) - s)
@@ -508,13 +517,14 @@ class StudySession(QObject):
                     w.setEnabled(True)
 
     # -- logging -------------------------------------------------------------------------------
-    def _log(self, action: str, **fields) -> None:
+    def _log(self, action: str, **fields) -> dict | None:
         try:
-            self.log.write(action, **fields)
+            return self.log.write(action, **fields)
         except (OSError, StudyError) as e:  # never lose the participant's work over the log
             from app import dialogs
 
             dialogs.error(self.window, "Study log", f"The session log could not be written: {e}")
+            return None
 
     def _save_state(self, state) -> tuple[str, str]:
         """Save a document state for replay (once per hash); returns (hash, relative file).

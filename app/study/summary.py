@@ -3,12 +3,16 @@
 One row per (log, task) in the order the participant did the tasks. Columns:
 
 ``study, participant, condition, order, task, status`` (done / skipped / timeout / unfinished),
-``seconds`` (task_start to task_end on the monotonic clock), ``actions`` (what the participant
+``seconds`` (the task's time: task_start to task_end on the log's clock ``t_mono``, which
+leaves out the time the app was not running after a crash; the session logs the same figure in
+``task_end``'s ``seconds`` and its time limit counts the same clock), ``actions`` (what the participant
 did during the task: runs, edits, undo / redo, panels brought forward, questionnaires — not the
 app's own events: task_start / task_end, the task's mesh being opened, results, notes, resumes,
 camera moves, which have their own column), ``runs`` (runs started), ``failed_runs``,
-``undo``, ``redo``, ``camera_moves``, ``final_params`` (JSON: for each method, the params of its
-last finished run), ``result_hash`` (the document at task end), then one ``q_<item>`` column per
+``undo``, ``redo``, ``camera_moves``, ``final_params`` (JSON: for each method, the params of
+the run whose result is part of the document at task end: a run the participant undid, or one
+whose result was replaced by undoing to an earlier state, does not count; a run that changed
+nothing, an analysis, counts on the state it ran on), ``result_hash`` (the document at task end), then one ``q_<item>`` column per
 questionnaire item seen in any log, and ``sus_score`` (0-100, Brooke 1996) where the task asked
 the SUS.
 """
@@ -55,8 +59,20 @@ def summarize(data: LogData) -> list[dict]:
                           "task": task, "status": "unfinished", "seconds": "", "actions": 0,
                           "runs": 0, "failed_runs": 0, "undo": 0, "redo": 0,
                           "camera_moves": 0, "final_params": {}, "result_hash": "",
-                          "_start": None, "_answers": {}}
+                          "_start": None, "_answers": {}, "_params_of": {}, "_now": None}
         return rows[task]
+
+    def follow(r, h, params=None):
+        """The document is now in state ``h``: the params that made it are those of the state
+        it came from plus ``params`` (a run), or those it had when it was reached before (an
+        undo / redo back to it)."""
+        if not h:
+            return
+        if params is not None:
+            r["_params_of"][h] = {**r["_params_of"].get(r["_now"], {}), **params}
+        elif h not in r["_params_of"]:
+            r["_params_of"][h] = dict(r["_params_of"].get(r["_now"], {}))  # an edit
+        r["_now"] = h
 
     for ev in data.events:
         task = ev.get("task")
@@ -71,13 +87,21 @@ def summarize(data: LogData) -> list[dict]:
             if r["_start"] is not None:
                 r["seconds"] = round(ev["t_mono"] - r["_start"], 3)
             r["result_hash"] = ev.get("result_hash", "")
+            r["final_params"] = r["_params_of"].get(r["result_hash"], {})
+        elif a == "open":  # a freshly opened mesh: made by no run
+            r["_params_of"][ev.get("mesh_hash", "")] = {}
+            r["_now"] = ev.get("mesh_hash", "")
         elif a == "camera":
             r["camera_moves"] += 1
         elif a == "result":
             if ev.get("status") == "done":
-                r["final_params"][ev.get("method", "?")] = ev.get("params", {})
+                follow(r, ev.get("result_hash", ""), {ev.get("method", "?"): ev.get("params", {})})
             elif ev.get("status") == "failed":
                 r["failed_runs"] += 1
+        elif a in ("undo", "redo"):
+            follow(r, ev.get("result_hash", ""))
+        elif a == "edit":
+            follow(r, ev.get("after_hash", ""))
         elif a == "questionnaire":
             r["_answers"].update(ev.get("answers") or {})
         if a == "run":
@@ -92,7 +116,8 @@ def summarize(data: LogData) -> list[dict]:
     for task in sorted(rows, key=lambda t: (order.index(t) if t in order else len(order), t)):
         r = rows[task]
         answers = r.pop("_answers")
-        r.pop("_start")
+        for k in ("_start", "_params_of", "_now"):
+            r.pop(k)
         r["final_params"] = json.dumps(r["final_params"], sort_keys=True)
         for k, v in answers.items():
             r[f"q_{k}"] = v

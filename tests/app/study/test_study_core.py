@@ -208,13 +208,16 @@ def test_summary_csv_rows(tmp_path):
         for task in ("t2", "t1"):
             log.task = task
             log.write("task_start")
+            log.write("open", mesh="sample:blob", mesh_hash="m0")
             log.write("camera", position=[0, 0, 1])
             log.write("run", method="Smooth", params={"iterations": 3})
-            log.write("result", method="Smooth", status="done", params={"iterations": 3})
-            log.write("undo", text="Smooth")
+            log.write("result", method="Smooth", status="done", params={"iterations": 3},
+                      result_hash="r1")
+            log.write("undo", text="Smooth", result_hash="m0")
             log.write("questionnaire", answers={f"sus{i}": 3 for i in range(1, 11)}
                       if task == "t1" else {"ease": 6, "comment": "ok, fine"})
-            log.write("task_end", status="done" if task == "t1" else "skipped")
+            log.write("task_end", status="done" if task == "t1" else "skipped",
+                      result_hash="m0")
         log.close()
     out = tmp_path / "summary.csv"
     text, warnings = summary_csv([tmp_path / "P01.jsonl", tmp_path / "P02.jsonl"], out)
@@ -226,7 +229,45 @@ def test_summary_csv_rows(tmp_path):
     assert r["condition"] == "A" and r["status"] == "done" and float(r["seconds"]) >= 0
     assert r["runs"] == "1" and r["undo"] == "1" and r["camera_moves"] == "1"
     assert r["actions"] == "3"  # run, undo, questionnaire (camera and results not counted)
-    assert json.loads(r["final_params"]) == {"Smooth": {"iterations": 3}}
+    assert json.loads(r["final_params"]) == {}  # the run was undone: the task ended on the input
     assert r["sus_score"] == "50.0" and r["q_sus1"] == "3"
     assert rows[0]["status"] == "skipped" and rows[0]["q_ease"] == "6"
     assert rows[0]["q_comment"] == "ok, fine" and rows[0]["sus_score"] == ""
+
+
+def test_summary_final_params_and_seconds_describe_the_tasks_end(tmp_path):
+    """Issue 41: ``final_params`` named a live run the participant undid (λ 0.85) while
+    ``result_hash`` was the kept λ 0.2 result; ``seconds`` differed from task_end's. Every
+    column describes the task's final state; one definition of the task's time."""
+    log = SessionLog.create(tmp_path / "P03.jsonl", study="pilot", protocol_path=None,
+                            protocol_sha256="0" * 64, participant="P03", condition="A",
+                            task_order=["t"])
+    log.task = "t"
+    start = log.write("task_start")["t_mono"]
+    log.write("open", mesh="sample:blob", mesh_hash="m0")
+
+    def run(method, params, h):
+        log.write("run", method=method, params=params)
+        log.write("result", method=method, status="done", params=params, result_hash=h)
+
+    run("Cubic", {"lambda_": 0.2}, "c2")
+    run("Smooth", {"iterations": 2}, "s2")          # on top of the cubic result
+    run("Cubic", {"lambda_": 0.85}, "c85")          # a live run on top of both ...
+    log.write("undo", text="Cubic", result_hash="s2")   # ... undone
+    log.write("undo", text="Smooth", result_hash="c2")  # and the smoothing too
+    log.write("redo", text="Smooth", result_hash="s2")  # redone
+    log.write("edit", text="Paint λ", after_hash="p1")  # a stroke keeps the runs' params
+    run("Spectral coarsening", {"target": 100}, "p1")   # an analysis: the state stays
+    log.write("run", method="Cubic", params={"lambda_": 0.5})
+    log.write("result", method="Cubic", status="failed", params={"lambda_": 0.5})
+    t = log.now() + 1.25
+    log.write("task_end", at=t, status="done", result_hash="p1", seconds=round(t - start, 3))
+    log.close()
+    text, _ = summary_csv([tmp_path / "P03.jsonl"])
+    (r,) = list(csv.DictReader(io.StringIO(text)))
+    assert json.loads(r["final_params"]) == {"Cubic": {"lambda_": 0.2},
+                                             "Smooth": {"iterations": 2},
+                                             "Spectral coarsening": {"target": 100}}
+    assert r["result_hash"] == "p1" and r["failed_runs"] == "1" and r["runs"] == "5"
+    end = read_log(tmp_path / "P03.jsonl").events[-1]
+    assert r["seconds"] == str(end["seconds"]) and end["t_mono"] == t

@@ -113,6 +113,13 @@ def test_two_task_session_counts_exactly_what_the_participant_did(window, dialog
     assert [b[f"q_sus{i}"] for i in range(1, 11)] == ["5", "1"] * 5
     ends = [e for e in ev if e["action"] == "task_end"]
     assert a["result_hash"] == ends[0]["result_hash"] and b["result_hash"] == ends[1]["result_hash"]
+    # one definition of a task's time: the CSV's seconds are task_end's seconds, exactly
+    assert [a["seconds"], b["seconds"]] == [str(e["seconds"]) for e in ends]
+    # final_params: the params of the run the task ended on (the second Smooth, undone and
+    # redone, then a stroke on it)
+    results = [e for e in ev if e["action"] == "result" and e["task"] == "first"]
+    assert len(results) == 2
+    assert json.loads(a["final_params"]) == {"Smooth": results[1]["params"]}
 
 
 def test_camera_moves_count_only_the_participants_moves(window, dialogs, qtbot, tmp_path):
