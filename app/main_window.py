@@ -346,8 +346,11 @@ class MainWindow(QMainWindow):
         "Details…"); its first line, shortened with "…" to the free width, to the status bar."""
         self.message_log.add(text, level)
         sb = self.statusBar()
-        used = sum(w.width() for w in (self.details_button, self.stats_label, self.job_label,
-                                       self.progress_bar, self.cancel_button) if w.isVisible())
+        # a job's label, progress bar and Cancel are about to go when no job runs (a "finished"
+        # or "cancelled" message comes just before they hide): their room is the message's
+        job = (self.job_label, self.progress_bar, self.cancel_button)
+        used = sum(w.width() for w in (self.details_button, self.stats_label) + job
+                   if w.isVisible() and (w not in job or self.runner.busy))
         free = max(sb.width() - used - 40, 120)
         line = text.strip().splitlines()[0] if text.strip() else ""
         shown = sb.fontMetrics().elidedText(line, Qt.TextElideMode.ElideRight, free)

@@ -43,7 +43,8 @@ iterations 40.7 % / 59.3 % (random 25 %); grey background (1 draw) 21.3 % / 28.7
 15 %); radiance + sign + all iterations + ``--jitter 10`` 40.0 % / 60.6 % (random 25 %; split
 by subject, load 15-27). Geometry (``--mode geometry``, the thesis's set-up) 21.0 % / 42.4 %
 against random dents 26 % / 26 % (thesis 0.6 / 3.6 %). Set-ups are compared on other views
-(``--view-seed 1 --views 30``). The one-suspect-at-a-time tables: docs/adversarial_lighting.md.
+(``--view-seed 1 --views 30``). The one-suspect-at-a-time tables:
+docs/results/adversarial_lighting.md.
 
 Measured (busy 2-core machine, --skip-speed: 8 min): lighting 38/64 views vs random 12/64
 (better on 5 of 8 shapes: orange, wine bottle, jack-o'-lantern, golf ball, candle; 0 vs 0 on

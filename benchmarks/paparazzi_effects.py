@@ -43,10 +43,10 @@ three-quarter view (algorithms.render).
 noise of 0.3 mean edge lengths along the vertex normals, seed 0); crease5 and the distances are
 then measured against the clean mesh. ``--pretzel`` measures why the guided energy of the pretzel
 sample rises, ``--noise-variance`` why the guided filter cannot both remove that noise and keep
-fandisk's creases (docs/paparazzi.md).
+fandisk's creases (docs/results/paparazzi.md).
 
 ``--suspects`` measures, for the guided filter, each suspect of issue 23 separately (see
-docs/paparazzi.md): the filter's change per view against the optimizer's step, the radius
+docs/results/paparazzi.md): the filter's change per view against the optimizer's step, the radius
 against the triangles' size in pixels, what a remeshing does to the energy, resolution and the
 defaults (old: radius 15, epsilon 1e-8; the thesis's Fig. 2.15: radius 4, epsilon 0.02).
 """
@@ -106,7 +106,7 @@ def _gram_monitor(run, V, F, views=1):
     ``gram`` energy's own: the filter's energy of that view), or, with the ``network`` energy,
     against the network's stylization of the view; view 0 (``views=1``), or the mean over the
     first ``views`` monitor views that the shape covers at least half of (``views=16``:
-    *Gram16*; one view is a noisy judge, see docs/paparazzi.md)."""
+    *Gram16*; one view is a noisy judge, see docs/results/paparazzi.md)."""
     from algorithms.paparazzi.filters import FilterContext
     from algorithms.paparazzi.neural_style import gram_style_loss
     from algorithms.render import render
@@ -417,7 +417,7 @@ def suspects(a) -> int:
 
 # ----------------------------------------------------------------------------- pretzel, noise
 def pretzel(a) -> int:
-    """Why the guided energy of the pretzel sample rises (docs/paparazzi.md, "The pretzel"):
+    """Why the guided energy of the pretzel sample rises (docs/results/paparazzi.md, "The pretzel"):
     each monitor view before and after one remeshing; remeshings alone; the same with the
     vertices projected onto the exact implicit surface the sample was made from; the jumps at
     remeshings against the steps between them for several learning rates and remeshing
@@ -476,7 +476,7 @@ def pretzel(a) -> int:
 def noise_variance(a) -> int:
     """Colour variance of the guided filter's 9 x 9 windows on clean and noisy fandisk, in flat
     regions and at creases (20 random views), and the filter's change there: why no epsilon
-    both removes the noise and keeps the creases (docs/paparazzi.md, "Noisy scans")."""
+    both removes the noise and keeps the creases (docs/results/paparazzi.md, "Noisy scans")."""
     import os
 
     from algorithms.paparazzi import Paparazzi, PaparazziParams
@@ -518,8 +518,8 @@ def noise_variance(a) -> int:
 
 
 def barrier(a) -> int:
-    """Why a filter's energy rises on a noisy scan at a small step (docs/paparazzi.md, "Rough
-    scans"): the 16-view energy along the straight path from each noisy scan (t = 0) to its
+    """Why a filter's energy rises on a noisy scan at a small step (docs/results/paparazzi.md,
+    "Rough scans"): the 16-view energy along the straight path from each noisy scan (t = 0) to its
     clean mesh (t = 1), per filter, and ``Paparazzi.rough_probe`` (the relative change of the
     energy after one small full-batch step along the filter's own pull; > 0 = rough) on the
     clean meshes and on noisy copies at 0.1, 0.2 and 0.3 mean edge lengths of noise."""

@@ -29,8 +29,8 @@ lighting attack fails -- confidently recognized views, :mod:`.shapes` -- this st
 the light to the ball's boundary within the 30 iterations, and sign steps do no better.)
 
 Options measured against the thesis's set-up (``benchmarks/adversarial.py --table34``,
-docs/adversarial_lighting.md): ``until_fooled=False`` runs all the iterations (the thesis stops
-once fooled, App. 3.7.6; a stronger light transfers to more unseen views), and
+docs/results/adversarial_lighting.md): ``until_fooled=False`` runs all the iterations (the
+thesis stops once fooled, App. 3.7.6; a stronger light transfers to more unseen views), and
 ``formation="radiance"`` (:class:`RadianceSHShading`) looks the light up along the normal
 instead of forming the irradiance of a diffuse surface: every degree then shades, where Eq. 3.24
 gives degrees 3 and 5 no effect (``A_3 = A_5 = 0``) and degrees 4 and 6 only ``1/24`` and

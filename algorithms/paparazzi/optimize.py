@@ -26,7 +26,7 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   fourth pass, 26 November 2026) cost what the steps had won: one such remeshing of the
   pretzel sample raised its 16-view guided energy by 8 % (1.783 -> 1.929) and the
   1000-iteration run ended above its start (1.856); moving bad elements only, it falls
-  (1.700; docs/paparazzi.md). The remeshed mesh is accepted only if it is still a 2-manifold
+  (1.700; docs/results/paparazzi.md). The remeshed mesh is accepted only if it is still a 2-manifold
   with the input's Euler characteristic and boundary-loop count and no new self-intersections
   (``igl.predicates.find_self_intersections``, exact predicates). Otherwise (remeshed mesh
   rejected, or not remeshed, see below) the current mesh is checked for self-intersections; if the
@@ -71,7 +71,7 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   are about ``lr`` per coordinate whatever the gradient's size, so where a filter asks for
   little a large step is mostly noise: with the guided filter's former defaults (epsilon 1e-8)
   the displacement a view asked for was 163 times smaller than a 5e-5 step on the blob sample,
-  and the filter's own energy rose (issue 23; :func:`.filters._guided`, docs/paparazzi.md).
+  and the filter's own energy rose (issue 23; :func:`.filters._guided`, docs/results/paparazzi.md).
   *Rough scans* (issue 23, fifth pass): an edge-preserving filter takes noise stronger than its
   threshold for edges, so on a noisy scan its energy first *rises* as the surface is smoothed and
   falls only near the smooth surface (the guided filter along the straight path from the noisy
@@ -93,11 +93,11 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   never halves and runs bit for bit as without the option. The filter's target moves with the
   surface (an iterative filter's f(R)), so past some point the steps can add more than they
   remove: l0 on the noisy fandisk fell from 23.55 to 19.6 in 150 iterations and climbed back to
-  27.4 (ending at 24.5); with halving it ends at 19.87 (docs/paparazzi.md). Not for a filter whose
-  energy is no measure of progress (``FilterSpec.halve_on_climb`` False: neural-style). Off
-  by default: re-running the effects table with it on, slic's energy (its superpixels re-form
-  from picture to picture, so a 2 % rise is often a jump, not a trend) ended higher on 7 of
-  its 10 runs (spot 186.1 -> 216.5) and its effect weaker.
+  27.4 (ending at 24.5); with halving it ends at 19.87 (docs/results/paparazzi.md). Not for a
+  filter whose energy is no measure of progress (``FilterSpec.halve_on_climb`` False:
+  neural-style). Off by default: re-running the effects table with it on, slic's energy (its
+  superpixels re-form from picture to picture, so a 2 % rise is often a jump, not a trend)
+  ended higher on 7 of its 10 runs (spot 186.1 -> 216.5) and its effect weaker.
 * A run must lower its monitor energy (below): a result whose energy is not below the start's
   did not converge. With ``lowest_fallback`` on (the default; issue 23, sixth pass) the monitor
   checks' shapes below the start are remembered (the lowest one, and the lowest one taken at a
@@ -106,8 +106,8 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   says which, ``last_monitor_energy`` what the last one had). If none got below the start, the
   last shape is returned and the recipe (:func:`app.recipes.paparazzi.paparazzi_steps`) fails
   the run with :class:`EnergyNotLowered`, changing nothing. A run whose energy ends below its
-  start runs bit for bit as without the option. Measured (docs/paparazzi.md): l0 on the noisy
-  fandisk fell to 19.6 and climbed back above its start (23.55 -> 25.33 at iteration 1000).
+  start runs bit for bit as without the option. Measured (docs/results/paparazzi.md): l0 on the
+  noisy fandisk fell to 19.6 and climbed back above its start (23.55 -> 25.33 at iteration 1000).
 * Boundary vertices do not move (their gradient is zeroed), so a boundary loop stays where it is.
 * Monitor energy (thesis 353-356, made multi-view): the thesis watches one fixed camera; one
   view sees a sixth of the shape at most and its energy can rise while the rest falls (issue
@@ -158,7 +158,7 @@ REMESH_ATTEMPTS = 3
 #: ``PaparazziParams.plateau_step``: every this many iterations the monitor energy is checked;
 #: once the run has brought it below its start, a rise of more than ``PLATEAU_RISE`` above the
 #: lowest value seen halves the step, at most down to ``PLATEAU_MIN`` of it (issue 23, fifth
-#: pass; docs/paparazzi.md "A smaller step when the energy climbs")
+#: pass; docs/results/paparazzi.md "A smaller step when the energy climbs")
 PLATEAU_EVERY = 50
 PLATEAU_RISE = 0.02
 PLATEAU_MIN = 1.0 / 16.0
@@ -485,7 +485,7 @@ class Paparazzi:
         23's fifth pass, 16 views; benchmarks/paparazzi_effects.py --barrier): fandisk, bob,
         bumpy, pretzel -1.9 % to -20 % clean, -1.8 % to -2.5 % with 0.1 mean edge lengths of
         noise (there the energy falls at the filter's own step), +0.03 % to +1.2 % with 0.2
-        and 0.3 (docs/paparazzi.md, "Rough scans")."""
+        and 0.3 (docs/results/paparazzi.md, "Rough scans")."""
         cams = self.monitor_cameras() if cameras is None else cameras
         e0, g = start if start is not None else self.monitor_pull(V, F, cams)
         g = g.copy()
@@ -611,8 +611,8 @@ class Paparazzi:
         secs = {"render": 0.0, "filter": 0.0, "derivative": 0.0, "remesh": 0.0, "monitor": 0.0}
         counts = {"remeshes": 0, "rollbacks": 0, "remesh_rejected": 0, "remesh_retries": 0}
         # the step: the run's, else the filter's; on a rough input the filter's rough step
-        # (FilterSpec.rough_learning_rate; docs/paparazzi.md "Rough scans"), probed below from
-        # the same pass over the monitor views as the starting energy
+        # (FilterSpec.rough_learning_rate; docs/results/paparazzi.md "Rough scans"), probed below
+        # from the same pass over the monitor views as the starting energy
         probing = bool(not p.learning_rate and p.rough_step and self.spec.rough_learning_rate
                        and not self.single_view)
         tm = time.perf_counter()

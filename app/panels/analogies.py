@@ -148,6 +148,7 @@ class AnalogiesPanel(MethodPanel):
     plot_metrics = ("mean_angle_to_targets",)
     plot_title = "Mean angle to the target normals (°)"
     live_by_default = True
+    run_from_base = True  # Run and the λ slider start from one base shape
     builtin_presets = {"subtle": {"lam": 0.3}, "strong": {"lam": 4.0}}
 
     def __init__(self, window):

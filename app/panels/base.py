@@ -48,6 +48,9 @@ class MethodPanel(QDockWidget):
     description = ""
     params_cls: type = object
     plot_metrics: tuple[str, ...] = ()
+    #: Run (not only a live re-run) on top of this panel's last result starts again from the
+    #: shape that result came from (see :meth:`start_state`); the footer says which shape
+    run_from_base = False
     plot_title = ""
     plot_log_y = False
     #: what the plot says while it is empty (e.g. which button fills it)
@@ -127,13 +130,37 @@ class MethodPanel(QDockWidget):
         # room for two lines: the dock's layout does not grow a wrapped label by itself
         self.status_label.setMinimumHeight(2 * self.status_label.fontMetrics().lineSpacing() + 2)
         self.status_label.setAlignment(Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignTop)
-        fl.addWidget(self.status_label)
         self.footer = footer
+        # the Live switch lives in the footer, next to Run: always in sight, however long the
+        # panel's settings are (Cubic's was at the bottom of a long scroll)
         self.live_box = QCheckBox("Live: re-run when a parameter changes")
         self.live_box.setToolTip("Each parameter change restarts the method from the current mesh, "
                                  "so you see its effect at once. The result is applied only when "
                                  "the run finishes.")
-        lay.addWidget(self.live_box)
+        fl.addWidget(self.live_box)
+        # where Run and the slider start from (panels with run_from_base): one base shape
+        self.base_label = QLabel()
+        self.base_label.setWordWrap(True)
+        self.base_label.setStyleSheet("color: #444;")
+        self.base_label.setToolTip("Run and every live re-run start from this shape, so moving a "
+                                   "slider or pressing Run again never piles one result on "
+                                   "another.")
+        self.continue_button = QPushButton("Stylize the result instead")
+        self.continue_button.setFlat(True)
+        self.continue_button.setStyleSheet(
+            "QPushButton { color: #1d4ed8; text-decoration: underline; text-align: left; "
+            "border: none; padding: 0; }")
+        self.continue_button.setCursor(Qt.CursorShape.PointingHandCursor)
+        self.continue_button.setToolTip("Make the mesh as it is now the start of the next run "
+                                        "(to apply the method to its own result).")
+        self.continue_button.clicked.connect(self.continue_from_result)
+        base_row = QHBoxLayout()
+        base_row.addWidget(self.base_label, 1)
+        base_row.addWidget(self.continue_button, 0)
+        fl.addLayout(base_row)
+        for w in (self.base_label, self.continue_button):
+            w.setVisible(self.run_from_base)
+        fl.addWidget(self.status_label)
         self.plot = LinePlot(self.plot_title or ", ".join(self.plot_metrics), log_y=self.plot_log_y,
                              empty_text=self.plot_empty_text)
         lay.addWidget(self.plot)
@@ -165,7 +192,7 @@ class MethodPanel(QDockWidget):
         self._debounce.timeout.connect(lambda: self.run(live=True))
         self.live_box.setChecked(self.live_by_default)
         self._live_text = self.live_box.text()
-        window.document.subscribe(self._live_default_for_mesh)
+        window.document.subscribe(self._on_document_for_panel)
         self.run_button.clicked.connect(lambda: self.run())
         self.stop_button.clicked.connect(window.cancel_job)
         self.defaults_button.clicked.connect(self.form.reset_defaults)
@@ -183,6 +210,7 @@ class MethodPanel(QDockWidget):
         runner.busy_changed.connect(self._on_busy)
         runner.finished.connect(self._on_finished)
         runner.cancelled.connect(self._on_stopped)
+        runner.cancelled.connect(self._on_cancelled)
         runner.failed.connect(lambda msg, _d: self._on_stopped(msg))
         self.visibilityChanged.connect(self._on_visibility_changed)
 
@@ -425,16 +453,7 @@ class MethodPanel(QDockWidget):
             self.status_label.setText("Open a mesh first (File > Open).")
             return
         params = self.form.params()
-        start = state
-        # A live re-run replaces the previous live result: it starts from the positions that
-        # result was computed from (with the current painted fields and handles), so moving a
-        # slider back and forth never compounds the effect. A click on Run starts from the mesh
-        # as it is (run again to apply the method again).
-        if (live and self._last is not None and state.V is self._last[1].V
-                and self._last[0].V is not self._last[1].V):  # (a field result keeps V)
-            prev = self._last[0]
-            # (a result with new faces starts again from the whole previous input)
-            start = state.with_positions(prev.V) if prev.F is state.F else prev
+        start = self.start_state(state, live)
         self._pending_input = start
         # read once, here on the GUI thread: the worker, the commit and the study log use it
         self._run_options = self.job_options()
@@ -545,6 +564,59 @@ class MethodPanel(QDockWidget):
     def _on_committed(self, name: str, after: MeshState) -> None:
         if name == self.title and self._pending_input is not None:
             self._last = (self._pending_input, after)
+        self._update_base_label()
+
+    def _on_document_for_panel(self, what: str) -> None:
+        if what == "mesh":
+            self.on_new_mesh()
+            self._live_default_for_mesh(what)
+        self._update_base_label()
+
+    def on_new_mesh(self) -> None:
+        """Another mesh was opened: nothing of the previous mesh's runs stays in the panel (its
+        status, its plot, the shape a live re-run would start from)."""
+        self._debounce.stop()
+        self._last = None
+        self._pending_input = None
+        self.plot.clear()
+        self.status_label.setText("Ready.")
+        self.show_live_state(None)
+
+    def start_state(self, state: MeshState, live: bool) -> MeshState:
+        """The shape a run starts from. A live re-run (and, in a panel with ``run_from_base``,
+        a click on Run) on top of this panel's last result starts again from the positions that
+        result was computed from, with the current painted fields and handles: moving a slider
+        back and forth, or pressing Run again, never compounds the effect. Otherwise the run
+        starts from the mesh as it is (Smooth: Run again smooths more)."""
+        last = self._last
+        if ((live or self.run_from_base) and last is not None and state.V is last[1].V
+                and last[0].V is not last[1].V):  # (a field result keeps V)
+            prev = last[0]
+            # (a result with new faces starts again from the whole previous input)
+            return state.with_positions(prev.V) if prev.F is state.F else prev
+        return state
+
+    def continue_from_result(self) -> None:
+        """The next run starts from the mesh as it is now (the last result), not from the
+        shape that result was computed from."""
+        self._last = None
+        self._update_base_label()
+        self.status_label.setText("The next run starts from the mesh as it is now.")
+
+    def _update_base_label(self) -> None:
+        if not self.run_from_base:
+            return
+        st = self.window_.document.state
+        on_result = (st is not None and self.start_state(st, live=True) is not st)
+        if st is None:
+            text = ""
+        elif on_result:
+            text = (f"Starts from: the mesh before your last {self.title} run (Run and the "
+                    "slider re-do it from there).")
+        else:
+            text = "Starts from: the mesh as it is now."
+        self.base_label.setText(text)
+        self.continue_button.setVisible(on_result)
 
     def _on_params_changed(self, _params) -> None:
         if self.live_box.isChecked() and not self.window_.document.is_empty:
@@ -611,3 +683,9 @@ class MethodPanel(QDockWidget):
             return
         self.status_label.setText(message)
         self.stop_button.setEnabled(False)
+
+    def _on_cancelled(self, _message: str) -> None:
+        # the mesh went back to how it was: the plot no longer shows the cancelled run's curve
+        # (a live re-run that replaced the cancelled one fills it again)
+        if self.window_.last_job_name == self.title and not self.window_.runner.busy:
+            self.plot.clear()

@@ -45,6 +45,7 @@ class CubicPanel(MethodPanel):
     plot_metrics = ("energy",)
     plot_title = "Energy (ARAP + λ·L1) per iteration"
     live_by_default = True
+    run_from_base = True  # Run and the λ slider start from one base shape
     builtin_presets = {"subtle": {"lam": 0.1}, "strong": {"lam": 0.6}}
     param_groups = {"Per-axis λ": ("per_axis", "axis_factor_x", "axis_factor_y", "axis_factor_z"),
                     "Cube orientation": ("rot_x", "rot_y", "rot_z")}

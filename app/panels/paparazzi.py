@@ -53,7 +53,7 @@ GUI_ITERATIONS = 300
 #: default 300 iterations (issue 24, item 4: the guided filter, the former default, smooths what
 #: is rough, and the bundled blob is smooth already, so its default Run changed nothing one
 #: could see; quantize cuts facets into every shape, e.g. the blob's monitor energy falls by
-#: more than half; docs/paparazzi.md, "The default Run")
+#: more than half; docs/results/paparazzi.md, "The panel's default Run")
 DEFAULT_PANEL_FILTER = "quantize"
 #: the panel's monitor interval: 16 monitor views every 25 iterations (the command line's)
 #: made quantize's default run on the blob 40 % monitor (22.9 of 56.8 s on a loaded machine);

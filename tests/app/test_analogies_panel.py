@@ -156,9 +156,18 @@ def test_panel_run_equals_the_headless_recipe_bit_for_bit(window, dialogs, qtbot
     assert head.state.V.tobytes() == window.document.V.tobytes()
     np.testing.assert_array_equal(head.state.F, window.document.F)
     assert head.outcome["iterations"] == 20
-    # a second Run (from the result) reuses nothing stale: it equals a headless run too
+    # a second Run starts from the same base shape as the first (issue 41 item 9): the same
+    # precomputation, the same result
     sa = panel._recipe_cache["analogy"][2]
+    first = window.document.V.copy()
+    run_panel(window, panel, qtbot)
+    assert panel.last_request["input"].V is before.V and panel._recipe_cache["analogy"][2] is sa
+    assert window.document.V.tobytes() == first.tobytes()
+    # "Stylize the result instead": a Run from the result reuses nothing stale: it equals a
+    # headless run too
+    panel.continue_button.click()
     before2 = run_panel(window, panel, qtbot)
+    assert panel.last_request["input"] is before2 and before2.V.tobytes() == first.tobytes()
     assert panel._recipe_cache["analogy"][2] is not sa  # new input positions, new precompute
     head2 = run("Analogies", before2, panel.form.params(), panel.job_options())
     assert head2.state.V.tobytes() == window.document.V.tobytes()

@@ -227,3 +227,76 @@ def test_painting_tools_are_in_sight_at_1024x700(window, qtbot):
     panel.multigrid_box.setChecked(True)
     assert panel.big_section.isChecked() and panel.multigrid_box.isVisible()
     panel.multigrid_box.setChecked(False)
+
+
+def test_run_and_the_slider_start_from_one_base_shape(window, dialogs, qtbot):
+    """Issue 41 item 9: a second Run stylized the stylized shape while the λ slider re-ran from
+    the last Run's input. Both start from one base shape, which the footer names; "Stylize the
+    result instead" makes the result the next start."""
+    panel = open_cubic(window)
+    panel.form.editors["max_iterations"].setValue(5)
+    V0 = window.document.V.copy()
+    assert panel.base_label.isVisible() and "as it is now" in panel.base_label.text()
+    assert not panel.continue_button.isVisible()
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    V1 = window.document.V.copy()
+    assert "before your last Cubic run" in panel.base_label.text()
+    assert panel.continue_button.isVisible()
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    np.testing.assert_array_equal(window.document.V, V1)  # the same start, the same result
+    qtbot.mouseClick(panel.continue_button, Qt.MouseButton.LeftButton)
+    assert "as it is now" in panel.base_label.text() and not panel.continue_button.isVisible()
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    F = window.document.F
+    assert l1_of_normals(window.document.V, F) < l1_of_normals(V1, F) - 1e-4  # on the result
+    # undo back to the input: the next start is the mesh as it is (the input)
+    while window.undo_stack.canUndo():
+        window.undo_stack.undo()
+    np.testing.assert_array_equal(window.document.V, V0)
+    assert "as it is now" in panel.base_label.text()
+
+
+def test_opening_another_mesh_leaves_nothing_of_the_previous_one(window, dialogs, qtbot):
+    """Issue 41 item 8: after opening another mesh, Cubic still said "Done: … Undo with Ctrl+Z"
+    (Undo greyed), and its energy plot kept the previous mesh's curve; after Esc the plot kept
+    the cancelled run's curve while the mesh was back."""
+    panel = open_cubic(window)
+    window.resize(1024, 700)  # and the status bar's messages are whole at this size
+    panel.form.editors["max_iterations"].setValue(5)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    assert panel.status_label.text().startswith("Done") and panel.plot.series
+    assert window.statusBar().currentMessage().endswith("Undo with Ctrl+Z.")
+    dialogs.answers.append("Discard changes")
+    assert window.open_path(SAMPLES / "bumpy.obj")
+    assert panel.status_label.text() == "Ready." and not panel.plot.series
+    assert "as it is now" in panel.base_label.text()
+    # Esc: the plot does not keep the cancelled run's curve
+    panel.form.editors["max_iterations"].setValue(100000)
+    panel.form.editors["rel_displacement_tol"].setValue(0.0)
+    with qtbot.waitSignal(window.runner.metrics, timeout=60000):
+        panel.run_button.click()
+    qtbot.waitUntil(lambda: any(len(v) for v in panel.plot.series.values()), timeout=30000)
+    window.activateWindow()
+    qtbot.waitUntil(window.isActiveWindow, timeout=5000)
+    with qtbot.waitSignal(window.runner.cancelled, timeout=60000):
+        qtbot.keyClick(window.viewport, Qt.Key.Key_Escape)
+    qtbot.waitUntil(lambda: not window.runner.busy)
+    assert not any(len(v) for v in panel.plot.series.values())
+    assert window.statusBar().currentMessage().endswith("The mesh is as it was.")
+
+
+def test_the_live_switch_is_in_the_footer_next_to_run(window, qtbot):
+    """Issue 41 item 10: Cubic's Live switch was at the bottom of a long scroll."""
+    assert window.open_path(SAMPLES / "blob.obj")
+    window.resize(1024, 700)
+    for panel in window.panels.values():
+        assert panel.footer.isAncestorOf(panel.live_box), panel.title
+    panel = window.panels["Cubic"]
+    panel.raise_()
+    qtbot.waitUntil(panel.is_shown)
+    qtbot.wait(50)
+    assert not panel.live_box.visibleRegion().isEmpty()

@@ -500,9 +500,9 @@ def test_default_run_on_the_blob_sample_shows_a_visible_change(window, dialogs, 
 
 
 def test_guided_on_a_noisy_scan_says_it_takes_its_rough_step(window, dialogs, qtbot, tmp_path):
-    # issue 23, fifth pass (docs/paparazzi.md, "Rough scans"): the learning rate's "auto" says
-    # both steps; a run on a noisy scan says it took the larger one; unticking the option (a
-    # key press on the focused check box) brings the single value back
+    # issue 23, fifth pass (docs/results/paparazzi.md, "Rough scans"): the learning rate's
+    # "auto" says both steps; a run on a noisy scan says it took the larger one; unticking the
+    # option (a key press on the focused check box) brings the single value back
     from PySide6.QtCore import Qt as _Qt
 
     from algorithms.mesh import read_mesh, write_mesh

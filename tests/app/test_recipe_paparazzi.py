@@ -258,7 +258,7 @@ def test_every_built_in_filter_lowers_its_energy_averaged_over_16_views(name, it
     # monitor views (quantize measured 960 -> 875 in 60 iterations). slic and
     # l0 need more iterations at 256 px than a unit test can afford (40 at 128 px: slic 8.51 ->
     # 8.58, l0 9.68 -> 9.54); their 1000-iteration runs at the command line's defaults on the
-    # shared meshes: benchmarks/paparazzi_effects.py, docs/paparazzi.md
+    # shared meshes: benchmarks/paparazzi_effects.py, docs/results/paparazzi.md
     from algorithms.mesh import loop_subdivide
 
     V, F = loop_subdivide(*icosphere(2), 1)

@@ -39,7 +39,7 @@ def test_registered_with_the_thesis_settings():
     assert NeuralStyleParams().energy == "gram" and ns.ENERGIES == ("gram", "network")
     # thesis 468 and Table 2.1: 128 px, sigma 0.02, view width 0.1, not a single view
     assert (spec.resolution, spec.width, spec.sigma) == (128, 0.1, 0.02)
-    # the step follows the energy (docs/paparazzi.md): the network's 1e-3 made the blob's
+    # the step follows the energy (docs/results/paparazzi.md): the network's 1e-3 made the blob's
     # 16-view energy rise since remeshing moves only bad elements, 2e-4 barely moves 0.1-wide
     # views in 1000 iterations (5e-4); the Gram energy's falls further at 1e-3 than at 5e-4 or
     # 2e-3 (camelhead's crossings)
@@ -54,7 +54,7 @@ def test_registered_with_the_thesis_settings():
                                                                      learning_rate=3e-4))
     assert run.learning_rate == 3e-4
     # no creases kept through remeshing: the input's creases made the orange's energy rise
-    # (docs/paparazzi.md, "Remeshing only bad elements")
+    # (docs/results/paparazzi.md, "Remeshing only bad elements")
     assert spec.crease_angle == 0.0
     assert not spec.is_single_view(NeuralStyleParams())
     # grey, one white light along the camera's y axis: a face facing camera-up is 1, facing
@@ -312,8 +312,8 @@ def test_cli_runs_neural_style_end_to_end(tmp_path, capsys):
 
 
 def test_the_network_energy_at_its_step_lowers_its_energy_on_the_blob_sample():
-    # issue 23, fourth pass (docs/paparazzi.md): with remeshing moving only bad elements, the
-    # former step of 1e-3 grew a relief whose 16-view energy rose in the run's second half
+    # issue 23, fourth pass (docs/results/paparazzi.md): with remeshing moving only bad elements,
+    # the former step of 1e-3 grew a relief whose 16-view energy rose in the run's second half
     # (blob 227.8 -> 245.8 in 1000 iterations); at 5e-4 it falls (-> 224.8), and the relief
     # still changes the Gram loss (-6 %)
     from algorithms.steps import run_to_end

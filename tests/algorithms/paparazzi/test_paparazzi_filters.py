@@ -185,7 +185,7 @@ def test_flat_edge_fraction_counts_the_edge_length_between_coplanar_faces():
 
 
 def test_slic_learning_rate_is_the_authors():
-    # 2e-4 roughened every test shape (docs/paparazzi.md, measured effects)
+    # 2e-4 roughened every test shape (docs/results/paparazzi.md, "The first table")
     assert get_filter("slic").learning_rate == pytest.approx(6e-5)
 
 
@@ -204,7 +204,7 @@ def test_slic_superpixels_cover_many_triangles_of_the_meshes_the_cli_is_made_for
     # `segments` counts superpixels per picture, so the view width sets their size on the
     # shape: at the authors' 0.3 (meshes of 10^5 vertices and more) one covered 1.5-4
     # triangles of the test meshes subdivided to >= 5,000 vertices, too few to make flat
-    # patches in 1000 iterations (docs/paparazzi.md, measured effects); at 1.0, 16-44
+    # patches in 1000 iterations (docs/results/paparazzi.md, "The first table"); at 1.0, 16-44
     from algorithms.mesh.operators import face_areas, normalize_unit_box
 
     spec = get_filter("slic")

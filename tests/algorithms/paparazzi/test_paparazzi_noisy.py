@@ -1,4 +1,4 @@
-"""Issue 23, the Paparazzi bullets measured in docs/paparazzi.md (long runs:
+"""Issue 23, the Paparazzi bullets measured in docs/results/paparazzi.md (long runs:
 benchmarks/paparazzi_effects.py, benchmarks/bilateral_normal.py): why the guided energy of the
 pretzel sample rises, the noisy scans, and the bilateral normal filter as the guided filter's
 non-image peer. Short runs, one claim each."""
@@ -23,7 +23,7 @@ def _pretzel():
 
 
 def test_the_pretzels_guided_energy_falls_when_remeshing_moves_only_bad_elements():
-    # docs/paparazzi.md, "The pretzel": its marching-cubes grid is a triangulation whose
+    # docs/results/paparazzi.md, "The pretzel": its marching-cubes grid is a triangulation whose
     # pictures the guided filter changes less than those of any isotropic remeshing of the same
     # surface: re-placing every vertex (remesh_scope "all", the default before issue 23's
     # fourth pass) raises the 16-view energy by 8 % (1.783 -> 1.929) and the 1000-iteration run
@@ -44,7 +44,7 @@ def test_the_pretzels_guided_energy_falls_when_remeshing_moves_only_bad_elements
     last = run_to_end(run.steps())
     assert last.metrics["remeshes"] == 2
     assert last.metrics["initial_monitor_energy"] == pytest.approx(e0)
-    # (1.783 -> 1.762 at 90 iterations; 1000 iterations: docs/paparazzi.md)
+    # (1.783 -> 1.762 at 90 iterations; 1000 iterations: docs/results/paparazzi.md)
     assert last.metrics["monitor_energy"] < 0.995 * e0, last.metrics
 
 
@@ -66,7 +66,7 @@ def test_noisy_scan_moves_vertices_along_their_normals_by_the_asked_amount():
 
 def test_guided_at_its_defaults_ends_a_noisy_scan_smoother_than_remeshing_alone():
     # issue 23's noisy bob (0.3 mean edge lengths of noise along the normals); 1000-iteration
-    # figures in docs/paparazzi.md, "Rough scans" (bending 6647 -> 618, control 6937; at the
+    # figures in docs/results/paparazzi.md, "Rough scans" (bending 6647 -> 618, control 6937; at the
     # fixed step before the rough step, 5498)
     from benchmarks.paparazzi_effects import control_spec
 
@@ -96,7 +96,7 @@ def test_bilateral_normal_filtering_denoises_fandisk_and_brings_its_creases_back
 
 
 @pytest.mark.parametrize("name, iterations, factor", [
-    # 1000-iteration rows at the CLI's defaults: docs/paparazzi.md, "Noisy scans"
+    # 1000-iteration rows at the CLI's defaults: docs/results/paparazzi.md, "Noisy scans"
     ("quantize", 60, 1.2),     # palette share of the area (0.339 -> 0.432, control 0.340)
     ("l0", 100, 2.0),          # near-planar share of the area (noisy: 0.0005)
     ("slic", 200, 3.0),        # (0.0005 -> 0.0055, control 0.0010; at 120 iterations 0.0022)
@@ -142,9 +142,9 @@ def _noisy_blob():
 
 
 def test_the_guided_energy_has_a_barrier_between_a_noisy_scan_and_its_smooth_surface():
-    # docs/paparazzi.md, "Rough scans": the guided filter takes noise stronger than its epsilon
-    # for edges, so its energy rises along the straight path from the noisy scan to the clean
-    # surface before it falls (fandisk: 2.99 -> 3.85 at 70 % of the way -> 0.34)
+    # docs/results/paparazzi.md, "Rough scans": the guided filter takes noise stronger than its
+    # epsilon for edges, so its energy rises along the straight path from the noisy scan to the
+    # clean surface before it falls (fandisk: 2.99 -> 3.85 at 70 % of the way -> 0.34)
     V, W, F = _noisy_blob()
     run = Paparazzi(W, F, "guided", None, PaparazziParams())
     cams = run.monitor_cameras()
@@ -167,7 +167,7 @@ def test_the_rough_probe_tells_a_noisy_scan_from_a_clean_surface():
 def test_guided_takes_its_rough_step_on_a_noisy_scan_and_its_energy_then_falls():
     # at the former fixed step (1e-5) the run stays on the barrier's rising side: the noisy
     # blob's energy rises (300 iterations: 3.104 -> 3.128); the rough step (2e-4) crosses it
-    # (-> 2.827; 1000 iterations on the noisy fandisk: 2.989 -> 0.958, docs/paparazzi.md)
+    # (-> 2.827; 1000 iterations on the noisy fandisk: 2.989 -> 0.958, docs/results/paparazzi.md)
     from algorithms.paparazzi.filters import GUIDED_LEARNING_RATE, GUIDED_ROUGH_LEARNING_RATE
 
     _, W, F = _noisy_blob()

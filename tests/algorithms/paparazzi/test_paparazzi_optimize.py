@@ -282,7 +282,7 @@ def test_remeshing_moves_only_the_vertices_next_to_bad_elements_by_default():
     # once (3,310 V), remeshing as the CLI does: 0.047 -> 0.153 (x3.2; re-placing the whole
     # surface 0.146, seed 1: x3.06; with the former 0.3-wide views 0.0626, x1.33); the
     # 1000-iteration runs of
-    # benchmarks/paparazzi_effects.py: docs/paparazzi.md's effects table
+    # benchmarks/paparazzi_effects.py: docs/results/paparazzi.md's effects table
     ("slic", 300, 2.0),
 ])
 def test_each_filter_changes_the_shape_in_its_own_way(name, iterations, factor):
@@ -424,9 +424,9 @@ def test_monitor_energy_is_the_mean_over_16_fixed_views_spread_around_the_shape(
 
 
 def test_guided_lowers_its_energy_smooths_more_than_remeshing_and_keeps_fandisks_creases():
-    # issue 23 (1000-iteration figures: docs/paparazzi.md): the guided filter at its defaults
-    # lowers its own energy (mean over the 16 monitor views), ends smoother (bending energy)
-    # than the same run with the picture returned unchanged (remeshing alone), and keeps the
+    # issue 23 (1000-iteration figures: docs/results/paparazzi.md): the guided filter at its
+    # defaults lowers its own energy (mean over the 16 monitor views), ends smoother (bending
+    # energy) than the same run with the picture returned unchanged (remeshing alone), and keeps the
     # input's sharp creases, on fandisk in 200 iterations
     import dataclasses
 
@@ -452,7 +452,7 @@ def test_the_step_is_halved_once_the_energy_climbs_back_up():
     # (here: its pull weakens over 90 calls, then grows from call 400) makes the monitor
     # energy fall below its start and then climb; each climb of more than PLATEAU_RISE above
     # the lowest check halves the step; without the option the step stays; a falling energy is
-    # never touched; off by default (docs/paparazzi.md)
+    # never touched; off by default (docs/results/paparazzi.md)
     from algorithms.paparazzi.optimize import PLATEAU_EVERY, PLATEAU_MIN, PLATEAU_RISE
 
     assert (PLATEAU_EVERY, PLATEAU_RISE, PLATEAU_MIN) == (50, 0.02, 1 / 16)
