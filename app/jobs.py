@@ -242,6 +242,10 @@ class JobRunner(QObject):
         details = t.details
         t.deleteLater()
         pending, self._pending = self._pending, None
+        if status == "failed" and pending is None:
+            # not busy any more before the error dialog opens: the window must not say
+            # "working" with a Cancel button behind a modal message (issue 41)
+            self.busy_changed.emit(False)
         if status == "done":
             self.finished.emit(last)
         elif status == "cancelled":
@@ -250,5 +254,5 @@ class JobRunner(QObject):
             self.failed.emit(message, details)
         if pending is not None:
             self._launch(*pending)
-        else:
+        elif status != "failed":
             self.busy_changed.emit(False)

@@ -1,8 +1,9 @@
 """The scale table (issue 25): five methods at about 10^4, 10^5 and 10^6 vertices, each against
 the peer its own benchmark uses, with seconds, peak memory and the fitted growth exponent.
 
-Meshes: tests/data/armadillo.obj (14,587 vertices) and its Loop subdivisions (libigl's
-``igl.loop``, through ``algorithms.mesh.loop_subdivide``): 58k, 233k and 933k vertices. A
+Meshes: tests/data/armadillo.obj (14,587 vertices) and its Loop subdivisions
+(``algorithms.mesh.loop_subdivide``: libigl's rules, the same bits as ``igl.loop``): 58k, 233k
+and 933k vertices. A
 requested size goes to the level whose vertex count is nearest on a log scale (1e4 -> 14.6k,
 1e5 -> 58k, 1e6 -> 933k). The meshes are built once, by a child process, into a cache folder.
 
@@ -42,8 +43,8 @@ What is timed (wall clock; median of 3 repeats below 10^5 vertices, one run abov
                level (14.6k -> 58k, 58k -> 233k, 233k -> 933k). ours: neural subdivision with the
                shipped weights, NumPy inference (``neural_subdivide_np``), ``adapt_scale=False``
                (the network always runs; by default a mesh denser than the training meshes gets
-               Loop instead) = "one level"; loading the network = "load". peer: Loop, libigl's
-               ``igl.loop`` (what ``algorithms.mesh.loop_subdivide`` calls) = "one level".
+               Loop instead) = "one level"; loading the network = "load". peer: Loop,
+               ``algorithms.mesh.loop_subdivide`` (libigl's rules) = "one level".
   paparazzi    the mesh normalized to a unit box x 2, offset surface at 0.1, 128^2 views
                (benchmarks/paparazzi.py). ours: offset surface + camera sampling = "set-up"
                (not part of an iteration); per iteration = ``render`` (rasterize + Lambertian

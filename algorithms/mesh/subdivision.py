@@ -1,4 +1,5 @@
-"""Subdivision of triangle meshes (libigl): Loop and mid-point.
+"""Subdivision of triangle meshes: Loop (ours, with libigl's rules and numbering) and mid-point
+(libigl).
 
 Both split every triangle into four per level: a mesh with ``n`` vertices, ``e`` edges and ``m``
 faces becomes one with ``n + e`` vertices and ``4 m`` faces. The input must be edge-manifold
@@ -13,7 +14,7 @@ import numpy as np
 from ..errors import InvalidMeshError, ParameterError
 from .topology import _EdgeData
 
-__all__ = ["loop_subdivide", "midpoint_subdivide"]
+__all__ = ["loop_subdivide", "loop_matrix", "midpoint_subdivide"]
 
 #: Refuse to produce more faces than this (memory guard: 4**levels growth).
 MAX_FACES = 20_000_000
@@ -67,7 +68,8 @@ def _prepare(V, F, levels, what: str) -> tuple[np.ndarray, np.ndarray, int]:
 
 
 def loop_subdivide(V, F, levels: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Loop subdivision (smooth; vertices move), via ``igl.loop``.
+    """Loop subdivision (smooth; vertices move): the rules and numbering of ``igl.loop``,
+    computed here (:func:`loop_matrix`) so that any edge-manifold mesh, oriented or not, is safe.
 
     Parameters
     ----------
@@ -87,10 +89,85 @@ def loop_subdivide(V, F, levels: int = 1) -> tuple[np.ndarray, np.ndarray]:
     V, F, lv = _prepare(V, F, levels, "subdivision")
     if lv == 0:
         return V.copy(), F.copy()
-    import igl
+    for _ in range(lv):
+        S, F = loop_matrix(F, len(V))
+        V = np.ascontiguousarray(S @ V)
+    return V, F
 
-    NV, NF = igl.loop(V, F, lv)
-    return np.ascontiguousarray(NV, dtype=np.float64), np.ascontiguousarray(NF, dtype=np.int64)
+
+def loop_matrix(F: np.ndarray, n: int):
+    """One level of Loop subdivision as a sparse matrix: ``(S, F_sub)`` with ``V_sub = S @ V``.
+
+    The rules of libigl's ``igl::loop`` (Loop 1987 with Warren's weights), and its numbering,
+    so the result is the same bits as ``igl.loop`` on the meshes it handles
+    (tests/algorithms/test_subdivision.py): new edge vertices are numbered in the order their
+    edges first appear (face by face, edges 01, 12, 20) after the ``n`` old ones, and face
+    ``f = (a, b, c)`` with edge vertices ``ab, bc, ca`` becomes ``[a, ab, ca], [b, bc, ab],
+    [ab, bc, ca], [bc, c, ca]``.
+
+    * an edge vertex: 3/8 of each end + 1/8 of each opposite corner; 1/2 of each end on a
+      boundary edge;
+    * an old interior vertex of valence k: ``1 - k * beta`` of itself + ``beta`` of each
+      neighbour, ``beta = 3/16`` for k = 3 and ``3 / (8 k)`` otherwise;
+    * an old boundary vertex: 3/4 of itself + 1/8 of each of its two boundary neighbours; a
+      vertex where more than two boundary edges meet (two sheets touching) stays where it is.
+
+    Built from undirected edges only, so it works on any edge-manifold mesh whatever the
+    orientation of its triangles: ``igl.loop`` corrupted memory and aborted the process
+    ("double free or corruption") on a Moebius strip, the input the app advises Loop for.
+    """
+    import scipy.sparse as sp
+
+    F = np.asarray(F, dtype=np.int64)
+    m = len(F)
+    a = F.reshape(-1)
+    b = F[:, [1, 2, 0]].reshape(-1)
+    opp = F[:, [2, 0, 1]].reshape(-1)  # the corner opposite each (face, edge)
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    uniq, first, inv, cnt = np.unique(key, return_index=True, return_inverse=True,
+                                      return_counts=True)
+    order = np.argsort(first, kind="stable")  # edges numbered by first appearance
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    uniq, cnt, inv = uniq[order], cnt[order], rank[inv.reshape(-1)]
+    E = np.stack(divmod(uniq, n), axis=1)
+    ne = len(E)
+    boundary = cnt == 1
+    # edge vertices
+    ei = np.arange(ne)
+    w_end = np.where(boundary, 0.5, 3.0 / 8.0)
+    inner = ~boundary[inv]
+    rows = [ei, ei, inv[inner]]
+    cols = [E[:, 0], E[:, 1], opp[inner]]
+    vals = [w_end, w_end, np.full(int(inner.sum()), 1.0 / 8.0)]
+    S_odd = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(ne, n))
+    # old vertices
+    deg = np.bincount(E.ravel(), minlength=n)
+    bdeg = np.bincount(E[boundary].ravel(), minlength=n)
+    beta = np.where(deg == 3, 3.0 / 16.0, 3.0 / (8.0 * np.maximum(deg, 1)))
+    on_b = bdeg > 0
+    corner = on_b & (bdeg != 2)
+    centre = np.where(corner, 1.0, np.where(on_b, 0.75, 1.0 - deg * beta))
+    rows, cols, vals = [np.arange(n)], [np.arange(n)], [centre]
+    for s, t in ((0, 1), (1, 0)):
+        i, j = E[:, s], E[:, t]
+        k = ~on_b[i]
+        rows += [i[k]]
+        cols += [j[k]]
+        vals += [beta[i[k]]]
+        k = on_b[i] & ~corner[i] & boundary
+        rows += [i[k]]
+        cols += [j[k]]
+        vals += [np.full(int(k.sum()), 1.0 / 8.0)]
+    S_even = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                           shape=(n, n))
+    e = (n + inv).reshape(m, 3)  # the edge vertices of edges 01, 12, 20 of each face
+    F_sub = np.stack([np.stack([F[:, 0], e[:, 0], e[:, 2]], 1),
+                      np.stack([F[:, 1], e[:, 1], e[:, 0]], 1),
+                      np.stack([e[:, 0], e[:, 1], e[:, 2]], 1),
+                      np.stack([e[:, 1], F[:, 2], e[:, 2]], 1)], axis=1).reshape(-1, 3)
+    return sp.vstack([S_even, S_odd]).tocsr(), np.ascontiguousarray(F_sub)
 
 
 def midpoint_subdivide(V, F, levels: int = 1) -> tuple[np.ndarray, np.ndarray]:

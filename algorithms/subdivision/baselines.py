@@ -142,9 +142,9 @@ def butterfly_subdivide(V, F, levels: int = 1) -> tuple[np.ndarray, np.ndarray]:
     F_sub : (m * 4**levels, 3) int64.
     """
     V, F = midpoint_subdivide(V, F, 0)  # the project's input checks
-    from .data import check_manifold
+    from .data import LOOP_WORKS, check_manifold
 
-    check_manifold(V, F, "Butterfly subdivision")
+    check_manifold(V, F, "Butterfly subdivision", LOOP_WORKS)
     for _ in range(int(levels)):
         V, F = _butterfly_level(V, F)
     return V, F

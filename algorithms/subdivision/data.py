@@ -46,7 +46,7 @@ from .topology import half_flaps, igl_odd_order, locate_vertices, refine, refine
 
 __all__ = ["DataParams", "CoarseSample", "normalization", "generate_coarse_sample",
            "selection_shape",
-           "generate_dataset", "default_cache_dir", "check_manifold", "mesh_hash",
+           "generate_dataset", "default_cache_dir", "check_manifold", "LOOP_WORKS", "mesh_hash",
            "subdivision_positions"]
 
 DATA_VERSION = 1
@@ -114,21 +114,52 @@ def normalization(V: np.ndarray) -> tuple[np.ndarray, float]:
     return c, np.sqrt(3.0) / r
 
 
-def check_manifold(V: np.ndarray, F: np.ndarray, what: str) -> None:
-    """Raise InvalidMeshError unless F is a consistently oriented, edge-manifold triangle mesh."""
+#: what works where neural or butterfly subdivision cannot take a mesh and Clean cannot fix it
+LOOP_WORKS = ("Loop subdivision works on this mesh as it is: set Method to 'loop' "
+              "(command line: --method loop).")
+
+
+def _directed_edge_repeats(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(sorted directed-edge keys ``src * n + dst``, positions where a key repeats)."""
+    key = np.sort(F.reshape(-1) * n + F[:, [1, 2, 0]].reshape(-1))
+    return key, np.flatnonzero(key[1:] == key[:-1])
+
+
+def _clean_fixes_edges(V: np.ndarray, F: np.ndarray) -> bool:
+    """True when 'Clean' (its defaults, as the app and ``stylize3d clean`` run it) leaves no
+    directed edge used twice: advice to clean must work (a Moebius strip or a part glued to
+    itself cannot be re-oriented, and 'Clean' then says "Nothing could be fixed")."""
+    from algorithms.mesh.validate import clean_mesh
+
+    try:
+        res = clean_mesh(V, F)
+    except Exception:  # noqa: BLE001 - a mesh Clean refuses: it cannot fix it either
+        return False
+    return not _directed_edge_repeats(np.asarray(res.F, np.int64), len(res.V))[1].size
+
+
+def check_manifold(V: np.ndarray, F: np.ndarray, what: str, alternative: str = "") -> None:
+    """Raise InvalidMeshError unless F is a consistently oriented, edge-manifold triangle mesh.
+
+    The message advises 'Clean' only when Clean fixes it; otherwise it says so and gives
+    ``alternative`` (what works on this mesh as it is, e.g. Loop subdivision), if any."""
     F = np.asarray(F, dtype=np.int64)
     n = len(V)
     src = F.reshape(-1)
-    dst = F[:, [1, 2, 0]].reshape(-1)
-    key = np.sort(src * n + dst)
-    dup = np.flatnonzero(key[1:] == key[:-1])
+    key, dup = _directed_edge_repeats(F, n)
     if dup.size:
         a, b = divmod(int(key[dup[0]]), n)
+        if _clean_fixes_edges(V, F):
+            advice = "'Clean' fixes this."
+        else:
+            advice = ("'Clean' cannot fix it on this mesh (a one-sided part, like a Moebius "
+                      "strip, or triangles glued to each other's backs).")
+            if alternative:
+                advice += " " + alternative
         raise InvalidMeshError(
             f"{what} needs a manifold, consistently oriented triangle mesh, but the edge between "
             f"vertices {a} and {b} is used twice in the same direction ({dup.size} such edges: "
-            f"more than two triangles on an edge, or neighbours facing opposite ways). 'Clean' "
-            f"can fix both.")
+            f"more than two triangles on an edge, or neighbours facing opposite ways). {advice}")
     used = np.zeros(n, dtype=bool)
     used[src] = True
     if not used.all():
@@ -175,7 +206,7 @@ def subdivision_positions(F0: np.ndarray, n0: int, levels: int):
 
 
 def _loop_targets(V0: np.ndarray, F0: np.ndarray, levels: int) -> list:
-    import igl
+    from ..mesh.subdivision import loop_matrix
 
     V = np.asarray(V0, dtype=np.float64)
     F = np.asarray(F0, dtype=np.int64)
@@ -184,7 +215,7 @@ def _loop_targets(V0: np.ndarray, F0: np.ndarray, levels: int) -> list:
         n = len(V)
         hf = half_flaps(F, n)
         perm = igl_odd_order(F, n, hf.E)
-        NV, _ = igl.loop(V, F, 1)
+        NV = loop_matrix(F, n)[0] @ V
         V = np.concatenate([NV[:n], NV[n:][perm]])
         F = refine(F, n, hf.EF)
         out.append(V)

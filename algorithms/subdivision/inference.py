@@ -705,11 +705,11 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
     lv = _check_levels(levels)
     chunk = int(CHUNK_FLAPS if chunk is None else chunk)
     from ..mesh.subdivision import midpoint_subdivide
-    from .data import check_manifold
+    from .data import LOOP_WORKS, check_manifold
 
     V_in = V
     V, F = midpoint_subdivide(V, F, 0)  # the project's input checks
-    check_manifold(V, F, "Neural subdivision")
+    check_manifold(V, F, "Neural subdivision", LOOP_WORKS)
     if len(F) * 4 ** lv > 20_000_000:
         raise ParameterError(f"{lv} levels would make {len(F) * 4 ** lv:,} triangles; use fewer "
                              f"levels.")

@@ -47,7 +47,7 @@ import numpy as np
 from ..compiled import KernelModule
 from ..errors import InvalidMeshError, ParameterError, Stylize3DError
 from ..params import param
-from .data import check_manifold, normalization
+from .data import LOOP_WORKS, check_manifold, normalization
 from .inference import SHIPPED_REFERENCE_EDGE, WeightsError, shipped_weights_path
 from .topology import half_flaps, refine
 
@@ -578,7 +578,7 @@ def neural_subdivide_torch(V, F, levels: int = 2, weights=None) -> tuple[np.ndar
     from ..mesh.subdivision import midpoint_subdivide
 
     V, F = midpoint_subdivide(V, F, 0)  # the project's input checks
-    check_manifold(V, F, "Neural subdivision")
+    check_manifold(V, F, "Neural subdivision", LOOP_WORKS)
     if len(F) * 4 ** lv > 20_000_000:
         raise ParameterError(f"{lv} levels would make {len(F) * 4 ** lv:,} triangles; use fewer "
                              f"levels.")

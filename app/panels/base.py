@@ -51,6 +51,9 @@ class MethodPanel(QDockWidget):
     #: Run (not only a live re-run) on top of this panel's last result starts again from the
     #: shape that result came from (see :meth:`start_state`); the footer says which shape
     run_from_base = False
+    #: the plot shows a Run's curve (cleared when that run is cancelled: the mesh goes back),
+    #: not a job whose Stop keeps a result (Subdivision's training keeps its best weights)
+    plot_shows_run = True
     plot_title = ""
     plot_log_y = False
     #: what the plot says while it is empty (e.g. which button fills it)
@@ -465,6 +468,7 @@ class MethodPanel(QDockWidget):
         self._debounce.stop()
         self.show_live_state("running" if live else None)
         self.plot.clear()
+        self.plot_shows_run = True  # the curve of a run whose result Stop throws away
         self.status_label.setText("Starting…")
         merge_id = self.merge_id if live else -1
         if self.changes_faces:
@@ -687,5 +691,6 @@ class MethodPanel(QDockWidget):
     def _on_cancelled(self, _message: str) -> None:
         # the mesh went back to how it was: the plot no longer shows the cancelled run's curve
         # (a live re-run that replaced the cancelled one fills it again)
-        if self.window_.last_job_name == self.title and not self.window_.runner.busy:
+        if (self.window_.last_job_name == self.title and not self.window_.runner.busy
+                and self.plot_shows_run):
             self.plot.clear()

@@ -166,6 +166,7 @@ class SubdivisionPanel(MethodPanel):
         self.last_request = {"params": params, "options": options, "input": state,
                              "recipe": name}
         self.plot.clear()
+        self.plot_shows_run = False  # Stop keeps the best weights: the loss curve stays
         self.status_label.setText("Making training data…")
         holder: dict = {}
 

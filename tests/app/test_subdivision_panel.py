@@ -261,3 +261,43 @@ def test_default_run_on_a_dense_mesh_says_what_the_network_did(window, dialogs, 
     qtbot.waitUntil(lambda: "Done" in panel.status_label.text(), timeout=10000)
     text = panel.status_label.text()
     assert "Loop subdivision was used" in text and "Coarsen first" in text
+
+
+def test_a_mesh_clean_cannot_fix_gets_advice_that_works_and_no_working_status(
+        window, dialogs, qtbot, tmp_path, monkeypatch):
+    """Issue 41 item 1: on a mesh Clean cannot fix, Subdivision said "'Clean' can fix both",
+    Clean then said nothing could be fixed, and nothing suggested Loop, which works; while the
+    error dialog was open the status bar still said "working" with Cancel (Esc)."""
+    from algorithms.mesh import write_mesh
+    from tests.algorithms.subdivision.test_baselines import _moebius
+
+    V, F = _moebius(40)
+    path = tmp_path / "strip.obj"
+    write_mesh(path, V, F)
+    dialogs.answers += ["Open anyway"] * 3  # whatever the open asks about the strip
+    assert window.open_path(path)
+    panel = window.panels["Subdivision"]
+    panel.raise_()
+    panel.live_box.setChecked(False)
+    seen = []
+    real_error = dialogs.error
+
+    def error(parent, title, text, details=None):
+        seen.append((text, window.cancel_button.isVisible(), window.job_label.isVisible(),
+                     window.progress_bar.isVisible()))
+        real_error(parent, title, text, details)
+
+    from app import dialogs as mod
+
+    monkeypatch.setattr(mod, "error", error)
+    with qtbot.waitSignal(window.runner.failed, timeout=60000):
+        panel.run_button.click()
+    qtbot.waitUntil(lambda: bool(seen), timeout=10000)
+    text, cancel, job, progress = seen[0]
+    assert "'Clean' cannot fix it" in text and "Method to 'loop'" in text, text
+    assert not (cancel or job or progress)  # not "working" behind the message
+    # the advice works: Loop subdivides it
+    panel.form.set_value("method", "loop")
+    with qtbot.waitSignal(window.job_committed, timeout=60000):
+        panel.run_button.click()
+    assert len(window.document.F) == len(F) * 4 ** panel.form.params().levels

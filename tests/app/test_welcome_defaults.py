@@ -108,3 +108,31 @@ def test_the_orange_suggestion_shows_its_colours_and_is_classified_an_orange(win
     assert panel.top5_view.entries[0][0] == "orange"
     window.panels["Cubic"].raise_()
     qtbot.waitUntil(lambda: vp._field_name is None)
+
+
+def test_the_subdivision_card_shows_the_network_not_loop(window, dialogs, qtbot):
+    """Issue 41 item 3: the Subdivision card opened the blob (too dense for the network) at the
+    defaults: Loop ran silently and the result looked like the input. The card presets
+    'Coarsen first' to the count the method's own advice names, and the network runs."""
+    window.actions_by_name["welcome"].trigger()
+    dlg = window.welcome_dialog
+    qtbot.waitExposed(dlg)
+    qtbot.mouseClick(dlg.sample_buttons["Subdivision"], Qt.MouseButton.LeftButton)
+    panel = window.panels["Subdivision"]
+    qtbot.waitUntil(panel.is_shown)
+    assert panel.form.params().coarsen_first == 450
+    assert "Coarsen first" in panel.status_label.text() and "450" in panel.status_label.text()
+    from app.recipes import run
+
+    # the advice the defaults give on this mesh names the same count
+    mesh = read_mesh(SAMPLES / "blob.obj")
+    res = run("subdivision", (mesh.V, mesh.F), {}, {})
+    assert res.outcome["fallback"] and "about 450 vertices" in res.outcome["note"]
+    panel.live_box.setChecked(False)
+    steps = []
+    window.runner.finished.connect(steps.append)
+    with qtbot.waitSignal(window.job_committed, timeout=180000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    assert "Loop" not in panel.status_label.text(), panel.status_label.text()
+    assert panel.recipe().outcome(steps[-1])["method_used"] == "neural"
+    assert len(window.document.V) > 4 * 450  # two levels on the coarsened copy

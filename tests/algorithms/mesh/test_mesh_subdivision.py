@@ -79,3 +79,48 @@ def test_bad_input():
         loop_subdivide(V, np.vstack([F, [[0, 0, 1]]]))
     with pytest.raises(InvalidMeshError, match="no faces"):
         loop_subdivide(V, np.zeros((0, 3), int))
+
+
+@pytest.mark.parametrize("name", ["blob", "bumpy", "hand", "open"])
+def test_loop_is_libigls_loop_bit_for_bit(name):
+    """Our Loop (built from undirected edges, safe on any orientation) gives the same bits as
+    libigl's ``igl.loop`` on the oriented meshes it handles: 1 and 2 levels, closed and open."""
+    import igl
+
+    from algorithms.mesh import read_mesh
+    from algorithms.mesh.samples import sample_path
+    from tests.conftest import ROOT
+
+    if name == "hand":
+        m = read_mesh(ROOT / "tests" / "data" / "hand_lowres.obj")
+        V, F = m.V, m.F
+    elif name == "open":
+        V, F = grid(9, 7)
+        V = V + 0.05 * np.sin(7 * V[:, [1, 2, 0]])
+    else:
+        m = read_mesh(sample_path(name))
+        V, F = m.V, m.F
+    for levels in (1, 2):
+        ours = loop_subdivide(V, F, levels)
+        theirs = igl.loop(V, F, levels)
+        np.testing.assert_array_equal(ours[1], theirs[1])
+        np.testing.assert_array_equal(ours[0], theirs[0])
+
+
+def test_loop_on_a_one_sided_strip_is_safe_and_smooth():
+    """``igl.loop`` aborted the process ("double free or corruption") on a Moebius strip; ours
+    subdivides it: each face in four, boundary vertices on the boundary rule, nothing moves
+    farther than an edge."""
+    from tests.algorithms.subdivision.test_baselines import _moebius
+
+    V, F = _moebius(40)
+    for levels in (1, 2, 3):
+        V2, F2 = loop_subdivide(V, F, levels)
+        assert len(F2) == len(F) * 4 ** levels and np.isfinite(V2).all()
+        assert np.abs(V2[:len(V)] - V).max() < 0.1
+    # the one-level matrix: rows sum to one (an affine combination), on a strip and a grid
+    from algorithms.mesh.subdivision import loop_matrix
+
+    for VV, FF in (_moebius(40), grid(5, 4)):
+        S, _ = loop_matrix(FF, len(VV))
+        np.testing.assert_allclose(np.asarray(S.sum(axis=1)).ravel(), 1.0, atol=1e-14)

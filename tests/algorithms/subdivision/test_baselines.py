@@ -85,3 +85,50 @@ def test_non_manifold_input_is_refused():
     F = np.array([[0, 1, 2], [0, 1, 3], [0, 1, 4]])
     with pytest.raises(InvalidMeshError):
         butterfly_subdivide(V, F, 1)
+
+
+def _moebius(n=24, w=0.3):
+    """A triangulated Moebius strip: one-sided, so no orientation makes every edge pair up."""
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    V = []
+    for s in (-w, w):
+        V.append(np.stack([(1 + s * np.cos(t / 2)) * np.cos(t),
+                           (1 + s * np.cos(t / 2)) * np.sin(t), s * np.sin(t / 2)], axis=1))
+    V = np.concatenate(V)
+    F = []
+    for i in range(n):
+        j = (i + 1) % n
+        a, b = i, n + i
+        c, d = (j, n + j) if j else (n + j, j)  # the half twist joins the ends swapped
+        F += [[a, c, b], [b, c, d]]
+    return V, np.array(F)
+
+
+def test_advice_to_clean_only_when_clean_fixes_it_else_loop():
+    """Issue 41 item 1: a mesh Clean cannot fix was told "'Clean' can fix both", and Clean then
+    said "Nothing could be fixed automatically": circular advice. Now the message advises Clean
+    only when Clean fixes it, and otherwise names Loop, which works on it."""
+    from algorithms.mesh.subdivision import loop_subdivide
+    from algorithms.mesh.validate import clean_mesh
+    from algorithms.subdivision.data import check_manifold
+
+    V, F = _moebius()
+    with pytest.raises(InvalidMeshError) as e:
+        butterfly_subdivide(V, F, 1)
+    msg = str(e.value)
+    assert "'Clean' cannot fix it" in msg and "--method loop" in msg, msg
+    assert clean_mesh(V, F).actions[0] == "Nothing could be fixed automatically."
+    Vl, Fl = loop_subdivide(V, F, 1)                 # the advice works
+    assert len(Fl) == 4 * len(F) and np.isfinite(Vl).all()
+    # a closed mesh with one triangle flipped: Clean fixes it, and the message says so
+    from algorithms.mesh.samples import sample_path
+    from algorithms.mesh import read_mesh
+
+    m = read_mesh(sample_path("blob"))
+    F2 = m.F.copy()
+    F2[0] = F2[0, ::-1]
+    with pytest.raises(InvalidMeshError) as e:
+        check_manifold(m.V, F2, "Neural subdivision")
+    assert "'Clean' fixes this." in str(e.value)
+    c = clean_mesh(m.V, F2)
+    check_manifold(c.V, c.F, "Neural subdivision")  # no error after Clean
