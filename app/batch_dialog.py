@@ -83,6 +83,12 @@ class BatchDialog(QDialog):
         if front:
             self.panel_combo.setCurrentText(front)
         form.addRow("Method", self.panel_combo)
+        # what the batch does differently from the panel (said before Start, never silently)
+        self.note_label = QLabel()
+        self.note_label.setWordWrap(True)
+        self.note_label.setStyleSheet("color: #b45309;")
+        self.note_label.setVisible(False)
+        form.addRow("", self.note_label)
         self.inputs = QListWidget()
         self.inputs.setToolTip("Mesh files and folders (folders are searched with their "
                                "sub-folders for OBJ, PLY, STL, OFF, glb and .s3d files).")
@@ -150,7 +156,23 @@ class BatchDialog(QDialog):
         self.start_button.clicked.connect(self.start)
         self.cancel_button.clicked.connect(self.stop)
         self.close_button.clicked.connect(self.close)
+        self.panel_combo.currentTextChanged.connect(lambda _t: self.update_note())
+        self.update_note()
         self.resize(720, 560)
+
+    def update_note(self) -> None:
+        """Say what the batch will do differently from the chosen panel (or hide the note)."""
+        from app.batch import settings_note
+
+        title = self.panel_combo.currentText()
+        panel = self.window_.panels.get(title)
+        note = settings_note(title, panel.job_options()) if panel is not None else ""
+        self.note_label.setText(note)
+        self.note_label.setVisible(bool(note))
+
+    def showEvent(self, event) -> None:  # noqa: N802 - Qt override
+        self.update_note()  # the panel's settings may have changed since the dialog was made
+        super().showEvent(event)
 
     # -- inputs -----------------------------------------------------------------------------
     def add_inputs(self, paths) -> None:

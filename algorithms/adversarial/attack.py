@@ -166,20 +166,25 @@ class Scene:
         return np.asarray(V) * self.scale + self.center
 
 
-def prepare_scene(V, F, *, albedo=0.7, lighting="Grace Cathedral", background: float = 0.0
-                  ) -> Scene:
+def prepare_scene(V, F, *, albedo=0.7, lighting="Grace Cathedral", background: float = 0.0,
+                  frame=None) -> Scene:
     """Scale ``(V, F)`` to a unit box and attach albedo (number, colour, per-face or per-vertex
-    colours) and lighting (an environment name or a (49, 3) array)."""
+    colours) and lighting (an environment name or a (49, 3) array). ``frame``: ``(cx, cy, cz,
+    size)`` to use instead of the box of ``V`` (the box of the shape before a geometry attack:
+    the attacked shape is then seen exactly as the attack saw it, not re-centred on its own
+    slightly different box)."""
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     if V.ndim != 2 or V.shape[1] != 3 or len(V) < 3 or F.ndim != 2 or F.shape[1] != 3 or \
             len(F) == 0 or not np.isfinite(V).all():
         raise InvalidMeshError("The shape needs finite 3D vertices and at least one triangle.")
-    lo, hi = V.min(0), V.max(0)
-    size = float((hi - lo).max())
-    if size <= 0:
-        raise InvalidMeshError("The shape has no extent (all its vertices are at one point).")
-    center = (lo + hi) / 2
+    if frame is None:
+        center, size = scene_frame(V)
+    else:
+        fr = np.asarray(frame, dtype=np.float64).ravel()
+        if fr.shape != (4,) or not np.isfinite(fr).all() or fr[3] <= 0:
+            raise ParameterError(f"A frame is (cx, cy, cz, size) with size > 0; got {frame!r}.")
+        center, size = fr[:3], float(fr[3])
     Vn = (V - center) / size
     if isinstance(lighting, str):
         U = environment(lighting)
@@ -195,6 +200,17 @@ def prepare_scene(V, F, *, albedo=0.7, lighting="Grace Cathedral", background: f
             U = Uf
     return Scene(Vn, F, face_albedo(F, albedo, channels=3), U.copy(), center, size,
                  float(background))
+
+
+def scene_frame(V) -> tuple[np.ndarray, float]:
+    """``(centre, size)`` of the unit-box scaling :func:`prepare_scene` applies to ``V``: the
+    centre of its bounding box and its longest side."""
+    V = np.asarray(V, dtype=np.float64)
+    lo, hi = V.min(0), V.max(0)
+    size = float((hi - lo).max())
+    if not size > 0:
+        raise InvalidMeshError("The shape has no extent (all its vertices are at one point).")
+    return (lo + hi) / 2, size
 
 
 def orbit_cameras(azimuths_deg: Sequence[float], *, elevation: float = 30.0,

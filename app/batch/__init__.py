@@ -47,11 +47,11 @@ from app.batch.driver import (REPORT_NAME, BatchError, BatchSummary, default_mem
 from app.batch.inputs import collect_inputs, collect_inputs_with_roots, output_names
 from app.batch.jobs import (METHODS, PANEL_METHODS, BatchUsageError, Job, build_job,
                             job_from_settings, method_parser, parse_batch_args,
-                            write_panel_settings)
+                            settings_note, write_panel_settings)
 from app.batch.worker import EXIT_MEMORY, EXIT_TIME, run_task
 
 __all__ = ["BatchError", "BatchSummary", "BatchUsageError", "EXIT_MEMORY", "EXIT_TIME", "Job",
            "METHODS", "PANEL_METHODS", "REPORT_NAME", "build_job", "collect_inputs",
-           "collect_inputs_with_roots",           "default_memory_limit", "job_from_settings", "method_parser", "output_names",
-           "parse_batch_args", "parse_size", "plan", "read_report", "run_batch", "run_task",
-           "write_panel_settings"]
+           "collect_inputs_with_roots", "default_memory_limit", "job_from_settings",
+           "method_parser", "output_names", "parse_batch_args", "parse_size", "plan",
+           "read_report", "run_batch", "run_task", "settings_note", "write_panel_settings"]

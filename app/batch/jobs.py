@@ -139,6 +139,7 @@ class Job:
         when they are the same.
     blobs : ``{reference: bytes}`` of every blob the options refer to.
     clean : clean each mesh first (``--clean``); source : where the settings came from.
+    note : what the batch does differently from the panel (said in every record).
     """
 
     method: str
@@ -150,6 +151,9 @@ class Job:
     blobs: dict = field(default_factory=dict)
     clean: bool = False
     source: str = "flags"
+    #: what the batch does differently from the panel whose settings it applies
+    #: (:func:`settings_note`); every record's ``notes`` carries it
+    note: str = ""
 
     def options_for(self, n_faces: int) -> dict:
         """The options for a mesh of ``n_faces`` triangles."""
@@ -181,7 +185,7 @@ class Job:
         return {"method": self.method, "recipe": self.recipe, "params": self.params,
                 "options": self.options, "large_options": self.large_options,
                 "large_faces": self.large_faces, "clean": self.clean, "source": self.source,
-                "blobs": {ref: len(b) for ref, b in self.blobs.items()}, "key": self.key}
+                "note": self.note, "blobs": {ref: len(b) for ref, b in self.blobs.items()}, "key": self.key}
 
 
 # ----------------------------------------------------------------------------- the parser
@@ -455,6 +459,20 @@ def build_job(method: str, flags: list[str] | tuple = (), *, panel: str | None =
                              f"{method} (exit status {e.code}).") from None
 
 
+def settings_note(panel: str, options: dict) -> str:
+    """What a batch does differently from the panel with these settings, in plain words (""
+    when nothing): the batch dialog shows it before Start, and the job's ``source`` (the
+    summary and the report's header) keeps it."""
+    signal = (options or {}).get("signal", "positions")
+    if panel == "Multigrid smoothing" and signal != "positions":
+        what = {"noise": "its noisy test field", "loaded": "the field loaded from a file"}.get(
+            signal, f"its {signal!r} signal")
+        return (f"The Multigrid smoothing panel is set to smooth {what}, which belongs to the "
+                "open mesh. A batch writes meshes, so it smooths each mesh's shape (its vertex "
+                "positions) with the panel's Smoothness and solver.")
+    return ""
+
+
 def job_from_settings(panel: str, params, options: dict, *, flags: list[str] | tuple = ()
                       ) -> Job:
     """The Job that applies a panel's settings (its Params or dict and its ``job_options()``)
@@ -474,10 +492,15 @@ def job_from_settings(panel: str, params, options: dict, *, flags: list[str] | t
     except SystemExit as e:
         raise ParameterError(f"The flags {' '.join(map(str, flags))!r} are not valid for "
                              f"{command} (exit status {e.code}).") from None
-    return job_from_args(command, args, project, f"{panel} panel settings")
+    note = settings_note(panel, options)
+    source = f"{panel} panel settings" + (" (signal: the vertex positions, not the panel's "
+                                          f"{options.get('signal')} field)" if note else "")
+    job = job_from_args(command, args, project, source)
+    job.note = note
+    return job
 
 
 __all__ = ["BatchUsageError", "Job", "METHODS", "MethodSpec", "NO_BATCH_FORM",
            "PANEL_METHODS", "SETTINGS_FORMAT", "build_job", "choose_panel", "job_from_args",
            "job_from_settings", "method_parser", "parse_batch_args", "resolve_method",
-           "write_panel_settings"]
+           "settings_note", "write_panel_settings"]

@@ -227,6 +227,8 @@ def _run(job, task: dict, rec: dict) -> dict:
     rec["input_sha256"] = file_sha256(task["input"])
     rec["key"] = record_key(rec["input_sha256"], job.key)
     state, notes = _read(job, task["input"])
+    if getattr(job, "note", ""):
+        notes = [job.note] + list(notes)
     if notes:
         rec["notes"] = notes
     limit = task.get("memory_limit")

@@ -164,6 +164,9 @@ class AdversarialPanel(MethodPanel):
         self._attack_mode = "lighting"
         self._attack_lighting_before: np.ndarray | None = None
         self._revert_to: tuple | None = None   # (lighting, environment) before the last attack
+        # (positions of a geometry attack's result, the unit-box frame of the shape before the
+        # attacks): that result is classified in the frame the attack saw it in
+        self._attack_frame: tuple | None = None
         self._preview_stale = True
         self.preview_runner = JobRunner(self)
         self.preview_runner.finished.connect(self._on_preview_done)
@@ -821,7 +824,23 @@ class AdversarialPanel(MethodPanel):
                 "classifier": self._classifier_ref,
                 "classifier_name": self.classifier_name,
                 "color": [float(x) for x in self.color],
-                "face_colors": self._face_colors_ref(self.window_.document.state)}
+                "face_colors": self._face_colors_ref(self.window_.document.state),
+                "frame": self._frame_for(self.window_.document.state)}
+
+    def _frame_for(self, state):
+        """The unit-box frame to classify ``state`` in: the frame of the shape before this
+        panel's geometry attacks when ``state`` is their result (else None: its own box)."""
+        keep = self._attack_frame
+        if state is not None and keep is not None and state.V is keep[0]:
+            return list(keep[1])
+        return None
+
+    def _on_committed(self, name: str, after) -> None:
+        super()._on_committed(name, after)
+        before = self._pending_input
+        if name == self.title and self._attack_mode == "geometry" and before is not None:
+            frame = self._frame_for(before) or rcp.frame_of(before)
+            self._attack_frame = (after.V, frame)
 
     def restore_options(self, options: dict) -> None:
         """Set the classifier, labels, view, lighting (sliders and environment) and colours

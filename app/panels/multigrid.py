@@ -461,6 +461,10 @@ class MultigridPanel(MethodPanel):
             src = self._input_values(doc.state) if self.signal != "positions" else None
             vals = fields.get(RESULT_FIELD) if i == 0 and self.signal != "positions" else src
             if vals is None:
+                # no smoothed field yet (a new noisy field, or undone to it): show the input
+                # rather than an uncoloured mesh
+                vals = src
+            if vals is None:
                 vp.show_field(None)
                 return
             vp.show_field("signal", vals, "viridis", signal_range(src))

@@ -42,6 +42,11 @@ jobs, whose window job is always named "Adversarial lighting", say which recipe 
     What the panel shows for the classifier (not used by the run).
 ``color`` : [r, g, b] in [0, 1]
     The surface colour (default 0.7 grey) when ``face_colors`` is None.
+``frame`` : [cx, cy, cz, size] or None
+    The unit-box scaling of the shape (default: its own bounding box). The panel passes the
+    box of the shape before its geometry attacks, so an attacked shape is classified exactly as
+    the attack saw it (re-centred on its own box the picture moves by a fraction of a pixel,
+    enough to change an adversarial prediction by several points).
 ``face_colors`` : str or None
     A blob reference of an ``.npy`` array (m, 3) of per-face colours in [0, 1] (the mesh file's
     colours, see :func:`face_colors_ref`), used instead of ``color``.
@@ -76,7 +81,7 @@ from app.recipes import Recipe, blob_bytes, blob_path, put_blob, register, uncha
 __all__ = ["LIGHTING", "GEOMETRY", "CLASSIFY", "PreviewStep", "AttackStep", "classifier_of",
            "load_classifier_file", "remember_classifier", "class_names_of", "resolve_label",
            "top_k", "environment_lighting", "full_lighting", "face_colors_ref",
-           "face_colors_of", "read_face_colors", "azimuths_of", "exact_moves",
+           "face_colors_of", "read_face_colors", "azimuths_of", "exact_moves", "frame_of",
            "lighting_steps", "geometry_steps", "classify_steps", "attack_outcome",
            "classify_outcome"]
 
@@ -279,6 +284,14 @@ def _albedo_of(state, options: dict):
     return np.array([float(x) for x in options.get("color", DEFAULT_COLOR)])
 
 
+def frame_of(state) -> list[float]:
+    """``[cx, cy, cz, size]``: the unit-box frame the renders of ``state`` use by default."""
+    from algorithms.adversarial.attack import scene_frame
+
+    c, size = scene_frame(state.V)
+    return [float(x) for x in c] + [float(size)]
+
+
 def azimuths_of(options: dict, views: int) -> list[float]:
     """The views' azimuths (degrees): ``options["azimuths"]``, else ``views`` evenly spaced
     from ``options["azimuth"]``."""
@@ -293,7 +306,8 @@ def scene_and_cameras(state, params, options: dict, views: int):
     from algorithms.adversarial.attack import orbit_cameras, prepare_scene
 
     scene = prepare_scene(np.asarray(state.V), np.asarray(state.F),
-                          albedo=_albedo_of(state, options), lighting=_lighting_of(options))
+                          albedo=_albedo_of(state, options), lighting=_lighting_of(options),
+                          frame=options.get("frame"))
     cams = orbit_cameras(azimuths_of(options, views), elevation=params.elevation,
                          width=params.view_width,
                          resolution=params.resolution * params.supersample)
@@ -435,7 +449,8 @@ def classify_steps(state, params, options: dict | None = None, cache: dict | Non
     options = options or {}
     clf = classifier_of(options.get("classifier"))
     scene, cams = scene_and_cameras(state, params, options, 1)
-    images, renders, _ = render_views(scene, cams[:1], supersample=params.supersample)
+    images, renders, _ = render_views(scene, cams[:1], supersample=params.supersample,
+                                      formation=params.formation)
     p = classify(clf, images)[0]
     yield PreviewStep(0, None, np.asarray(state.V), {}, "", image=images[0].astype(np.float32),
                       probs=p, names=tuple(clf.class_names),

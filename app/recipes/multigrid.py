@@ -493,6 +493,13 @@ def compare_steps(state, params, options=None, cache=None) -> Iterator[Step]:
         if k < len(kinds) - 1:
             yield Step(k + 1, 2, V, {}, msg)
     im = infos["multigrid"]
+    # the multigrid solve's V-cycles, for the panel's residual plot (relative to the first)
+    res = np.asarray(im.get("multigrid_residuals") or im.get("residuals") or [],
+                     dtype=np.float64)
+    if res.size > 1:
+        res = res / (res[0] if res[0] > 0 else 1.0)
+        for k, r in enumerate(res[1:], 1):
+            yield Step(k, None, V, {"relative residual": float(r)}, "")
     figures = {"multigrid_cycles": int(im.get("multigrid_cycles", im.get("cycles", 0))),
                "multigrid_relative_residual": _relres(im),
                "multigrid_fallback": bool(im.get("fallback")),

@@ -123,3 +123,41 @@ def test_batch_dialog_asks_before_replacing_files(window, dialogs, qtbot, tmp_pa
     assert not dlg.start()
     assert (out / "m0.obj").read_text() == "precious"
     assert "replaced" in dialogs.questions[-1][1]
+
+
+def test_batch_of_multigrid_smoothing_says_it_smooths_the_shape_not_the_test_field(
+        window, dialogs, qtbot, tmp_path):
+    """Issue 41 item 4: a batch of Multigrid smoothing smoothed each mesh's shape while the
+    panel smoothed its noisy test field, and said nothing. The dialog says so before Start,
+    and the summary's source keeps it."""
+    assert window.open_path(SAMPLES / "bumpy.obj")
+    mg = window.panels["Multigrid smoothing"]
+    mg.raise_()
+    qtbot.waitUntil(mg.is_shown)
+    assert mg.signal == "noise"  # the panel's default: its noisy test field
+    window.actions_by_name["batch"].trigger()
+    dlg = window.batch_dialog
+    dlg.panel_combo.setCurrentText("Multigrid smoothing")
+    assert dlg.note_label.isVisible()
+    assert "noisy test field" in dlg.note_label.text() and "vertex positions" in \
+        dlg.note_label.text()
+    dlg.panel_combo.setCurrentText("Cubic")
+    assert not dlg.note_label.isVisible()
+    dlg.panel_combo.setCurrentText("Multigrid smoothing")
+    lib = _library(tmp_path / "lib", n=1)
+    dialogs.open_paths.append(str(lib))
+    dlg.add_folder_button.click()
+    dialogs.open_paths.append(str(tmp_path / "out"))
+    dlg.out_button.click()
+    dlg.start_button.click()
+    qtbot.waitUntil(lambda: dlg.summary is not None, timeout=240000)
+    from app.batch import read_report
+
+    recs = [r for k, r in read_report(tmp_path / "out" / "batch-report.jsonl").items()
+            if k != "__task_ids__" and r.get("status") == "done"]
+    assert recs and all("vertex positions" in r["notes"][0] for r in recs)
+    # with the panel on the positions there is nothing to say
+    mg.signal_combo.setCurrentIndex(__import__("app.recipes.multigrid", fromlist=["SIGNALS"])
+                                    .SIGNALS.index("positions"))
+    dlg.update_note()
+    assert not dlg.note_label.isVisible()

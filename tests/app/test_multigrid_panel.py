@@ -369,3 +369,36 @@ def test_panel_imports_no_numerical_code():
                       or a.name.isupper() or a.name in allowed
                       or (node.module == "algorithms.steps" and a.name == "Step"))
                 assert ok, f"{node.module}.{a.name}"
+
+
+def test_the_noisy_input_is_shown_and_compare_plots_its_cycles(window, dialogs, qtbot):
+    """Issue 41 item 4: the noisy input was never shown (undo to "New noisy test field" gave
+    an uncoloured mesh), and after Compare solvers the residual plot was blank although the
+    panel reported the multigrid solve's cycles."""
+    from app.recipes.multigrid import NOISY_FIELD
+
+    panel = open_panel(window)
+    panel.live_box.setChecked(False)
+    panel.new_noise()
+    vp = window.viewport
+    noisy = window.document.state.fields[NOISY_FIELD]
+    assert vp._field_name == "signal"
+    np.testing.assert_allclose(np.asarray(vp.poly.point_data["signal"]), noisy)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    assert panel.view_combo.currentIndex() == 0  # the smoothed field
+    smoothed = np.asarray(vp.poly.point_data["signal"]).copy()
+    assert roughness(window.document.V, window.document.F, smoothed) < \
+        0.5 * roughness(window.document.V, window.document.F, noisy)
+    window.undo_stack.undo()  # back to the noisy field: shown in colour, not a plain mesh
+    assert window.undo_stack.undoText() == "New noisy test field"
+    assert vp._field_name == "signal"
+    np.testing.assert_allclose(np.asarray(vp.poly.point_data["signal"]), noisy)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.compare_button.click()
+    res = panel.plot.series.get("relative residual", [])
+    assert len(res) >= 2 and res[-1] < res[0], res
+    import re
+
+    m = re.search(r"(\d+) cycles?", panel.times_label.text())
+    assert m and len(res) == int(m.group(1)), (panel.times_label.text(), len(res))
