@@ -153,6 +153,7 @@ class BatchDialog(QDialog):
         self.add_folder_button.clicked.connect(self.add_folder_dialog)
         self.remove_button.clicked.connect(self._remove_selected)
         self.out_button.clicked.connect(self.choose_output_dialog)
+        self.out_edit.textChanged.connect(lambda _t: self._update_hint())
         self.start_button.clicked.connect(self.start)
         self.cancel_button.clicked.connect(self.stop)
         self.close_button.clicked.connect(self.close)
@@ -181,6 +182,24 @@ class BatchDialog(QDialog):
             if p and str(p) not in have:
                 self.inputs.addItem(str(p))
                 have.add(str(p))
+        self._update_hint()
+
+    def _update_hint(self) -> None:
+        """The line under the progress bar says what is still missing, or that Start is ready
+        (it kept saying "Add meshes and an output folder" after both were set)."""
+        if self.running:
+            return
+        n = self.inputs.count()
+        out = self.out_edit.text().strip()
+        if not n and not out:
+            text = "Add meshes and an output folder, then Start."
+        elif not n:
+            text = "Add meshes (files or folders), then Start."
+        elif not out:
+            text = "Choose an output folder, then Start."
+        else:
+            text = (f"Ready: {n} item(s) added; results go to {out}. Press Start.")
+        self.status.setText(text)
 
     def add_files_dialog(self) -> None:
         from algorithms.mesh import file_filter
@@ -202,6 +221,7 @@ class BatchDialog(QDialog):
     def _remove_selected(self) -> None:
         for item in self.inputs.selectedItems():
             self.inputs.takeItem(self.inputs.row(item))
+        self._update_hint()
 
     # -- running ----------------------------------------------------------------------------
     @property
@@ -247,6 +267,9 @@ class BatchDialog(QDialog):
                 yes="Replace", no="Cancel"):
             return False
         self.table.setRowCount(0)
+        for it in items:  # listed too: the meshes a finished earlier run already did
+            if it.action == "skip":
+                self._add_row(it.input, "skipped", it.reason)
         self.progress.setRange(0, len(inputs))
         self.progress.setValue(0)
         self.summary = None
@@ -293,12 +316,14 @@ class BatchDialog(QDialog):
                             f"skipped {counts.get('skipped', 0)} · remaining {left}{rate}")
         if rec is None:
             return
+        self._add_row(rec.get("input", ""), rec.get("status", ""), rec.get("message", ""))
+
+    def _add_row(self, path, status: str, message: str) -> None:
         r = self.table.rowCount()
         self.table.insertRow(r)
-        for c, text in enumerate((Path(rec.get("input", "")).name, rec.get("status", ""),
-                                  rec.get("message", ""))):
+        for c, text in enumerate((Path(path).name, status, message)):
             item = QTableWidgetItem(str(text))
-            item.setToolTip(str(rec.get("input", "")) if c == 0 else str(text))
+            item.setToolTip(str(path) if c == 0 else str(text))
             self.table.setItem(r, c, item)
         self.table.scrollToBottom()
 

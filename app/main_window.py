@@ -434,13 +434,19 @@ class MainWindow(QMainWindow):
             a = self.recent_menu.addAction(p)
             a.triggered.connect(lambda _=False, p=p: self.open_path(p))
 
+    def _document_name(self) -> str:
+        """What the window is about, as its title says: the project it was opened from or saved
+        as, else the mesh file, else "The mesh"."""
+        if self.project_path is not None:
+            return self.project_path.name
+        return self.document.path.name if self.document.path else "The mesh"
+
     def _confirm_discard(self) -> bool:
         if not self.document.modified:
             return True
         return dialogs.confirm(self, "Unsaved changes",
-                               f"{self.document.path.name if self.document.path else 'The mesh'} "
-                               "has changes that are not saved. Discard them?",
-                               yes="Discard changes", no="Cancel")
+                               f"{self._document_name()} has changes that are not saved. "
+                               "Discard them?", yes="Discard changes", no="Cancel")
 
     def open_dialog(self) -> bool:
         path = dialogs.open_file(self, "Open mesh", file_filter(), self._last_dir())

@@ -417,6 +417,11 @@ class StudySession(QObject):
     def _finish_session(self) -> None:
         self._log("session_end")
         self.finished = True
+        # every task's result is saved next to the log: quitting must not ask the participant
+        # to discard changes to the sample mesh (issue 41)
+        self.window.undo_stack.setClean()
+        self.window.document.modified = False
+        self.window._update_title()
         self._cam_timer.stop()
         self._tick.stop()
         self.bar.clock.setText("")

@@ -111,6 +111,30 @@ def test_batch_dialog_stop_then_continue(window, dialogs, qtbot, tmp_path):
     assert not second.stopped
     assert second.done + first.done == 8  # nothing done twice, nothing left out
     assert second.skipped >= first.done
+    # the meshes the first start did are listed as skipped, with the reason (issue 41)
+    rows = [(dlg.table.item(r, 0).text(), dlg.table.item(r, 1).text(),
+             dlg.table.item(r, 2).text()) for r in range(dlg.table.rowCount())]
+    skipped = [r for r in rows if r[1] == "skipped"]
+    assert len(skipped) == second.skipped and all(r[2] for r in skipped), rows
+    assert len(rows) == 9  # every input once: 8 meshes and the broken file
+
+
+def test_batch_dialog_hint_says_what_is_missing(window, dialogs, qtbot, tmp_path):
+    """Issue 41 item 11: "Add meshes and an output folder" stayed after both were set."""
+    window.actions_by_name["batch"].trigger()
+    dlg = window.batch_dialog
+    assert dlg.status.text() == "Add meshes and an output folder, then Start."
+    lib = _library(tmp_path / "lib", n=1)
+    dialogs.open_paths.append(str(lib))
+    dlg.add_folder_button.click()
+    assert dlg.status.text() == "Choose an output folder, then Start."
+    dialogs.open_paths.append(str(tmp_path / "out"))
+    dlg.out_button.click()
+    assert dlg.status.text().startswith("Ready: 1 item(s) added") and "Start" in \
+        dlg.status.text()
+    dlg.inputs.setCurrentRow(0)
+    dlg.remove_button.click()
+    assert dlg.status.text() == "Add meshes (files or folders), then Start."
 
 
 def test_batch_dialog_asks_before_replacing_files(window, dialogs, qtbot, tmp_path):

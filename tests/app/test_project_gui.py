@@ -149,3 +149,25 @@ def test_project_saved_in_the_app_remakes_the_run_headless(window, dialogs, qtbo
     assert not window.open_path(bad)
     assert dialogs.errors and "project" in dialogs.errors[-1][0].lower()
     assert _h(window.document.state) == _h(st)
+
+
+def test_the_discard_prompt_names_the_project_the_window_is_about(window, dialogs, qtbot,
+                                                                  tmp_path):
+    """Issue 41 item 11: the prompt named another file than the project in the title bar."""
+    import shutil
+
+    from tests.conftest import SAMPLES
+
+    proj = tmp_path / "mine.s3d"
+    shutil.copy(SAMPLES / "blob-painted.s3d", proj)
+    assert window.open_project(proj)
+    assert window.windowTitle().startswith("mine.s3d")
+    smooth = window.panels["Smooth"]
+    smooth.live_box.setChecked(False)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        smooth.run_button.click()
+    dialogs.answers.append("Cancel")
+    window.close()
+    title, text, _ = dialogs.questions[-1]
+    assert title == "Unsaved changes" and text.startswith("mine.s3d has changes"), text
+    assert window.isVisible()  # Cancel keeps the window

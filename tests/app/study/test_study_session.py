@@ -221,3 +221,27 @@ def test_malformed_protocol_from_the_command_line(tmp_path):
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "Task 1: 'id' must be" in r.stderr
+
+
+def test_quitting_after_the_session_asks_nothing(window, dialogs, qtbot, tmp_path):
+    """Issue 41 item 11: after "Session complete", quitting asked to discard changes to the
+    sample mesh (worrying participants); every task's result is saved next to the log."""
+    from app.commands import StateCommand
+    from app.study.session import start_study
+
+    session = start_study(window, protocol(tmp_path), log_dir=tmp_path / "logs",
+                          participant="P05", condition="A")
+    session.end_task("done")
+    session.questionnaire_dialog.set_answer("ease", 4)
+    session.questionnaire_dialog.accept()
+    st = window.document.state  # a change in the last task: the window has unsaved changes
+    window.undo_stack.push(StateCommand(window.document, st,
+                                        st.with_field("lambda_scale", np.ones(len(st.V))),
+                                        "Paint λ scale"))
+    assert window.document.modified
+    session.end_task("done")
+    assert session.finished
+    assert (session.log.results_dir / "cube-it.obj").is_file()
+    assert not window.document.modified and not window.isWindowModified()
+    window.close()  # no question (the recorder raises on an unexpected one)
+    assert not window.isVisible()
