@@ -260,6 +260,7 @@ class MainWindow(QMainWindow):
 
     def _build_toolbar(self) -> None:
         """The common actions as icons (the same actions as the menus)."""
+        from PySide6.QtGui import QFontMetrics
         from PySide6.QtWidgets import QStyle, QToolBar
 
         tb = QToolBar("Toolbar", self)
@@ -297,6 +298,27 @@ class MainWindow(QMainWindow):
                     a.setToolTip(f"{a.toolTip() or a.text().replace('&', '')} ({keys})")
                 tb.addAction(a)
                 self.toolbar_buttons[name] = tb.widgetForAction(a)
+        # Undo / Redo name the step ("Undo Cubic") in a button of one fixed width, the name
+        # shortened with "…" when long: the buttons after them no longer jump as it changes
+        for name, prefix, signal in (("undo", "Undo", self.undo_stack.undoTextChanged),
+                                     ("redo", "Redo", self.undo_stack.redoTextChanged)):
+            b = self.toolbar_buttons[name]
+            width = b.fontMetrics().horizontalAdvance(f"{prefix} Spectral coarsening") + 16
+            b.setFixedWidth(width)
+            a = self.actions_by_name[name]
+
+            def show(text, a=a, fm=QFontMetrics(b.font()), prefix=prefix, width=width):
+                import shiboken6
+
+                if not shiboken6.isValid(a):  # the window is being destroyed
+                    return
+                full = f"{prefix} {text}".strip()
+                a.setIconText(fm.elidedText(full, Qt.TextElideMode.ElideRight, width - 12))
+                keys = a.shortcut().toString()
+                a.setToolTip(f"{full} ({keys})" if keys else full)
+
+            signal.connect(show)
+            show("")
         self.addToolBar(Qt.ToolBarArea.TopToolBarArea, tb)
         self.toolbar = tb
 

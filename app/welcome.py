@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 from PySide6.QtCore import QSize, QStandardPaths, Qt
 from PySide6.QtGui import QIcon
 from PySide6.QtWidgets import (QCheckBox, QDialog, QGridLayout, QHBoxLayout, QLabel, QPushButton,
-                               QToolButton, QVBoxLayout)
+                               QSizePolicy, QToolButton, QVBoxLayout)
 
 if TYPE_CHECKING:  # pragma: no cover
     from app.main_window import MainWindow
@@ -29,7 +29,7 @@ SAMPLES = (
     ("bumpy.obj", "Smooth", "Smooth", "Run smooths the bumps away"),
     ("bumpy.obj", "Multigrid smoothing", "Multigrid", "Run, then compare solvers"),
     ("pretzel.obj", "Spectral coarsening", "Spectral", "Run: a small operator alike"),
-    ("blob.obj", "Subdivision", "Subdivision", "Run: the network rebuilds a coarsened copy"),
+    ("blob.obj", "Subdivision", "Subdivision", "Run: a network adds detail"),
     ("blob.obj", "Paparazzi", "Paparazzi", "Run: an image filter shapes it"),
     ("orange.obj", "Adversarial lighting", "Adversarial", "Attack: fool it with light"),
 )
@@ -140,9 +140,21 @@ class WelcomeDialog(QDialog):
             b.setMinimumWidth(max(THUMB_SIZE[0] + 16,
                                   *(fm.horizontalAdvance(t) + 24 for t in text.split("\n"))))
             b.setMinimumHeight(THUMB_SIZE[1] + 2 * fm.lineSpacing() + 24)
+            b.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Fixed)
             b.clicked.connect(lambda _=False, n=name, p=panel: self.open_sample(n, p))
             grid.addWidget(b, i // COLUMNS, i % COLUMNS)
             self.sample_buttons[panel] = b
+        # every card the same size, in equal columns, with a gap: a card with a longer hint
+        # made its column wider and the grid uneven (cards touching at 1024 x 700)
+        if self.sample_buttons:
+            w = max(b.minimumWidth() for b in self.sample_buttons.values())
+            h = max(b.minimumHeight() for b in self.sample_buttons.values())
+            for b in self.sample_buttons.values():
+                b.setMinimumSize(w, h)
+        for c in range(COLUMNS):
+            grid.setColumnStretch(c, 1)
+        grid.setHorizontalSpacing(8)
+        grid.setVerticalSpacing(8)
         lay.addLayout(grid)
         row = QHBoxLayout()
         self.open_button = QPushButton("Open a mesh file…")

@@ -27,6 +27,7 @@ from .components import connected_components as _cc
 from ..errors import InvalidMeshError
 
 __all__ = [
+    "touching_parts",
     "halfedges",
     "unique_edges",
     "edge_flaps",
@@ -816,3 +817,31 @@ def orient_consistently(F) -> tuple[np.ndarray, np.ndarray, bool]:
     G = F.copy()
     G[flip] = G[flip][:, [0, 2, 1]]
     return G, flip, orientable
+
+
+def touching_parts(V, F, tol: float = 1e-3) -> tuple[int, int]:
+    """``(parts, touching)``: the number of connected parts of the mesh (parts that share no
+    vertex) and how many of them come within ``tol`` times the bounding-box diagonal of
+    another part (a door against its car body, a window in its frame). A method that moves
+    each part on its own (Cubic with several parts) can pull such parts apart."""
+    from scipy.spatial import cKDTree
+
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    if len(F) == 0:
+        return 0, 0
+    used = np.unique(F)
+    n_parts, lab = connected_components(F, len(V), over="vertices")
+    lab = lab[used]
+    n_parts = len(np.unique(lab))
+    if n_parts < 2:
+        return n_parts, 0
+    P = V[used]
+    diag = float(np.linalg.norm(P.max(axis=0) - P.min(axis=0)))
+    if not diag > 0:
+        return n_parts, 0
+    pairs = cKDTree(P).query_pairs(tol * diag, output_type="ndarray")
+    if not len(pairs):
+        return n_parts, 0
+    cross = pairs[lab[pairs[:, 0]] != lab[pairs[:, 1]]]
+    return n_parts, int(len(np.unique(lab[cross.ravel()])))

@@ -213,7 +213,29 @@ class CubicPanel(MethodPanel):
         else:
             brush.show()
 
+    def parts_warning(self) -> str:
+        """A warning when the mesh is made of separate parts that touch (issue 41: a 62-part
+        CAD truck fell apart: doors, hood and windows each moved on their own), else ""."""
+        st = self.window_.document.state
+        if st is None:
+            return ""
+        if getattr(self, "_parts_of", (None,))[0] is not st.F:
+            from algorithms.mesh.topology import touching_parts
+
+            self._parts_of = (st.F, touching_parts(st.V, st.F))
+        parts, touching = self._parts_of[1]
+        if not touching:
+            return ""
+        return (f"This model is made of {parts:,} separate parts, {touching:,} of them touching "
+                "another: Cubic moves each part on its own, so touching parts can come apart "
+                "(gaps, floating pieces). Parts that share vertices stay together: weld them "
+                "first if your modeller can, or stylize one part at a time.")
+
     def _on_doc(self, what: str) -> None:
+        if what in ("mesh", "topology"):
+            warning = self.parts_warning()
+            if warning:
+                self.status_label.setText(warning)
         if what == "mesh":
             st = self.window_.document.state
             big = st is not None and len(st.F) > AUTO_PROGRESSIVE_FACES
@@ -221,7 +243,8 @@ class CubicPanel(MethodPanel):
             if big:
                 self.status_label.setText(
                     f"This mesh has {len(st.F):,} triangles: progressive meshes are on, so λ "
-                    "changes take about a second after a one-time preparation.")
+                    "changes take about a second after a one-time preparation. "
+                    + self.parts_warning())
         if what == "fields" and self.is_shown():
             self._show_field(self.show_combo.currentIndex())
         elif what in ("mesh", "topology"):
@@ -239,6 +262,15 @@ class CubicPanel(MethodPanel):
         if (what in ("fields", "handles") and changed and self.live_box.isChecked()
                 and self._last is not None and st is not None and st.V is self._last[1].V):
             self._debounce.start()
+
+    def _on_finished(self, step) -> None:
+        super()._on_finished(step)
+        warning = self.parts_warning() if self.window_.last_job_name == self.title else ""
+        if warning:
+            parts = self._parts_of[1][0]
+            self.status_label.setText(f"{self.status_label.text()} The {parts:,} separate parts "
+                                      "were stylized each on its own; look for gaps where "
+                                      "they touched.")
 
     def refresh_view(self) -> None:
         self._show_field(self.show_combo.currentIndex())

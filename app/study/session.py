@@ -158,6 +158,7 @@ class QuestionnaireDialog(QDialog):
                 t.setMaximumHeight(70)
                 self.texts[item.id] = t
                 form.addWidget(t)
+        form.addStretch(1)  # a short questionnaire stays together at the top (no big gaps)
         scroll = QScrollArea()
         scroll.setWidgetResizable(True)
         scroll.setWidget(body)
@@ -170,7 +171,9 @@ class QuestionnaireDialog(QDialog):
         self.buttons.accepted.connect(self.accept)
         foot.addWidget(self.buttons)
         outer.addLayout(foot)
-        self.resize(640, 520)
+        # as tall as its questions need, up to 520 px (then the questions scroll)
+        need = body.sizeHint().height() + intro.sizeHint().height() + 90
+        self.resize(640, max(240, min(520, need)))
         self._update()
 
     def reject(self) -> None:  # noqa: D401 - Qt override

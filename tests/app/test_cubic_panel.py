@@ -300,3 +300,31 @@ def test_the_live_switch_is_in_the_footer_next_to_run(window, qtbot):
     qtbot.waitUntil(panel.is_shown)
     qtbot.wait(50)
     assert not panel.live_box.visibleRegion().isEmpty()
+
+
+def test_touching_separate_parts_are_announced_before_and_after_a_run(window, dialogs, qtbot,
+                                                                      tmp_path):
+    """Issue 41 item 2: Cubic on a 62-part CAD model pulled touching parts apart and said only
+    "Done". Separate parts that touch are named when the mesh opens and after a run."""
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.primitives import icosphere
+    from algorithms.mesh.topology import touching_parts
+
+    V, F = icosphere(2)
+    V2 = np.concatenate([V, V + [2.0, 0, 0], V + [6.0, 0, 0]])  # two touch, one apart
+    F2 = np.concatenate([F, F + len(V), F + 2 * len(V)])
+    assert touching_parts(V2, F2) == (3, 2)
+    path = tmp_path / "parts.obj"
+    write_mesh(path, V2, F2)
+    assert window.open_path(path)
+    panel = window.panels["Cubic"]
+    panel.live_box.setChecked(False)
+    assert "3 separate parts, 2 of them touching" in panel.status_label.text()
+    panel.form.editors["max_iterations"].setValue(5)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    assert "stylized each on its own" in panel.status_label.text()
+    # one part: nothing to say
+    dialogs.answers.append("Discard changes")
+    assert window.open_path(SAMPLES / "blob.obj")
+    assert panel.status_label.text() == "Ready."

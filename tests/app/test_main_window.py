@@ -341,3 +341,25 @@ def test_colour_bar_text_has_its_greek_letters_and_no_dangling_dots(window, dial
     if font is not None:  # DejaVu Sans comes with the app's system packages
         for prop in (bar.GetTitleTextProperty(), bar.GetLabelTextProperty()):
             assert prop.GetFontFile() == str(font)
+
+
+def test_toolbar_buttons_stay_put_as_the_undo_label_changes(window, dialogs, qtbot):
+    """Issue 41 item 10: the toolbar's buttons jumped as "Undo …" grew."""
+    assert window.open_path(SAMPLE)
+    window.resize(1024, 700)
+    qtbot.wait(50)
+    tb = window.toolbar_buttons
+    x0 = tb["reset_camera"].geometry().x()
+    assert tb["undo"].text() == "Undo"
+    panel = window.panels["Multigrid smoothing"]
+    panel.raise_()
+    panel.live_box.setChecked(False)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.run_button.click()
+    qtbot.wait(50)
+    assert tb["undo"].text().startswith("Undo ") and tb["reset_camera"].geometry().x() == x0
+    assert window.actions_by_name["undo"].toolTip().startswith(
+        "Undo " + window.undo_stack.undoText())
+    window.undo_stack.undo()
+    qtbot.wait(50)
+    assert tb["redo"].text().startswith("Redo") and tb["reset_camera"].geometry().x() == x0

@@ -26,6 +26,12 @@ def test_every_panel_has_one_suggestion_that_opens_its_sample(window, dialogs, q
         top_left = b.mapTo(dlg, b.rect().topLeft())
         assert top_left.x() >= 0 and top_left.x() + b.width() <= dlg.width()
     assert dlg.sizeHint().width() <= 1024 and dlg.sizeHint().height() <= 700
+    # equal cards that do not touch (a longer hint made one column wider, issue 41 item 10)
+    rects = [b.geometry() for b in dlg.sample_buttons.values()]
+    assert len({(r.width(), r.height()) for r in rects}) == 1, [r.size() for r in rects]
+    for i, a in enumerate(rects):
+        for b in rects[i + 1:]:
+            assert not a.intersects(b), (a, b)
     qtbot.mouseClick(dlg.sample_buttons["Smooth"], Qt.MouseButton.LeftButton)
     assert window.document.path.name == "bumpy.obj" and not dlg.isVisible()
     qtbot.waitUntil(window.panels["Smooth"].is_shown)

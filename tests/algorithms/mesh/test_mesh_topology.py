@@ -337,3 +337,17 @@ def test_topology_on_igea():
     assert T.boundary_loops(F) == []
     assert T.connected_components(F, V.shape[0])[0] == 1
     assert T.genus(F, V.shape[0]) == 0
+
+
+def test_touching_parts_counts_parts_near_another_part():
+    import numpy as np
+
+    from algorithms.mesh.primitives import icosphere
+    from algorithms.mesh.topology import touching_parts
+
+    V, F = icosphere(2)
+    assert touching_parts(V, F) == (1, 0)
+    for gap, touching in ((0.0, 2), (0.5, 0)):
+        V2 = np.concatenate([V, V + [2.0 + gap, 0, 0], V + [9.0, 0, 0], [[50.0, 0, 0]]])
+        F2 = np.concatenate([F, F + len(V), F + 2 * len(V)])  # + one loose vertex: ignored
+        assert touching_parts(V2, F2) == (3, touching)

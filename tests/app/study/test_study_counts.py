@@ -62,6 +62,14 @@ def test_two_task_session_counts_exactly_what_the_participant_did(window, dialog
     session.bar.done.click()
     dlg = session.questionnaire_dialog
     assert dlg is not None and dlg.isVisible()
+    # two questions: a compact dialog, the scale right under its question (issue 41 item 10:
+    # large empty gaps between them)
+    from PySide6.QtCore import QPoint
+
+    first = dlg.groups["ease"].buttons()[0].mapTo(dlg, QPoint(0, 0)).y()
+    text = dlg.texts["why"].mapTo(dlg, QPoint(0, 0)).y()
+    assert dlg.height() <= 360 and first < 120 and text - first < 100, (dlg.height(), first,
+                                                                         text)
     # Esc does not close it; Done again does not end the task twice
     qtbot.keyClick(dlg, Qt.Key.Key_Escape)
     assert dlg.isVisible() and "answer the questions" in dlg.progress.text()
