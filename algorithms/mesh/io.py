@@ -1397,7 +1397,7 @@ def _check_colors(colors, n: int, name: str, ext: str) -> np.ndarray:
 
 
 def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray, *,
-               vertex_colors=None) -> None:
+               vertex_colors=None, attributes=None) -> None:
     """Write a triangle mesh atomically (OBJ, OFF, PLY, STL or GLB).
 
     Parameters
@@ -1412,6 +1412,9 @@ def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray, *,
     vertex_colors : array_like, optional
         ``(n, 3)`` (or ``(n, 4)``, alpha dropped) colours, ``uint8`` 0..255 or floats in
         [0, 1]; PLY and OBJ only.
+    attributes : :class:`~algorithms.mesh.attributes.SurfaceAttributes`, optional
+        UVs, materials, normals and vertex colours aligned with ``F``; OBJ only (other formats
+        ignore them: :func:`attributes_kept_by` says whether a format keeps them).
 
     Raises
     ------
@@ -1436,11 +1439,25 @@ def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray, *,
             f"write. Use one of {', '.join(SUPPORTED_WRITE)}."
         )
     V, F = _check_for_writing(V, F, p.name, ext)
+    if attributes is not None and ext == ".obj" and not attributes.empty:
+        from .attributes import obj_text
+
+        if attributes.uv is not None and len(attributes.uv) != len(F):
+            raise MeshWriteError(f"Cannot save '{p.name}': its texture coordinates are for "
+                                 f"{len(attributes.uv):,} triangles, the mesh has {len(F):,}.")
+        data = obj_text(V, F, attributes)
+        atomic_write(p, lambda fh: fh.write(data))
+        return
     if vertex_colors is None:
         atomic_write(p, lambda fh: _WRITERS[ext](fh, V, F))
     else:
         colors = _check_colors(vertex_colors, V.shape[0], p.name, ext)
         atomic_write(p, lambda fh: _WRITERS[ext](fh, V, F, colors))
+
+
+def attributes_kept_by(path: str | os.PathLike) -> bool:
+    """True when :func:`write_mesh` writes UVs, materials and normals to this file's format."""
+    return Path(os.fspath(path)).suffix.lower() == ".obj"
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], None]) -> None:

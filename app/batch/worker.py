@@ -261,10 +261,31 @@ def _run(job, task: dict, rec: dict) -> dict:
         _exit(0)  # the driver is gone: do not write behind its back
     out = Path(task["output"])
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_mesh(out, V, F)
+    # the input's UVs, materials, normals and colours: kept, subdivided or said to be dropped
+    from app.cli.common import carried_attributes
+
+    attrs, status = carried_attributes(task["input"], state, _attributes_how(job, state),
+                                       out, int(job.params.get("levels", 0) or 0), F_out=F)
+    write_mesh(out, V, F, attributes=attrs)
+    if status:
+        rec["surface_attributes"] = status
+        rec["notes"] = list(rec.get("notes", [])) + [status["note"]]
     outcome = recipe.outcome(last) if recipe.outcome is not None else {}
     return {**rec, "status": "done", "message": "",
             "output_sha256": file_sha256(out), "figures": _figures(job, state, after, outcome)}
+
+
+def _attributes_how(job, state) -> str:
+    """What the method does to the input's triangles (:func:`app.cli.common.carried_attributes`):
+    "same", "subdivided", or why they are new."""
+    if job.method == "subdivide":
+        c = int(job.params.get("coarsen_first", 0) or 0)
+        if c and c < len(state.V):
+            return "'Coarsen first' remade the triangles (QSlim) before subdividing"
+        return "subdivided"
+    if job.method == "paparazzi":
+        return "Paparazzi remakes the triangles when it remeshes, so they have nowhere to go"
+    return "same"
 
 
 _malloc_tuned = False

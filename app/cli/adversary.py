@@ -107,7 +107,7 @@ def cmd_adversary(args: argparse.Namespace) -> int:
     same norm on the same views."""
     from algorithms.adversarial import AdversaryParams, short_name
     from algorithms.adversarial.lighting_io import write_lighting
-    from algorithms.mesh import write_mesh
+    from app.cli.common import write_result
     from app.recipes import adversarial as rcp
 
     t0 = time.perf_counter()
@@ -138,7 +138,8 @@ def cmd_adversary(args: argparse.Namespace) -> int:
     out = recipe.outcome(last)
     if args.output:
         if params.mode == "geometry":
-            write_mesh(args.output, recipe.result(state, last, options).V, data.F)
+            write_result(args, args.output, recipe.result(state, last, options).V, data.F,
+                         data)
         else:
             write_lighting(args.output, out["lighting"])
     names = rcp.class_names_of(rcp.classifier_of(options.get("classifier")))

@@ -95,7 +95,7 @@ def _angles_to_targets(V, F, target_map) -> tuple[float, float]:
 
 def cmd_analogy(args: argparse.Namespace) -> int:
     from algorithms.deform.analogies import AnalogyParams
-    from algorithms.mesh import write_mesh
+    from app.cli.common import write_result
     from app.recipes.analogies import style_target_map
 
     params = method_params(args, AnalogyParams, panel="Analogies")
@@ -119,7 +119,7 @@ def cmd_analogy(args: argparse.Namespace) -> int:
                       f"{last.metrics['mean_angle_to_targets']:.2f}°", file=sys.stderr)
     seconds = time.perf_counter() - t0
     V = recipe.result(state, last, options).V
-    write_mesh(args.output, V, data.F)
+    write_result(args, args.output, V, data.F, data)
     after = _angles_to_targets(V, data.F, target_map)
     if args.json:
         print_json({"input": args.mesh, "output": args.output,

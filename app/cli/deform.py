@@ -150,7 +150,7 @@ def output_for_lambda(output: str, lam: float, several: bool) -> str:
 
 def cmd_cubic(args: argparse.Namespace) -> int:
     from algorithms.deform.cubic import mean_l1_of_normals
-    from algorithms.mesh import write_mesh
+    from app.cli.common import write_result
 
     lams = lambda_values(args)
     several = lams is not None and len(lams) > 1
@@ -189,7 +189,7 @@ def cmd_cubic(args: argparse.Namespace) -> int:
         else:
             online = seconds
         V = recipe.result(state, last, options).V
-        write_mesh(output, V, data.F)
+        write_result(args, output, V, data.F, data)
         results.append({"lam": params.lam, "output": output, "params": params,
                         "iterations": last.iteration, "seconds": seconds,
                         "online_seconds": online,

@@ -193,7 +193,7 @@ def paparazzi_job(args: argparse.Namespace) -> tuple:
 
 
 def cmd_paparazzi(args: argparse.Namespace) -> int:
-    from algorithms.mesh import write_mesh
+    from app.cli.common import write_result
     from algorithms.mesh.topology import euler_characteristic, is_manifold
     from algorithms.paparazzi import count_self_intersections
     from algorithms.paparazzi.optimize import PaparazziParams
@@ -225,7 +225,9 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
         raise Stylize3DError("Paparazzi failed: the result is not a clean 2-manifold with the "
                              "input's topology; nothing was written. Try a smaller learning rate.")
     after = recipe.result(state, last, options)
-    write_mesh(args.output, after.V, after.F)
+    write_result(args, args.output, after.V, after.F, data,
+                 how="Paparazzi remakes the triangles when it remeshes, so they have nowhere "
+                     "to go")
     outcome = recipe.outcome(last)
     sec = last.seconds
     it = outcome["iterations"]

@@ -45,7 +45,7 @@ def cmd_smooth(args: argparse.Namespace) -> int:
     names = _smooth_names()
     if _data_smoothing_requested(args):
         return _cmd_data_smooth(args, names)
-    from algorithms.mesh import write_mesh
+    from app.cli.common import write_result
 
     params = method_params(args, SmoothParams, panel="Smooth", allowed=names)
     check_output(args.output, args.overwrite, args.mesh)
@@ -60,7 +60,7 @@ def cmd_smooth(args: argparse.Namespace) -> int:
             print(f"  step {last.iteration}/{last.total}: bending energy {last.metrics['bending_energy']:.6g}",
                   file=sys.stderr)
     seconds = time.perf_counter() - t0
-    write_mesh(args.output, last.V, data.F)
+    write_result(args, args.output, last.V, data.F, data)
     if args.json:
         print_json({"input": args.mesh, "output": args.output, "params": params_to_dict(params),
                     "iterations": last.iteration, "seconds": seconds,
@@ -158,7 +158,7 @@ def _cmd_data_smooth(args: argparse.Namespace, names: set[str]) -> int:
     recipe "Multigrid smoothing" (:mod:`app.recipes.multigrid`)."""
     import numpy as np
 
-    from algorithms.mesh import write_mesh
+    from app.cli.common import write_result
     from algorithms.mesh.fields import write_field
     from algorithms.multigrid.params import DataSmoothingParams
     from app.recipes import multigrid as rm
@@ -179,7 +179,7 @@ def _cmd_data_smooth(args: argparse.Namespace, names: set[str]) -> int:
     if info.get("fallback") and not args.json:
         print(f"stylize3d smooth: {info['fallback']}", file=sys.stderr)
     if options["signal"] == "positions":
-        write_mesh(args.output, u, state.F)
+        write_result(args, args.output, u, state.F, data)
     else:
         write_field(args.output, u)
     out = {"input": args.mesh, "output": args.output, "signal": signal,

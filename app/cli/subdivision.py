@@ -82,7 +82,7 @@ def subdivide_job(args: argparse.Namespace) -> tuple:
 
 
 def cmd_subdivide(args: argparse.Namespace) -> int:
-    from algorithms.mesh import write_mesh
+    from app.cli.common import write_result
 
     params = subdivide_params(args)
     check_output(args.output, args.overwrite, args.mesh)
@@ -97,7 +97,9 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
     after = recipe.result(state, last, options)
     dt = time.perf_counter() - t0
     V, F = after.V, after.F
-    write_mesh(args.output, V, F)
+    how = ("'Coarsen first' remade the triangles (QSlim) before subdividing"
+           if params.coarsen_first and params.coarsen_first < len(data.V) else "subdivided")
+    write_result(args, args.output, V, F, data, how=how, levels=params.levels)
     note = str(getattr(last, "note", "") or "")
     method_used = str(getattr(last, "method_used", "") or params.method)
     fallback = bool(getattr(last, "fallback", False))
