@@ -580,6 +580,7 @@ class MainWindow(QMainWindow):
         from algorithms.params import params_from_dict, params_to_dict
 
         self.undo_stack.clear()
+        self._surface_attrs = (None, None, "")  # a project stores no UVs
         orig = project.original or project.state
         self.document.load(orig.V, orig.F, None, validate_mesh(orig.V, orig.F))
         self.document.original = orig
@@ -668,6 +669,7 @@ class MainWindow(QMainWindow):
         self.undo_stack.clear()
         self.project_path = None
         self.document.load(V, F, path, report)
+        self._remember_surface_attributes(path, data, F)
         self.undo_stack.setClean()
         self._add_recent(path)
         msg = f"Opened {Path(path).name}: {len(V):,} vertices, {len(F):,} triangles."
@@ -676,9 +678,45 @@ class MainWindow(QMainWindow):
         self.report(msg + (f"\n{report.summary()}" if report.warnings else ""))
         return True
 
+    def _remember_surface_attributes(self, path, data, F) -> None:
+        """The opened file's UVs, materials and normals (OBJ), kept for Save while the
+        document keeps the file's triangles (the methods that move vertices keep them)."""
+        from algorithms.mesh.attributes import read_attributes
+
+        attrs = read_attributes(path, len(data.V), len(data.F))
+        self._surface_attrs = (F if F is data.F else None, attrs, Path(path).name)
+        self._surface_n = len(data.V)
+
+    def _attributes_for_saving(self, path: str):
+        """``(attributes or None, what to say)``: the opened file's UVs etc. while the
+        triangles are the file's and the format holds them, else a note that they are not
+        saved (never silently, issue 39 item 5)."""
+        from algorithms.mesh.io import attributes_kept_by
+
+        F0, attrs, name = getattr(self, "_surface_attrs", (None, None, ""))
+        if attrs is None:
+            return None, ""
+        found = attrs.describe()
+        if F0 is None:
+            return None, f" {name}'s {found} were not saved: cleaning renumbered its triangles."
+        F = self.document.F
+        if not np.array_equal(F, F0):
+            # a subdivision (each triangle split in four, maybe several times) carries them
+            levels = next((k for k in (1, 2, 3, 4) if len(F) == len(F0) * 4 ** k), None)
+            attrs = None if levels is None else attrs.transferred(F0, self._surface_n, F,
+                                                                  levels)
+            if attrs is None:
+                return None, (f" {name}'s {found} were not saved: the triangles were remade "
+                              "(remeshing or coarsening).")
+        if not attributes_kept_by(path):
+            return None, (f" {name}'s {found} were not saved: {Path(path).suffix} files cannot "
+                          "hold them (save as .obj to keep them).")
+        return attrs, f" With {name}'s {found}."
+
     def _write(self, path: str) -> bool:
+        attrs, said = self._attributes_for_saving(path)
         try:
-            write_mesh(path, self.document.V, self.document.F)
+            write_mesh(path, self.document.V, self.document.F, attributes=attrs)
         except Stylize3DError as e:
             self._error("Could not save", str(e))
             return False
@@ -691,7 +729,7 @@ class MainWindow(QMainWindow):
             self.document.mark_saved(path)
             self.undo_stack.setClean()
             self._add_recent(path)
-        self.report(f"Saved {path}", timeout_ms=5000)
+        self.report(f"Saved {path}.{said}", timeout_ms=5000)
         self._update_title()
         return True
 

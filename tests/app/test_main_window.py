@@ -363,3 +363,49 @@ def test_toolbar_buttons_stay_put_as_the_undo_label_changes(window, dialogs, qtb
     window.undo_stack.undo()
     qtbot.wait(50)
     assert tb["redo"].text().startswith("Redo") and tb["reset_camera"].geometry().x() == x0
+
+
+def test_saving_keeps_the_opened_objs_uvs_while_its_triangles_are_kept(window, dialogs, qtbot,
+                                                                       tmp_path):
+    """Issue 39 item 5 in the app: a textured OBJ smoothed and saved keeps its UVs; after a
+    subdivision (new triangles) the save says they were not kept instead of dropping them
+    silently."""
+    from algorithms.mesh import read_mesh
+    from algorithms.mesh.attributes import read_attributes
+    from tests.conftest import ROOT
+
+    bob = ROOT / "tests" / "data" / "bob.obj"
+    assert window.open_path(bob)
+    smooth = window.panels["Smooth"]
+    smooth.live_box.setChecked(False)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        smooth.run_button.click()
+    out = tmp_path / "bob-smooth.obj"
+    dialogs.save_paths.append(str(out))
+    assert window.save_as()
+    assert "With bob.obj's texture coordinates (UVs)" in window.message_log.entries[-1][2]
+    m0, m1 = read_mesh(bob), read_mesh(out)
+    a0 = read_attributes(bob, len(m0.V), len(m0.F))
+    a1 = read_attributes(out, len(m1.V), len(m1.F))
+    np.testing.assert_array_equal(a1.uv, a0.uv)
+    assert np.abs(m1.V - m0.V).max() > 0
+    sub = window.panels["Subdivision"]
+    sub.form.set_value("method", "loop")
+    sub.form.set_value("levels", 1)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        sub.run_button.click()
+    out2 = tmp_path / "bob-sub.obj"
+    dialogs.save_paths.append(str(out2))
+    assert window.save_as()  # split with the triangles
+    assert "With bob.obj's texture coordinates (UVs)" in window.message_log.entries[-1][2]
+    m2 = read_mesh(out2)
+    a2 = read_attributes(out2, len(m2.V), len(m2.F))
+    assert a2.uv.shape == (4 * len(a0.uv), 3, 2)
+    window.undo_stack.undo()
+    sub.form.set_value("coarsen_first", 400)  # QSlim remakes the triangles: said, not silent
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        sub.run_button.click()
+    out3 = tmp_path / "bob-coarse.obj"
+    dialogs.save_paths.append(str(out3))
+    assert window.save_as()
+    assert "were not saved: the triangles were remade" in window.message_log.entries[-1][2]
