@@ -376,7 +376,8 @@ def run_batch(job: Job, inputs, out_dir, *, workers: int | None = None,
               time_limit: float | None = None, retries: int = 2, redo: bool = False,
               precheck: bool = True, outputs=None,
               on_record: Callable[[dict | None, dict], None] | None = None,
-              should_stop: Callable[[], bool] | None = None) -> BatchSummary:
+              should_stop: Callable[[], bool] | None = None,
+              state_dir: str = BATCH_DIR) -> BatchSummary:
     """Run ``job`` on every input file (module docstring); returns a :class:`BatchSummary`.
 
     inputs : input files (see :func:`app.batch.collect_inputs`); outputs : their result files
@@ -391,6 +392,8 @@ def run_batch(job: Job, inputs, out_dir, *, workers: int | None = None,
     on_record : ``(record, counts)`` after each record (``(None, counts)`` once at the start).
     should_stop : polled a few times a second; True stops the batch (in-flight meshes are
         abandoned without a record, to run again next time).
+    state_dir : the folder under ``out_dir`` for the run's lock, pending records and worker
+        files (one per shard: :func:`app.batch.inputs.shard_names`).
     """
     from app.batch.inputs import output_names
 
@@ -403,7 +406,7 @@ def run_batch(job: Job, inputs, out_dir, *, workers: int | None = None,
     if memory_limit == "auto":
         memory_limit = None if scheduler else default_memory_limit(workers)
     out.mkdir(parents=True, exist_ok=True)
-    batch_dir = out / BATCH_DIR
+    batch_dir = out / state_dir
     (batch_dir / "pending").mkdir(parents=True, exist_ok=True)
     lock = _lock(batch_dir)
     run_dir = batch_dir / f"run-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
@@ -471,6 +474,8 @@ class _Loop:
         if rec["status"] != "done":
             rec.pop("output_sha256", None)
             rec.pop("figures", None)
+            rec.setdefault("category", "limit" if rec.get("limit") else "error")
+        rec.setdefault("finished", time.strftime("%Y-%m-%dT%H:%M:%S%z"))
         self.writer.write(rec)
         with contextlib.suppress(OSError):
             (self.pending / f"{rec.get('task_id')}.json").unlink()
@@ -565,12 +570,12 @@ class _Loop:
             if type(e).__name__ == "KilledWorker":
                 self.failed(it, "the worker process died while working on it (each time the "
                                 "scheduler gave it to a worker); the mesh may need more memory "
-                                "than a worker has.")
+                                "than a worker has.", category="worker died")
                 return
             if self.scheduler and isinstance(e, (OSError, TimeoutError)):
                 raise BatchError(f"Lost the Dask scheduler ({e}). Run the same command again "
                                  "to finish the batch.") from None
-            self.failed(it, f"an unexpected error ({type(e).__name__}: {e}).")
+            self.failed(it, f"an unexpected error ({type(e).__name__}: {e}).", category="bug")
             return
         self.finish(it, rec)
 
@@ -598,7 +603,7 @@ class _Loop:
                 with contextlib.suppress(OSError, ValueError):
                     reason = json.loads(lim.read_text())
             if reason and reason.get("task_id") == it.task_id:
-                self.failed(it, reason["message"], limit=reason.get("kind"))
+                self.failed(it, reason["message"], limit=reason.get("kind"), category="limit")
                 blamed = True
                 continue
             if it.task_id in culprits:
@@ -612,7 +617,8 @@ class _Loop:
                     self.failed(it, f"the worker process died while working on it "
                                     f"({it.deaths} times); nothing was written."
                                     + (f" It crashed; the details are in {extra['crash_log']}."
-                                       if extra else ""), **extra)
+                                       if extra else ""),
+                                    category="crash" if extra else "worker died", **extra)
                     continue
             requeue.append(it)
         self.todo.extendleft(reversed(requeue))

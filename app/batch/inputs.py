@@ -38,7 +38,8 @@ def _is_input(p: Path) -> bool:
 
 def _is_batch_output(folder: Path) -> bool:
     """A folder an earlier batch wrote its results to (its bookkeeping is there)."""
-    return (folder / ".batch").is_dir() or (folder / "batch-report.jsonl").is_file()
+    return ((folder / ".batch").is_dir() or (folder / "batch-report.jsonl").is_file()
+            or any(folder.glob(".batch-shard-*")) or any(folder.glob("batch-report.shard-*")))
 
 
 def _search(folder: Path, out_dir: Path | None) -> list[Path]:
@@ -196,3 +197,39 @@ def excluded(path: Path, root: Path, patterns) -> bool:
 
 __all__ = ["INPUT_SUFFIXES", "collect_inputs", "collect_inputs_with_roots", "excluded",
            "output_names", "read_input_list"]
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"I/N"`` (1 <= I <= N) of ``--shard``."""
+    try:
+        i, n = (int(x) for x in str(text).split("/"))
+    except ValueError:
+        raise BatchUsageError(f"--shard takes I/N (e.g. 2/8: the second of 8 shards), not "
+                              f"{text!r}.") from None
+    if not (n >= 1 and 1 <= i <= n):
+        raise BatchUsageError(f"--shard {text}: I must be between 1 and N (N at least 1).")
+    return i, n
+
+
+def in_shard(path: Path, root: Path, shard: tuple[int, int]) -> bool:
+    """Whether an input belongs to shard ``(I, N)``: by a hash of its path below its root, so
+    every input is in exactly one shard, whatever the machine, and adding inputs moves no
+    other input to another shard (array jobs: one shard per task)."""
+    import hashlib
+
+    i, n = shard
+    try:
+        rel = Path(path).relative_to(root).as_posix()
+    except ValueError:
+        rel = Path(path).name
+    h = int.from_bytes(hashlib.sha1(rel.encode("utf-8")).digest()[:8], "big")
+    return h % n == i - 1
+
+
+def shard_names(shard: tuple[int, int] | None) -> tuple[str, str]:
+    """(report file name, state folder name) of a shard: each shard has its own, so that N
+    shards can write into one output folder at the same time."""
+    if shard is None:
+        return "batch-report.jsonl", ".batch"
+    i, n = shard
+    return f"batch-report.shard-{i}-of-{n}.jsonl", f".batch-shard-{i}-of-{n}"

@@ -261,6 +261,11 @@ def add_batch_flags(p: argparse.ArgumentParser) -> None:
     g.add_argument("--from-list", metavar="FILE",
                    help="more INPUTs from a file, one per line ('#' starts a comment; "
                         "relative paths are relative to the file's folder)")
+    g.add_argument("--shard", metavar="I/N",
+                   help="run only the I-th of N shares of the inputs (array jobs: N tasks with "
+                        "I = 1..N, e.g. --shard $((SLURM_ARRAY_TASK_ID + 1))/N); each shard "
+                        "has its own report (batch-report.shard-I-of-N.jsonl), all write "
+                        "into one output folder at once")
     g.add_argument("--max-failures", type=int, metavar="N",
                    help="stop after N meshes failed (what is done is recorded; the same "
                         "command goes on later)")

@@ -235,7 +235,7 @@ def _run(job, task: dict, rec: dict) -> dict:
     if limit and task.get("precheck", True):
         need = psutil.Process().memory_info().rss + len(state.F) * job.bytes_per_face
         if need > limit:
-            return {**rec, "status": "failed",
+            return {**rec, "status": "failed", "category": "limit", "limit": "memory",
                     "message": f"it would need about {_gb(need)} for its {len(state.F):,} "
                                f"triangles, more than the memory limit per task "
                                f"({_gb(limit)}); it was not run. Decimate it first, or raise "
@@ -313,6 +313,13 @@ def _tune_malloc() -> None:
         pass
 
 
+#: a failed record's ``category`` by the error's exit status (the README's table); others:
+#: "limit" (with ``limit``: "memory" / "time"), "worker died", "crash", "file", "out of
+#: memory", "bug", "error"
+CATEGORIES = {2: "unreadable input", 3: "cannot write", 4: "invalid mesh", 5: "bad parameter",
+              6: "did not converge"}
+
+
 def run_task(job, task: dict) -> dict:
     """Process one input (module docstring) and return its record: ``input``, ``output``,
     ``status`` ("done" / "failed"), ``message``, ``seconds``, ``key``, ``input_sha256``,
@@ -326,14 +333,16 @@ def run_task(job, task: dict) -> dict:
     _start_watchdog()
     iid, run_dir = task["input_id"], Path(task["run_dir"])
     rec = {"input": task["input"], "output": task["output"], "status": "failed",
-           "message": "", "seconds": 0.0, "attempt": task.get("attempt", 1),
+           "message": "", "seconds": 0.0, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+           "attempt": task.get("attempt", 1),
            "task_id": task["task_id"], "method": job.method, "recipe": job.recipe,
            "worker": f"{socket.gethostname()}:{os.getpid()}"}
     stopped = limit_file(run_dir, iid)
     if stopped.exists():  # an earlier try of this task hit a limit (Dask gave it again)
         try:
             reason = json.loads(stopped.read_text())
-            return {**rec, "message": reason["message"], "limit": reason.get("kind")}
+            return {**rec, "message": reason["message"], "limit": reason.get("kind"),
+                    "category": "limit"}
         except (OSError, ValueError, KeyError):
             pass
     from app.crashlog import current_log
@@ -349,13 +358,14 @@ def run_task(job, task: dict) -> dict:
     try:
         rec = _run(job, task, rec)
     except Stylize3DError as e:
-        rec = {**rec, "status": "failed", "message": str(e)}
+        rec = {**rec, "status": "failed", "message": str(e),
+               "category": CATEGORIES.get(getattr(e, "exit_code", 0), "error")}
     except OSError as e:  # the input vanished or cannot be read, a folder cannot be made
-        rec = {**rec, "status": "failed",
+        rec = {**rec, "status": "failed", "category": "file",
                "message": f"{e.filename or 'a file'} cannot be read or written "
                           f"({e.strerror or e}); nothing was written."}
     except MemoryError:
-        rec = {**rec, "status": "failed",
+        rec = {**rec, "status": "failed", "category": "out of memory",
                "message": "it ran out of memory; nothing was written. Decimate it first, or "
                           "run fewer workers."}
     except Exception as e:  # noqa: BLE001 - a defect of ours: recorded plainly, batch goes on
@@ -364,7 +374,7 @@ def run_task(job, task: dict) -> dict:
         from app.cli.common import write_crash_log
 
         log = write_crash_log(traceback.format_exc())
-        rec = {**rec, "status": "failed",
+        rec = {**rec, "status": "failed", "category": "bug",
                "message": f"an unexpected error stopped it ({type(e).__name__}: {e}); nothing "
                           "was written. This is a bug in Stylize3D"
                           + (f"; the details are in {log}." if log else ".")}
@@ -378,5 +388,5 @@ def run_task(job, task: dict) -> dict:
     return rec
 
 
-__all__ = ["EXIT_MEMORY", "EXIT_TIME", "file_sha256", "init_pool_worker", "input_id",
+__all__ = ["CATEGORIES", "EXIT_MEMORY", "EXIT_TIME", "file_sha256", "init_pool_worker", "input_id",
            "limit_file", "record_key", "run_task"]

@@ -126,7 +126,7 @@ class _Progress:
             self.bar.stop()
 
 
-def _refuse_replacing(inputs, outputs, report, out) -> None:
+def _refuse_replacing(inputs, outputs, report, out, state_dir: str = ".batch") -> None:
     """Like every other command, never replace a file without --overwrite: only outputs this
     batch's report says it wrote itself are written again (a resumed or re-run batch)."""
     import os
@@ -137,9 +137,7 @@ def _refuse_replacing(inputs, outputs, report, out) -> None:
     recorded = read_report(report)
     # records the workers of a stopped driver left for the report (what run_batch recovers
     # first): their outputs were written by this batch too (issue 39, item 1)
-    from app.batch.driver import BATCH_DIR
-
-    for f in sorted((Path(out) / BATCH_DIR / "pending").glob("*.json")):
+    for f in sorted((Path(out) / state_dir / "pending").glob("*.json")):
         try:
             rec = json.loads(f.read_text())
         except (OSError, ValueError):
@@ -165,8 +163,9 @@ def cmd_batch(args: argparse.Namespace) -> int:
         return int(e.code or 0)
     _check(bargs)
     out = Path(bargs.output)
-    from app.batch.inputs import excluded, read_input_list
+    from app.batch.inputs import excluded, in_shard, parse_shard, read_input_list, shard_names
 
+    shard = parse_shard(bargs.shard) if bargs.shard else None
     items = list(bargs.inputs) + (read_input_list(bargs.from_list) if bargs.from_list else [])
     found = [(p, r) for p, r in batch.collect_inputs_with_roots(items, out_dir=out)
              if not excluded(p, r, bargs.exclude)]
@@ -174,15 +173,24 @@ def cmd_batch(args: argparse.Namespace) -> int:
         raise batch.BatchUsageError(f"No mesh files ({', '.join(batch.inputs.INPUT_SUFFIXES)}) "
                                     f"in {', '.join(map(str, items))}"
                                     + (" (after --exclude)." if bargs.exclude else "."))
+    if shard is not None:
+        every = len(found)
+        found = [(p, r) for p, r in found if in_shard(p, r, shard)]
+        say(f"stylize3d batch: shard {shard[0]}/{shard[1]}: {len(found)} of {every} input(s).")
+        if not found:
+            if bargs.json:
+                print_json({"ok": True, "shard": list(shard), "total": 0, "done": 0,
+                            "failed": 0, "skipped": 0})
+            return 0
+    report_name, state_dir = shard_names(shard)
     inputs = [p for p, _ in found]
     outputs = batch.output_names(inputs, out, roots=[r for _, r in found], fmt=bargs.format,
                                  name=bargs.name, command=job.method)
-    report = Path(bargs.report).resolve() if bargs.report else \
-        out.resolve() / batch.REPORT_NAME
+    report = Path(bargs.report).resolve() if bargs.report else out.resolve() / report_name
     if bargs.dry_run:
         return _dry_run(job, bargs, inputs, outputs, report)
     if not bargs.overwrite:
-        _refuse_replacing(inputs, outputs, report, out)
+        _refuse_replacing(inputs, outputs, report, out, state_dir)
     memory = batch.parse_size(bargs.memory_limit) if bargs.memory_limit else "auto"
     progress = _Progress(job.method, bargs.quiet)
     try:
@@ -191,7 +199,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
                                   time_limit=bargs.time_limit, retries=bargs.retries,
                                   redo=bargs.overwrite, outputs=outputs, on_record=progress,
                                   should_stop=lambda: bargs.max_failures is not None
-                                  and progress.failed >= bargs.max_failures)
+                                  and progress.failed >= bargs.max_failures,
+                                  state_dir=state_dir)
     except KeyboardInterrupt as e:  # Ctrl+C, or SIGTERM (common.Terminated)
         progress.close()
         term = isinstance(e, Terminated)
@@ -226,7 +235,7 @@ def add_parsers(sub) -> None:
         usage="stylize3d batch METHOD INPUT... -o OUT_DIR [--workers N] [--scheduler ADDRESS] "
               "[--report FILE] [--memory-limit SIZE] [--time-limit S] [--dry-run] [--json] "
               "[--quiet] [--clean] [--format FMT] [--name TEMPLATE] [--exclude GLOB] "
-              "[--from-list FILE] [--max-failures N] [the method's flags]",
+              "[--from-list FILE] [--shard I/N] [--max-failures N] [the method's flags]",
         description="Run one method on every INPUT; results go to OUT_DIR under the inputs' "
                     "file names, one JSON line per input goes to the report. A batch that is "
                     "stopped and started again skips what is done. 'stylize3d batch METHOD "

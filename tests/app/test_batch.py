@@ -334,6 +334,7 @@ def test_memory_and_time_limits_fail_the_mesh_plainly_without_retry(tmp_path, ca
     (r,) = _records(tmp_path / "o1" / "batch-report.jsonl")
     assert r["status"] == "failed" and "would need about" in r["message"]
     assert "more than the memory limit per task (200 MB)" in r["message"]
+    assert r["category"] == "limit" and r["limit"] == "memory"
     # the watchdog stops a task over the limit (no estimate): no retry
     job = batch.build_job("cubic")
     s = batch.run_batch(job, [mesh], tmp_path / "o2", workers=1, memory_limit=50_000_000,
@@ -342,13 +343,15 @@ def test_memory_and_time_limits_fail_the_mesh_plainly_without_retry(tmp_path, ca
     assert s.failed == 1 and s.exit_code == 1
     assert r["message"].startswith("it needed more than 50 MB (the memory limit per task)")
     assert r["limit"] == "memory" and r["attempts"] == 1 and r["retries"] == 0
+    assert r["category"] == "limit"
     # time limit
     code = main(["batch", "cubic", str(mesh), "-o", str(tmp_path / "o3"), "--workers", "1",
                  "--time-limit", "0.3", "--quiet"])
     assert code == 1
     (r,) = _records(tmp_path / "o3" / "batch-report.jsonl")
     assert r["message"].startswith("it took longer than 0.3 s (the time limit per task)")
-    assert r["limit"] == "time" and r["attempts"] == 1
+    assert r["limit"] == "time" and r["attempts"] == 1 and r["category"] == "limit"
+    assert r["finished"]
     assert not (tmp_path / "o3" / "armadillo.obj").exists() and not _no_tmp(tmp_path)
 
 
@@ -620,3 +623,74 @@ def test_max_failures_stops_the_batch_and_it_goes_on_later(tmp_path, capsys):
     recs = _records(out / "batch-report.jsonl")
     assert {Path(r["input"]).name for r in recs if r["status"] == "done"} == {"good0.obj",
                                                                               "good1.obj"}
+
+
+def test_shards_cover_every_input_once_and_run_side_by_side(tmp_path):
+    """Issue 39 item 12: ``--shard I/N`` (array jobs). Every input falls in exactly one shard
+    (by a hash of its path, so adding inputs moves no other); N shards write into one output
+    folder at the same time, each with its own report and state folder."""
+    import subprocess
+    import sys
+
+    from app.batch import read_report
+    from app.batch.inputs import in_shard
+    from tests.conftest import ROOT
+
+    lib = tmp_path / "lib"
+    (lib / "sub").mkdir(parents=True)
+    V, F = icosphere(1)
+    names = [f"m{i}.obj" for i in range(6)] + [f"sub/s{i}.obj" for i in range(3)]
+    for n in names:
+        write_mesh(lib / n, V, F)
+    owners = [[i for i in (1, 2, 3) if in_shard(lib / n, lib, (i, 3))] for n in names]
+    assert all(len(o) == 1 for o in owners) and len({o[0] for o in owners}) > 1
+    out = tmp_path / "out"
+    procs = [subprocess.Popen([sys.executable, "-m", "app", "batch", "smooth", str(lib), "-o",
+                               str(out), "--shard", f"{i}/3", "--workers", "1", "--quiet"],
+                              cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True) for i in (1, 2, 3)]
+    results = [p.communicate(timeout=600) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0, 0], results
+    done = {}
+    for i in (1, 2, 3):
+        recs = {k: r for k, r in read_report(out / f"batch-report.shard-{i}-of-3.jsonl").items()
+                if k != "__task_ids__"}
+        assert all(r["status"] == "done" for r in recs.values())
+        for k in recs:
+            assert k not in done  # in one shard only
+            done[k] = i
+        assert f"shard {i}/3" in results[i - 1][1]
+    assert len(done) == len(names)
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*.obj")) == sorted(names)
+    # the library's output folder is not taken as input by a later batch
+    from app.batch import collect_inputs_with_roots
+
+    assert all(out not in p.parents for p, _ in collect_inputs_with_roots([tmp_path]))
+    from algorithms.errors import Stylize3DError
+    from app.batch.inputs import parse_shard
+
+    for bad in ("0/3", "4/3", "x", "1/0"):
+        with pytest.raises(Stylize3DError):
+            parse_shard(bad)
+
+
+def test_failed_records_say_their_category_and_every_record_its_times(tmp_path):
+    """Issue 39 item 9: report records lacked a failure category, the limit name and times."""
+    from app import batch
+
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    V, F = icosphere(1)
+    write_mesh(lib / "good.obj", V, F)
+    (lib / "garbage.obj").write_text("this is not a mesh\n")
+    write_mesh(lib / "nan.obj", np.where(np.arange(len(V))[:, None] == 0, np.nan, V), F)
+    job = batch.build_job("smooth")
+    inputs = sorted(lib.glob("*.obj"))
+    s = batch.run_batch(job, inputs, tmp_path / "out", workers=1)
+    assert s.done == 1 and s.failed == 2
+    recs = {Path(r["input"]).name: r for r in _records(tmp_path / "out" / "batch-report.jsonl")}
+    assert recs["garbage.obj"]["category"] == "unreadable input"
+    assert recs["nan.obj"]["category"] == "invalid mesh"
+    assert "category" not in recs["good.obj"]
+    for r in recs.values():
+        assert r["started"] <= r["finished"] and r["seconds"] >= 0
