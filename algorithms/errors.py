@@ -38,3 +38,9 @@ class ParameterError(Stylize3DError):
     """A parameter value is outside its allowed range."""
 
     exit_code = 5
+
+
+class ConnectionFailed(Stylize3DError):
+    """A service on the network (a Dask scheduler) could not be reached, or went away."""
+
+    exit_code = 7

@@ -40,7 +40,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..errors import InvalidMeshError, ParameterError
+from ..errors import ConnectionFailed, InvalidMeshError, ParameterError
 from ..params import param, params_to_dict, validate_params
 from .topology import half_flaps, igl_odd_order, locate_vertices, refine, refine_barycentric
 
@@ -341,13 +341,15 @@ def dask_client(scheduler: str):
         from distributed import Client
     except ImportError:
         raise ParameterError("A scheduler address needs Dask distributed, which is not "
-                             "installed: pip install 'stylize3d[cluster]'.") from None
+                             "installed in this environment. The README's set-up commands "
+                             "install it; in another environment, from the checkout: "
+                             "pip install -e '.[cluster]'.") from None
     try:
         return Client(scheduler, timeout=SCHEDULER_TIMEOUT)
     except Exception as exc:  # noqa: BLE001 - a plain message
-        raise ParameterError(f"Could not reach the Dask scheduler at {scheduler!r} "
-                             f"({exc}). Check the address (e.g. tcp://host:8786) and that "
-                             f"the scheduler is running.") from None
+        raise ConnectionFailed(f"Could not reach the Dask scheduler at {scheduler!r} "
+                               f"({exc}). Check the address (e.g. tcp://host:8786) and that "
+                               f"the scheduler is running.") from None
 
 
 def _make_executor(workers: int | None, scheduler: str | None, shapes=()):

@@ -38,7 +38,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
 
-from algorithms.errors import ParameterError, Stylize3DError
+from algorithms.errors import ConnectionFailed, ParameterError, Stylize3DError
 from app.batch.jobs import BatchUsageError, Job
 from app.batch.worker import file_sha256, init_pool_worker, input_id, limit_file, record_key, \
     run_task
@@ -562,8 +562,9 @@ class _Loop:
             return
         except cf.CancelledError:
             if self.scheduler:
-                raise BatchError("The Dask scheduler cancelled the work (did it stop?). "
-                                 "Run the same command again to finish the batch.") from None
+                raise ConnectionFailed("The Dask scheduler cancelled the work (did it "
+                                       "stop?). Run the same command again to finish the "
+                                       "batch.") from None
             broken.append(it)
             return
         except Exception as e:  # noqa: BLE001
@@ -573,8 +574,8 @@ class _Loop:
                                 "than a worker has.", category="worker died")
                 return
             if self.scheduler and isinstance(e, (OSError, TimeoutError)):
-                raise BatchError(f"Lost the Dask scheduler ({e}). Run the same command again "
-                                 "to finish the batch.") from None
+                raise ConnectionFailed(f"Lost the Dask scheduler ({e}). Run the same command "
+                                       "again to finish the batch.") from None
             self.failed(it, f"an unexpected error ({type(e).__name__}: {e}).", category="bug")
             return
         self.finish(it, rec)

@@ -694,3 +694,16 @@ def test_failed_records_say_their_category_and_every_record_its_times(tmp_path):
     assert "category" not in recs["good.obj"]
     for r in recs.values():
         assert r["started"] <= r["finished"] and r["seconds"] >= 0
+
+
+def test_an_unreachable_scheduler_exits_7_not_5(tmp_path, monkeypatch, capsys):
+    """Issue 39 item 9: a network failure had the bad-parameter code (5)."""
+    import algorithms.subdivision.data as data_mod
+
+    monkeypatch.setattr(data_mod, "SCHEDULER_TIMEOUT", 2)
+    V, F = icosphere(1)
+    write_mesh(tmp_path / "m.obj", V, F)
+    code = main(["batch", "smooth", str(tmp_path / "m.obj"), "-o", str(tmp_path / "out"),
+                 "--scheduler", "tcp://127.0.0.1:1", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 7 and "Could not reach the Dask scheduler" in err, err

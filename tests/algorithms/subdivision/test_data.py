@@ -110,7 +110,7 @@ def test_missing_dask_names_the_extra(monkeypatch):
 
     monkeypatch.setattr(builtins, "__import__", no_distributed)
     V, F, _ = _dense("spot_lowres.obj")
-    with pytest.raises(ParameterError, match=r"pip install 'stylize3d\[cluster\]'"):
+    with pytest.raises(ParameterError, match=r"from the checkout: pip install -e '\.\[cluster\]'"):
         generate_dataset([(V, F)], SMALL, scheduler="tcp://127.0.0.1:1", use_cache=False)
 
 
@@ -137,5 +137,9 @@ def test_plain_errors(monkeypatch):
         generate_dataset([(V, F[:10])], SMALL, workers=1, use_cache=False)
     with pytest.raises(ParameterError, match="exceed"):
         generate_dataset([(V, F)], DataParams(min_vertices=90, max_vertices=60), workers=1)
-    with pytest.raises(ParameterError, match="scheduler"):
+    from algorithms.errors import ConnectionFailed
+
+    # an unreachable scheduler is a network failure (exit 7), not a bad parameter (issue 39)
+    with pytest.raises(ConnectionFailed, match="scheduler") as e:
         generate_dataset([(V, F)], SMALL, scheduler="tcp://127.0.0.1:1", use_cache=False)
+    assert e.value.exit_code == 7
