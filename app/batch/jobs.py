@@ -209,6 +209,11 @@ def method_parser(command: str) -> argparse.ArgumentParser:
             action.dest, action.nargs, action.metavar = "inputs", "*", "INPUT"
             action.help = "mesh files (.obj .ply .stl .off .glb), projects (.s3d), folders " \
                           "(searched recursively for meshes) or globs"
+        elif action.dest == "lam" and action.nargs == "+":
+            # the one-mesh command takes several λ (one output each); a batch takes one: its
+            # help says what it accepts (issue 39 item 9: it offered what batch refuses)
+            text = (action.help or "").split(" Several values:")[0].rstrip()
+            action.help = text + " A batch takes one value (run one batch per λ)."
     add_batch_flags(p)
     return p
 

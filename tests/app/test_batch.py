@@ -707,3 +707,20 @@ def test_an_unreachable_scheduler_exits_7_not_5(tmp_path, monkeypatch, capsys):
                  "--scheduler", "tcp://127.0.0.1:1", "--quiet"])
     err = capsys.readouterr().err
     assert code == 7 and "Could not reach the Dask scheduler" in err, err
+
+
+def test_batch_help_offers_one_lambda_as_batch_accepts(capsys):
+    """Issue 39 item 9: the help offered several λ, which batch refuses."""
+    from app.batch import method_parser
+
+    lam = next(a for a in method_parser("cubic")._actions if a.dest == "lam")
+    assert "A batch takes one value" in lam.help and "Several values" not in lam.help
+    import argparse
+
+    from app.cli.deform import add_parsers  # the one-mesh command keeps its text
+
+    root = argparse.ArgumentParser()
+    sub = root.add_subparsers()
+    add_parsers(sub)
+    one = next(a for a in sub.choices["cubic"]._actions if a.dest == "lam")
+    assert "Several values" in one.help
