@@ -145,6 +145,12 @@ class BatchDialog(QDialog):
         self.cancel_button.setToolTip("Stop the batch; start it again later to continue.")
         self.cancel_button.setEnabled(False)
         self.close_button = QPushButton("Close")
+        self.save_steps_button = QPushButton("Save as step file…")
+        self.save_steps_button.setToolTip(
+            "Save the chosen panel's settings as a step file (.toml) for the command line: "
+            "stylize3d batch FILE.toml INPUT... -o OUT_DIR (more steps can be added to it).")
+        self.save_steps_button.clicked.connect(self.save_step_file_dialog)
+        buttons.addWidget(self.save_steps_button)
         buttons.addStretch(1)
         for b in (self.start_button, self.cancel_button, self.close_button):
             buttons.addWidget(b)
@@ -160,6 +166,34 @@ class BatchDialog(QDialog):
         self.panel_combo.currentTextChanged.connect(lambda _t: self.update_note())
         self.update_note()
         self.resize(720, 560)
+
+    def save_step_file_dialog(self) -> bool:
+        path = dialogs.save_file(self, "Save as step file", "Stylize3D step file (*.toml)", "")
+        if not path:
+            return False
+        if not path.lower().endswith(".toml"):
+            path += ".toml"
+        return self.save_step_file(path)
+
+    def save_step_file(self, path: str) -> bool:
+        """Write the chosen panel's settings as a one-step step file (True when written)."""
+        from algorithms.mesh.io import atomic_write
+        from algorithms.params import params_to_dict
+        from app.batch import PANEL_METHODS
+        from app.batch.pipeline import step_file_text
+
+        title = self.panel_combo.currentText()
+        panel = self.window_.panels[title]
+        try:
+            text = step_file_text(PANEL_METHODS[title], params_to_dict(panel.form.params()),
+                                  panel.job_options())
+            atomic_write(path, lambda fh: fh.write(text.encode("utf-8")))
+        except Stylize3DError as e:
+            dialogs.error(self, "Cannot save the step file", str(e))
+            return False
+        self.status.setText(f"Saved {path}: stylize3d batch {Path(path).name} INPUT... -o "
+                            "OUT_DIR runs it.")
+        return True
 
     def update_note(self) -> None:
         """Say what the batch will do differently from the chosen panel (or hide the note)."""

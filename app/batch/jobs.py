@@ -451,6 +451,18 @@ def job_from_args(command: str, args: argparse.Namespace, project=None,
 def parse_batch_args(method: str, argv: list[str]) -> tuple[Job, argparse.Namespace]:
     """``stylize3d batch METHOD argv...``: the Job and the parsed arguments. argparse's own
     usage errors raise SystemExit (status 2), bad values a plain Stylize3DError."""
+    from app.batch.pipeline import is_pipeline_path, read_pipeline
+
+    if is_pipeline_path(method):  # a step file: its steps, then INPUT... and the batch's flags
+        job = read_pipeline(method)
+        p = argparse.ArgumentParser(prog=f"stylize3d batch {Path(method).name}",
+                                    description="Run every step of the step file on each "
+                                                "INPUT, in order (docs/batch.md).")
+        p.add_argument("inputs", nargs="*", metavar="INPUT")
+        add_batch_flags(p)
+        args = p.parse_intermixed_args(argv)
+        args.clean = False
+        return job, args
     pre = argparse.ArgumentParser(add_help=False)
     pre.add_argument("--panel")
     known, _ = pre.parse_known_args(argv)

@@ -222,10 +222,11 @@ def _run(job, task: dict, rec: dict) -> dict:
 
     from algorithms.errors import InvalidMeshError
     from algorithms.mesh import write_mesh
-    from app.recipes import get_recipe
 
     rec["input_sha256"] = file_sha256(task["input"])
     rec["key"] = record_key(rec["input_sha256"], job.key)
+    if job.method == "pipeline":
+        return _run_pipeline(job, task, rec)
     state, notes = _read(job, task["input"])
     if getattr(job, "note", ""):
         notes = [job.note] + list(notes)
@@ -241,18 +242,7 @@ def _run(job, task: dict, rec: dict) -> dict:
                                f"({_gb(limit)}); it was not run. Decimate it first, or raise "
                                "--memory-limit."}
     _ensure_blobs(job)
-    options = job.options_for(len(state.F))
-    recipe = get_recipe(job.recipe)
-    params = recipe.make_params(job.params)
-    cache: dict = {}
-    last = None
-    for last in recipe.steps(state, params, options, cache):
-        pass
-    if last is None:
-        raise InvalidMeshError(f"{job.recipe} produced no result.")
-    if job.method == "paparazzi":
-        _check_paparazzi(state, last, cache)
-    after = recipe.result(state, last, options)
+    after, last, recipe = run_step(job, state)
     V, F = np.asarray(after.V), np.asarray(after.F)
     if not (len(V) and len(F) and np.isfinite(V).all() and F.min() >= 0 and F.max() < len(V)):
         raise InvalidMeshError("the result is not a valid mesh (empty, or coordinates that "
@@ -273,6 +263,52 @@ def _run(job, task: dict, rec: dict) -> dict:
     outcome = recipe.outcome(last) if recipe.outcome is not None else {}
     return {**rec, "status": "done", "message": "",
             "output_sha256": file_sha256(out), "figures": _figures(job, state, after, outcome)}
+
+
+def run_step(job, state):
+    """A Job's recipe on ``state`` as the one-mesh command runs it (a Paparazzi result is
+    checked as it checks it): ``(result state, last step, recipe)``. The batch's one place
+    that computes a method (a step of a step file too)."""
+    from algorithms.errors import InvalidMeshError
+    from app.recipes import get_recipe
+
+    recipe = get_recipe(job.recipe)
+    params = recipe.make_params(job.params)
+    options = job.options_for(len(state.F))
+    cache: dict = {}
+    last = None
+    for last in recipe.steps(state, params, options, cache):
+        pass
+    if last is None:
+        raise InvalidMeshError(f"{job.recipe} produced no result.")
+    if job.method == "paparazzi":
+        _check_paparazzi(state, last, cache)
+    return recipe.result(state, last, options), last, recipe
+
+
+def _run_pipeline(job, task: dict, rec: dict) -> dict:
+    """A step file's steps on one input (:mod:`app.batch.pipeline`)."""
+    import numpy as np
+
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.io import attributes_kept_by
+    from app.batch.pipeline import run_pipeline
+
+    V, F, attrs, figures, notes = run_pipeline(job, task, rec)
+    if _state["pool"] and os.getppid() != _state["parent"]:
+        _exit(0)  # the driver is gone: do not write behind its back
+    out = Path(task["output"])
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if attrs is not None and not attributes_kept_by(out):
+        notes = [n for n in notes if not n.startswith("kept ")] + [
+            f"the input's {attrs.describe()} were not written: {out.suffix} files cannot "
+            "hold them (write .obj to keep them)."]
+        attrs = None
+    write_mesh(out, np.asarray(V), np.asarray(F), attributes=attrs)
+    if notes:
+        rec["notes"] = list(rec.get("notes", [])) + notes
+    return {**rec, "status": "done", "message": "", "output_sha256": file_sha256(out),
+            "figures": {"vertices": int(len(V)), "faces": int(len(F)), "steps": figures}}
 
 
 def _attributes_how(job, state) -> str:

@@ -185,3 +185,32 @@ def test_batch_of_multigrid_smoothing_says_it_smooths_the_shape_not_the_test_fie
                                     .SIGNALS.index("positions"))
     dlg.update_note()
     assert not dlg.note_label.isVisible()
+
+
+def test_save_as_step_file_runs_like_the_panels_batch(window, dialogs, qtbot, tmp_path):
+    """Issue 39 item 11: File > Batch… saves the current panel as a step file; the command line
+    runs it to the same result as the panel's own batch settings."""
+    from app.batch import job_from_settings
+    from app.batch.pipeline import read_pipeline
+
+    lib = _library(tmp_path / "lib", n=1)
+    out = tmp_path / "out"
+    dlg = _open_dialog(window, dialogs, lib, out)   # Cubic, λ 0.3, 5 iterations
+    path = tmp_path / "cubic-steps.toml"
+    dialogs.save_paths.append(str(path))
+    assert dlg.save_step_file_dialog() and path.is_file()
+    assert "stylize3d batch cubic-steps.toml" in dlg.status.text()
+    pipe = read_pipeline(path)
+    cubic = window.panels["Cubic"]
+    same = job_from_settings("Cubic", cubic.form.params(), cubic.job_options())
+    assert pipe.commands == ["cubic"] and pipe.steps[0].params == same.params
+    assert pipe.steps[0].key == same.key
+    from app.cli import main
+
+    assert main(["batch", str(path), str(lib / "m0.obj"), "-o", str(tmp_path / "steps-out"),
+                 "--workers", "1", "--quiet"]) == 0
+    assert main(["batch", "cubic", str(lib / "m0.obj"), "-o", str(tmp_path / "cubic-out"),
+                 "--lambda", "0.3", "--max-iterations", "5", "--workers", "1", "--quiet"]) == 0
+    a = read_mesh(tmp_path / "steps-out" / "m0.obj")
+    b = read_mesh(tmp_path / "cubic-out" / "m0.obj")
+    np.testing.assert_array_equal(a.V, b.V)
