@@ -154,6 +154,9 @@ class Job:
     #: what the batch does differently from the panel whose settings it applies
     #: (:func:`settings_note`); every record's ``notes`` carries it
     note: str = ""
+    #: the params set by flags or ``--params`` (METHOD a plain command): a project given as
+    #: INPUT supplies its saved settings for the others, as the one-mesh command does
+    given: dict = field(default_factory=dict)
 
     def options_for(self, n_faces: int) -> dict:
         """The options for a mesh of ``n_faces`` triangles."""
@@ -437,6 +440,13 @@ def job_from_args(command: str, args: argparse.Namespace, project=None,
         panel = next(iter(project.panels))
         _use_settings(args, project, source.split(" (")[0])
     recipe, params, options = spec.build(args, panel, 0)
+    given = {}
+    if project is None:  # flags and --params: what a project given as INPUT cannot override
+        from app.cli.common import params_file
+
+        names = set(params_to_dict(params))
+        given = {k: v for k, v in params_file(args).items() if k in names}
+        given.update({k: v for k, v in vars(args).items() if k in names and v is not None})
     large = None
     if spec.sized:
         quiet = argparse.Namespace(**{**vars(args), "quiet": True})
@@ -445,7 +455,7 @@ def job_from_args(command: str, args: argparse.Namespace, project=None,
     return Job(method=command, recipe=recipe, params=params_to_dict(params), options=options,
                large_options=large, large_faces=AUTO_PROGRESSIVE_FACES,
                blobs=_blobs_of(options, large), clean=bool(getattr(args, "clean", False)),
-               source=source)
+               source=source, given=given)
 
 
 def parse_batch_args(method: str, argv: list[str]) -> tuple[Job, argparse.Namespace]:

@@ -242,6 +242,7 @@ def _run(job, task: dict, rec: dict) -> dict:
                                f"({_gb(limit)}); it was not run. Decimate it first, or raise "
                                "--memory-limit."}
     _ensure_blobs(job)
+    job = _with_project_settings(job, task["input"], rec)
     after, last, recipe = run_step(job, state)
     V, F = np.asarray(after.V), np.asarray(after.F)
     if not (len(V) and len(F) and np.isfinite(V).all() and F.min() >= 0 and F.max() < len(V)):
@@ -263,6 +264,30 @@ def _run(job, task: dict, rec: dict) -> dict:
     outcome = recipe.outcome(last) if recipe.outcome is not None else {}
     return {**rec, "status": "done", "message": "",
             "output_sha256": file_sha256(out), "figures": _figures(job, state, after, outcome)}
+
+
+def _with_project_settings(job, path: str, rec: dict):
+    """A project given as INPUT to ``batch METHOD`` (a plain command): its saved settings of
+    the method's panel for every parameter the flags did not set, as ``stylize3d METHOD
+    PROJECT.s3d`` does (issue 39 item 3); the record's notes say which."""
+    import dataclasses
+
+    from app.batch.jobs import METHODS
+    from app.project import is_project_path, read_project
+
+    if job.source != "flags" or not is_project_path(path):
+        return job
+    panel = METHODS[job.method].panels[0]
+    saved = (read_project(path).panels or {}).get(panel) or {}
+    use = {k: v for k, v in (saved.get("params") or {}).items()
+           if k in job.params and k not in job.given and job.params[k] != v}
+    if not use:
+        return job
+    rec["notes"] = list(rec.get("notes", [])) + [
+        f"the project's saved {panel} settings were used for "
+        + ", ".join(f"{k} = {v!r}" for k, v in sorted(use.items()))
+        + " (flags given on the command line win)."]
+    return dataclasses.replace(job, params={**job.params, **use})
 
 
 def run_step(job, state):

@@ -724,3 +724,27 @@ def test_batch_help_offers_one_lambda_as_batch_accepts(capsys):
     add_parsers(sub)
     one = next(a for a in sub.choices["cubic"]._actions if a.dest == "lam")
     assert "Several values" in one.help
+
+
+def test_a_project_given_as_input_supplies_its_saved_settings(tmp_path):
+    """Issue 39 item 3: ``batch cubic blob-painted.s3d`` ignored the project's saved λ 0.4 (the
+    one-mesh command uses it); flags given on the command line still win."""
+    import shutil
+
+    from algorithms.mesh import read_mesh
+    from app.project import read_project
+    from tests.conftest import SAMPLES
+
+    proj = tmp_path / "blob-painted.s3d"
+    shutil.copy(SAMPLES / "blob-painted.s3d", proj)
+    saved = read_project(proj).panels["Cubic"]["params"]
+    assert saved["lam"] == 0.4
+    for flags, lam in (([], 0.4), (["--lambda", "0.25"], 0.25)):
+        out = tmp_path / f"out{lam}"
+        assert main(["batch", "cubic", str(proj), "-o", str(out), "--workers", "1", "--quiet",
+                     "--max-iterations", "5", *flags]) == 0
+        (r,) = _records(out / "batch-report.jsonl")
+        one = tmp_path / f"one{lam}.obj"
+        assert main(["cubic", str(proj), "-o", str(one), "--max-iterations", "5", *flags]) == 0
+        np.testing.assert_array_equal(read_mesh(out / "blob-painted.obj").V, read_mesh(one).V)
+        assert ("lam = 0.4" in " ".join(r.get("notes", []))) == (lam == 0.4)
