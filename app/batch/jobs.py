@@ -128,6 +128,12 @@ NO_BATCH_FORM = {
 
 
 # ----------------------------------------------------------------------------- the job
+def _app_version() -> str:
+    from app import __version__
+
+    return __version__
+
+
 @dataclass
 class Job:
     """Everything a batch runs on each mesh (module docstring); picklable, sent once to each
@@ -157,6 +163,8 @@ class Job:
     #: the params set by flags or ``--params`` (METHOD a plain command): a project given as
     #: INPUT supplies its saved settings for the others, as the one-mesh command does
     given: dict = field(default_factory=dict)
+    #: the version of the driver that made the job (a worker of another version refuses it)
+    version: str = field(default_factory=lambda: _app_version())
 
     def options_for(self, n_faces: int) -> dict:
         """The options for a mesh of ``n_faces`` triangles."""

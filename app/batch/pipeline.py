@@ -56,6 +56,7 @@ class Pipeline:
     note: str = ""
     large_faces: int = 300_000
     blobs: dict = field(default_factory=dict)
+    version: str = field(default_factory=lambda: __import__("app").__version__)
 
     method = "pipeline"
 

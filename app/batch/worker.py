@@ -398,6 +398,13 @@ def run_task(job, task: dict) -> dict:
            "attempt": task.get("attempt", 1),
            "task_id": task["task_id"], "method": job.method, "recipe": job.recipe,
            "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    from app import __version__
+
+    if getattr(job, "version", __version__) != __version__:
+        return {**rec, "category": "version mismatch",
+                "message": f"this worker runs Stylize3D {__version__}, the batch was started "
+                           f"with {job.version}: install the same version on every worker "
+                           "(pip install -e . in the same checkout); nothing was written."}
     stopped = limit_file(run_dir, iid)
     if stopped.exists():  # an earlier try of this task hit a limit (Dask gave it again)
         try:

@@ -748,3 +748,21 @@ def test_a_project_given_as_input_supplies_its_saved_settings(tmp_path):
         assert main(["cubic", str(proj), "-o", str(one), "--max-iterations", "5", *flags]) == 0
         np.testing.assert_array_equal(read_mesh(out / "blob-painted.obj").V, read_mesh(one).V)
         assert ("lam = 0.4" in " ".join(r.get("notes", []))) == (lam == 0.4)
+
+
+def test_a_worker_of_another_version_refuses_the_job(tmp_path):
+    """Issue 39 item 10: workers check the driver's version (a Dask worker with another
+    installation would compute other results under the same report key)."""
+    import dataclasses
+
+    from app import __version__, batch
+
+    V, F = icosphere(1)
+    write_mesh(tmp_path / "m.obj", V, F)
+    job = batch.build_job("smooth")
+    assert job.version == __version__
+    old = dataclasses.replace(job, version="0.0.1-elsewhere")
+    s = batch.run_batch(old, [tmp_path / "m.obj"], tmp_path / "out", workers=1)
+    (r,) = _records(tmp_path / "out" / "batch-report.jsonl")
+    assert s.failed == 1 and r["category"] == "version mismatch"
+    assert "0.0.1-elsewhere" in r["message"] and not (tmp_path / "out" / "m.obj").exists()
