@@ -73,6 +73,14 @@ def _substitution(rec: dict) -> str:
     return "; " + method_words(str(fig.get("method_used", "")), True)
 
 
+def _one_line(message: str, limit: int = 240) -> str:
+    """A failure's message on one line (a mesh report is several): the lines joined, cut at
+    ``limit`` characters; the report keeps the whole message (issue 39 item 9)."""
+    text = " ".join(part.strip(" -") for part in str(message).splitlines() if part.strip())
+    return text if len(text) <= limit else text[:limit - 1].rstrip() + "… (the report has " \
+                                                                       "the rest)"
+
+
 class _Progress:
     """A rich progress bar on a terminal (done / failed / skipped / remaining, rate, ETA), or one
     plain line per mesh on stderr otherwise; nothing with --quiet."""
@@ -87,13 +95,20 @@ class _Progress:
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                        TimeElapsedColumn, TimeRemainingColumn)
 
+            console = console or Console(stderr=True)
+            if console.width >= 120:
+                counts = ("done {task.fields[done]} · failed {task.fields[failed]} · skipped "
+                          "{task.fields[skipped]} · remaining {task.fields[remaining]} · "
+                          "{task.fields[rate]}")
+                bar = BarColumn()
+            else:  # 80 columns: shorter words and bar, so the times are not cut
+                counts = ("{task.fields[done]} ok {task.fields[failed]} failed "
+                          "{task.fields[remaining]} left {task.fields[rate]}")
+                bar = BarColumn(bar_width=10)
             self.bar = Progress(
-                TextColumn(f"[bold]{method}"), BarColumn(), MofNCompleteColumn(),
-                TextColumn("done {task.fields[done]} · failed {task.fields[failed]} · "
-                           "skipped {task.fields[skipped]} · remaining "
-                           "{task.fields[remaining]} · {task.fields[rate]}"),
+                TextColumn(f"[bold]{method}"), bar, MofNCompleteColumn(), TextColumn(counts),
                 TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
-                console=console or Console(stderr=True))
+                console=console)
 
     def __call__(self, rec: dict | None, counts: dict) -> None:
         ran = counts["done"] + counts["failed"]
@@ -107,13 +122,16 @@ class _Progress:
                                               rate=rate, **fields)
             self.bar.update(self.task, completed=ran, rate=rate, **fields)
             if rec is not None and rec["status"] == "failed":
-                self.bar.console.print(f"[red]failed[/red] {rec['input']}: {rec['message']}",
-                                       markup=True, highlight=False)
+                from rich.text import Text
+
+                self.bar.console.print(Text.assemble(("failed", "red"), f" {rec['input']}: "
+                                                     f"{_one_line(rec['message'])}"),
+                                       highlight=False, soft_wrap=True)
             elif rec is not None and rec["status"] == "done" and _substitution(rec):
                 self.bar.console.print(f"done {rec['input']}{_substitution(rec)}",
                                        markup=False, highlight=False)
         elif not self.quiet and rec is not None:
-            tail = f": {rec['message']}" if rec["status"] == "failed" else \
+            tail = f": {_one_line(rec['message'])}" if rec["status"] == "failed" else \
                 f" -> {rec['output']} ({rec['seconds']:.1f} s{_substitution(rec)})"
             say(f"{rec['status']:6s} {rec['input']}{tail}")
         if rec is not None and rec["status"] == "done" and _substitution(rec):

@@ -766,3 +766,32 @@ def test_a_worker_of_another_version_refuses_the_job(tmp_path):
     (r,) = _records(tmp_path / "out" / "batch-report.jsonl")
     assert s.failed == 1 and r["category"] == "version mismatch"
     assert "0.0.1-elsewhere" in r["message"] and not (tmp_path / "out" / "m.obj").exists()
+
+
+def test_progress_keeps_its_times_at_80_columns_and_one_line_per_mesh(capsys):
+    """Issue 39 item 9: at 80 columns the bar cut its times; a failure's several-line report
+    made several stderr lines for one mesh."""
+    import io
+
+    from rich.console import Console
+
+    from app.cli.batch import _Progress, _one_line
+
+    buf = io.StringIO()
+    bar = _Progress("cubic", quiet=False, console=Console(file=buf, force_terminal=True,
+                                                          width=80))
+    counts = {"total": 3, "done": 1, "failed": 0, "skipped": 0, "remaining": 2}
+    bar(None, counts)
+    bar({"input": "a.obj", "output": "o/a.obj", "status": "done", "message": "",
+         "seconds": 0.1}, counts)
+    bar.close()
+    last = [ln for ln in buf.getvalue().splitlines() if "cubic" in ln][-1]
+    assert "ETA" in last and "0:00:0" in last and "left" in last, last
+    msg = "a.obj cannot be processed as it is:\nMesh: 3 vertices\nErrors:\n  - NaN coordinates"
+    assert _one_line(msg) == "a.obj cannot be processed as it is: Mesh: 3 vertices Errors: " \
+                             "NaN coordinates"
+    plain = _Progress("cubic", quiet=False)  # stderr is not a terminal here: plain lines
+    plain({"input": "a.obj", "output": "o/a.obj", "status": "failed", "message": msg,
+           "seconds": 0.1}, {**counts, "failed": 1})
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "NaN coordinates" in err
