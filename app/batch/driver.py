@@ -211,10 +211,47 @@ def make_executor(job: Job, workers: int, scheduler: str | None):
         client = dask_client(scheduler)
         slots = max(1, sum(client.nthreads().values()))
         job_ref = client.scatter(job, broadcast=True, hash=False)
-        return client.get_executor(), client.close, job_ref, slots
+        quiet = _quiet_dask_tracebacks()
+
+        def close():
+            try:
+                client.close()
+            finally:
+                quiet()
+
+        return client.get_executor(), close, job_ref, slots
     ex = cf.ProcessPoolExecutor(max_workers=workers, mp_context=_worker_context(),
                                 initializer=init_pool_worker, initargs=(job,))
     return ex, lambda: ex.shutdown(wait=True, cancel_futures=True), None, workers
+
+
+class _NoTraceback:
+    """A logging filter: Dask's own log lines without their tracebacks, empty ones dropped.
+    When the scheduler stops, Dask's client logs "ERROR -" with two tracebacks (a closed
+    connection, a CancelledError) before the batch says plainly what happened and how to go on
+    (issue 39 item 1); a user needs the plain message, not the traceback."""
+
+    def filter(self, record) -> bool:
+        record.exc_info, record.exc_text, record.stack_info = None, None, None
+        return bool(str(record.getMessage()).strip())
+
+
+def _quiet_dask_tracebacks():
+    """Put :class:`_NoTraceback` on Dask's loggers and their handlers; returns the undo."""
+    import logging
+
+    f = _NoTraceback()
+    targets = [logging.getLogger(n) for n in ("distributed", "distributed.client",
+                                               "distributed.core", "distributed.comm")]
+    targets += [h for lg in targets for h in lg.handlers]
+    for t in targets:
+        t.addFilter(f)
+
+    def undo():
+        for t in targets:
+            t.removeFilter(f)
+
+    return undo
 
 
 @contextlib.contextmanager

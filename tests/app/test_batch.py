@@ -795,3 +795,35 @@ def test_progress_keeps_its_times_at_80_columns_and_one_line_per_mesh(capsys):
            "seconds": 0.1}, {**counts, "failed": 1})
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "NaN coordinates" in err
+
+
+def test_dask_log_lines_lose_their_tracebacks_while_a_batch_runs():
+    """Issue 39 item 1: when the scheduler stopped, Dask's client logged "ERROR -" with two
+    tracebacks before the batch's plain message (reproduced by hand with `dask scheduler`
+    killed mid-batch; with this filter stderr holds the one message, and the same command
+    finished the batch on a new scheduler)."""
+    import io
+    import logging
+
+    from app.batch.driver import _quiet_dask_tracebacks
+
+    buf = io.StringIO()
+    h = logging.StreamHandler(buf)
+    lg = logging.getLogger("distributed.client")
+    lg.addHandler(h)
+    try:
+        undo = _quiet_dask_tracebacks()
+        try:
+            raise ConnectionResetError("Connection reset by peer")
+        except ConnectionResetError:
+            lg.error("", exc_info=True)                       # Dask's empty "ERROR -" line
+            lg.error("Lost connection to the scheduler", exc_info=True)
+        undo()
+        assert buf.getvalue() == "Lost connection to the scheduler\n"
+        try:
+            raise ConnectionResetError("again")
+        except ConnectionResetError:
+            lg.error("after the batch", exc_info=True)
+        assert "Traceback" in buf.getvalue()  # only while the batch runs
+    finally:
+        lg.removeHandler(h)
