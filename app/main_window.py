@@ -708,7 +708,7 @@ class MainWindow(QMainWindow):
             if attrs is None:
                 return None, (f" {name}'s {found} were not saved: the triangles were remade "
                               "(remeshing or coarsening).")
-        if not attributes_kept_by(path):
+        if not attributes_kept_by(path, attrs):
             return None, (f" {name}'s {found} were not saved: {Path(path).suffix} files cannot "
                           "hold them (save as .obj to keep them).")
         return attrs, f" With {name}'s {found}."

@@ -1,5 +1,6 @@
 """What a mesh file carries besides positions and triangles: texture coordinates (UVs), normals,
-materials and vertex colours -- read from OBJ files, carried through a method, written back.
+materials and vertex colours -- read from OBJ files (PLY: vertex colours), carried through a
+method, written back.
 
 :func:`read_mesh` returns positions and triangles only. :func:`read_attributes` reads the rest
 of an OBJ file (``vt``, ``vn``, ``mtllib``, ``usemtl``, ``v x y z r g b`` colours) as
@@ -153,6 +154,16 @@ def read_attributes(path: str | os.PathLike, n_vertices: int, n_faces: int
     nothing besides positions and triangles, or triangles that do not line up -- then the
     caller cannot keep them and says so)."""
     p = Path(os.fspath(path))
+    if p.suffix.lower() == ".ply":  # PLY: its vertex colours
+        from .io import ply_colors
+
+        try:
+            got = ply_colors(p.read_bytes())
+        except OSError:
+            return None
+        if got is None or got[0] != "vertex" or len(got[1]) != n_vertices:
+            return None
+        return SurfaceAttributes(vertex_colors=np.asarray(got[1], dtype=np.float64))
     if p.suffix.lower() != ".obj":
         return None
     try:

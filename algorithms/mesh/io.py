@@ -1439,6 +1439,10 @@ def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray, *,
             f"write. Use one of {', '.join(SUPPORTED_WRITE)}."
         )
     V, F = _check_for_writing(V, F, p.name, ext)
+    if (attributes is not None and ext == ".ply" and vertex_colors is None
+            and attributes.vertex_colors is not None
+            and len(attributes.vertex_colors) == len(V)):
+        vertex_colors = attributes.vertex_colors
     if attributes is not None and ext == ".obj" and not attributes.empty:
         from .attributes import obj_text
 
@@ -1455,9 +1459,16 @@ def write_mesh(path: str | os.PathLike, V: np.ndarray, F: np.ndarray, *,
         atomic_write(p, lambda fh: _WRITERS[ext](fh, V, F, colors))
 
 
-def attributes_kept_by(path: str | os.PathLike) -> bool:
-    """True when :func:`write_mesh` writes UVs, materials and normals to this file's format."""
-    return Path(os.fspath(path)).suffix.lower() == ".obj"
+def attributes_kept_by(path: str | os.PathLike, attributes=None) -> bool:
+    """True when :func:`write_mesh` writes ``attributes`` (UVs, materials, normals, vertex
+    colours) to this file's format: OBJ all of them, PLY vertex colours only."""
+    ext = Path(os.fspath(path)).suffix.lower()
+    if ext == ".obj":
+        return True
+    if ext == ".ply" and attributes is not None:
+        return (attributes.uv is None and attributes.material is None and not attributes.mtllib
+                and not attributes.normals and attributes.vertex_colors is not None)
+    return False
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], None]) -> None:

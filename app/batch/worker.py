@@ -324,7 +324,7 @@ def _run_pipeline(job, task: dict, rec: dict) -> dict:
         _exit(0)  # the driver is gone: do not write behind its back
     out = Path(task["output"])
     out.parent.mkdir(parents=True, exist_ok=True)
-    if attrs is not None and not attributes_kept_by(out):
+    if attrs is not None and not attributes_kept_by(out, attrs):
         notes = [n for n in notes if not n.startswith("kept ")] + [
             f"the input's {attrs.describe()} were not written: {out.suffix} files cannot "
             "hold them (write .obj to keep them)."]

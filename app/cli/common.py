@@ -310,10 +310,14 @@ def carried_attributes(input_path, data, how: str, output, levels: int = 0, F_ou
                                   "each of its triangles in four."}
         extra = (" (vertex colours were not subdivided: dropped)"
                  if attrs.vertex_colors is not None else "")
+        if out.empty:
+            return None, {"found": found, "kept": False,
+                          "note": f"{name}'s {found} were dropped: subdivision does not carry "
+                                  "vertex colours."}
     else:
         return None, {"found": found, "kept": False,
                       "note": f"{name}'s {found} were dropped: {how}."}
-    if not attributes_kept_by(output):
+    if not attributes_kept_by(output, out):
         return None, {"found": found, "kept": False,
                       "note": f"{name}'s {found} were not written: {Path(output).suffix} files "
                               "cannot hold them (write .obj to keep them)."}

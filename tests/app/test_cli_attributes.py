@@ -88,3 +88,25 @@ def test_batch_keeps_them_and_its_record_says_so(tmp_path):
     _, a0 = _attrs(BOB)
     _, a1 = _attrs(tmp_path / "out" / "bob.obj")
     np.testing.assert_array_equal(a1.uv, a0.uv)
+
+
+def test_ply_vertex_colours_are_kept_where_the_vertices_are(tmp_path, capsys):
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.io import ply_colors
+    from algorithms.mesh.primitives import icosphere
+
+    V, F = icosphere(2)
+    C = np.clip(np.abs(V), 0, 1)
+    src = tmp_path / "coloured.ply"
+    write_mesh(src, V, F, vertex_colors=C)
+    for ext in ("ply", "obj"):
+        out = tmp_path / f"smooth.{ext}"
+        assert main(["smooth", str(src), "-o", str(out)]) == 0
+        assert "kept coloured.ply's vertex colours" in capsys.readouterr().err
+        m = read_mesh(out)
+        got = read_attributes(out, len(m.V), len(m.F)).vertex_colors if ext == "obj" else \
+            ply_colors(out.read_bytes())[1]
+        np.testing.assert_allclose(got, np.round(C * 255) / 255, atol=1e-6)
+    out = tmp_path / "sub.ply"
+    assert main(["subdivide", str(src), "-o", str(out), "--method", "loop", "--levels", "1"]) == 0
+    assert "vertex colours were dropped: subdivision does not carry" in capsys.readouterr().err
