@@ -177,7 +177,7 @@ def read_pipeline(path) -> Pipeline:
     return Pipeline(steps, commands, source=str(p), blobs=blobs)
 
 
-def _how(command: str, job, same: bool) -> str:
+def _how(command: str, job, same: bool, n_vertices: int = 0) -> str:
     """What a step did to the triangles (``same``: its result has the same triangles): "same",
     "subdivided", or why the UVs cannot follow (:func:`app.cli.common.carried_attributes`)."""
     if command == "clean":
@@ -185,7 +185,7 @@ def _how(command: str, job, same: bool) -> str:
     if command == "subdivide":
         c = int(job.params.get("coarsen_first", 0) or 0)
         return ("'Coarsen first' remade the triangles (QSlim) before subdividing"
-                if c else "subdivided")
+                if c and c < n_vertices else "subdivided")
     if command == "paparazzi":
         return "Paparazzi remakes the triangles when it remeshes, so they have nowhere to go"
     return "same" if same else f"{command} changed the triangles"
@@ -267,7 +267,7 @@ def run_pipeline(job: Pipeline, task: dict, rec: dict) -> tuple:
         if attrs is not None:
             same = (len(state.F) == len(F_before) and len(state.V) == n_before
                     and np.array_equal(state.F, F_before))
-            how = _how(cmd, step, same)
+            how = _how(cmd, step, same, n_before)
             if how == "subdivided":
                 levels = int(step.params.get("levels", 2))
                 attrs = attrs.transferred(F_before, n_before, state.F, levels)
