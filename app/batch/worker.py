@@ -253,7 +253,7 @@ def _run(job, task: dict, rec: dict) -> dict:
     out = Path(task["output"])
     out.parent.mkdir(parents=True, exist_ok=True)
     # the input's UVs, materials, normals and colours: kept, subdivided or said to be dropped
-    from app.cli.common import carried_attributes
+    from app.cli.attributes import carried_attributes
 
     attrs, status = carried_attributes(task["input"], state, _attributes_how(job, state),
                                        out, int(job.params.get("levels", 0) or 0), F_out=F)

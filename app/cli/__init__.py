@@ -124,8 +124,11 @@ def main(argv: list[str]) -> int:
     from app import crashlog
     from app.cli import common
 
+    from app.cli import attributes
+
     common.json_printed(reset=True)
     crashlog.last_said(reset=True)
+    attributes.reset()  # no UV status of an earlier command in this one's --json
     want_json = bool(getattr(args, "json", False)) or "--json" in argv
 
     def failed(message: str, code: int) -> int:

@@ -107,7 +107,7 @@ def cmd_adversary(args: argparse.Namespace) -> int:
     same norm on the same views."""
     from algorithms.adversarial import AdversaryParams, short_name
     from algorithms.adversarial.lighting_io import write_lighting
-    from app.cli.common import write_result
+    from app.cli.attributes import write_result
     from app.recipes import adversarial as rcp
 
     t0 = time.perf_counter()

@@ -95,7 +95,7 @@ def _angles_to_targets(V, F, target_map) -> tuple[float, float]:
 
 def cmd_analogy(args: argparse.Namespace) -> int:
     from algorithms.deform.analogies import AnalogyParams
-    from app.cli.common import write_result
+    from app.cli.attributes import write_result
     from app.recipes.analogies import style_target_map
 
     params = method_params(args, AnalogyParams, panel="Analogies")

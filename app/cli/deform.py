@@ -150,7 +150,7 @@ def output_for_lambda(output: str, lam: float, several: bool) -> str:
 
 def cmd_cubic(args: argparse.Namespace) -> int:
     from algorithms.deform.cubic import mean_l1_of_normals
-    from app.cli.common import write_result
+    from app.cli.attributes import write_result
 
     lams = lambda_values(args)
     several = lams is not None and len(lams) > 1

@@ -193,7 +193,7 @@ def paparazzi_job(args: argparse.Namespace) -> tuple:
 
 
 def cmd_paparazzi(args: argparse.Namespace) -> int:
-    from app.cli.common import write_result
+    from app.cli.attributes import write_result
     from algorithms.mesh.topology import euler_characteristic, is_manifold
     from algorithms.paparazzi import count_self_intersections
     from algorithms.paparazzi.optimize import PaparazziParams

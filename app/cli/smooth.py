@@ -45,7 +45,7 @@ def cmd_smooth(args: argparse.Namespace) -> int:
     names = _smooth_names()
     if _data_smoothing_requested(args):
         return _cmd_data_smooth(args, names)
-    from app.cli.common import write_result
+    from app.cli.attributes import write_result
 
     params = method_params(args, SmoothParams, panel="Smooth", allowed=names)
     check_output(args.output, args.overwrite, args.mesh)
@@ -158,7 +158,7 @@ def _cmd_data_smooth(args: argparse.Namespace, names: set[str]) -> int:
     recipe "Multigrid smoothing" (:mod:`app.recipes.multigrid`)."""
     import numpy as np
 
-    from app.cli.common import write_result
+    from app.cli.attributes import write_result
     from algorithms.mesh.fields import write_field
     from algorithms.multigrid.params import DataSmoothingParams
     from app.recipes import multigrid as rm

@@ -82,7 +82,7 @@ def subdivide_job(args: argparse.Namespace) -> tuple:
 
 
 def cmd_subdivide(args: argparse.Namespace) -> int:
-    from app.cli.common import write_result
+    from app.cli.attributes import write_result
 
     params = subdivide_params(args)
     check_output(args.output, args.overwrite, args.mesh)

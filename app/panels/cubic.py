@@ -220,9 +220,9 @@ class CubicPanel(MethodPanel):
         if st is None:
             return ""
         if getattr(self, "_parts_of", (None,))[0] is not st.F:
-            from algorithms.mesh.topology import touching_parts
+            from app.recipes.cubic import touching_parts_of
 
-            self._parts_of = (st.F, touching_parts(st.V, st.F))
+            self._parts_of = (st.F, touching_parts_of(st))
         parts, touching = self._parts_of[1]
         if not touching:
             return ""

@@ -103,6 +103,14 @@ def cubic_steps(state, params, options: dict | None = None, cache: dict | None =
                         preview_every=prog.preview_every, lam_exponent=prog.lam_exponent)
 
 
+def touching_parts_of(state) -> tuple[int, int]:
+    """``(parts, touching)`` of the mesh (:func:`algorithms.mesh.topology.touching_parts`):
+    the Cubic panel warns when separate parts touch."""
+    from algorithms.mesh.topology import touching_parts
+
+    return touching_parts(state.V, state.F)
+
+
 def _cubic_params():
     from algorithms.deform.cubic import CubicParams
 

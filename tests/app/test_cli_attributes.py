@@ -61,7 +61,7 @@ def test_subdivision_splits_the_uvs_and_a_format_without_uvs_says_so(tmp_path, c
 
 
 def test_a_method_that_remakes_the_triangles_says_what_it_dropped(tmp_path):
-    from app.cli.common import carried_attributes
+    from app.cli.attributes import carried_attributes
 
     m0, _ = _attrs(BOB)
     attrs, status = carried_attributes(BOB, m0, "Paparazzi remakes the triangles when it "
