@@ -144,6 +144,10 @@ class SurfaceAttributes:
         return replace(self, uv=uv, material=mat, vertex_colors=None)
 
 
+#: an OBJ line that carries more than positions and triangles (UVs, normals, materials, or a
+#: vertex with colours: six numbers)
+_EXTRAS = re.compile(rb"(?m)^[ \t]*(?:(?:vt|vn|usemtl|mtllib)[ \t]|v(?:[ \t]+\S+){6})")
+
 _FACE_TOKEN = re.compile(r"^(-?\d+)(?:/(-?\d*)(?:/(-?\d*))?)?$")
 
 
@@ -167,9 +171,14 @@ def read_attributes(path: str | os.PathLike, n_vertices: int, n_faces: int
     if p.suffix.lower() != ".obj":
         return None
     try:
-        text = p.read_bytes().decode("utf-8", errors="replace")
+        raw = p.read_bytes()
     except OSError:
         return None
+    # most meshes carry nothing more: a search in C, not the line-by-line parse below, on every
+    # opened file and every batch input
+    if _EXTRAS.search(raw) is None:
+        return None
+    text = raw.decode("utf-8", errors="replace")
     if "\\" in text:
         text = re.sub(r"\\[ \t]*\r?\n", " ", text)
     vt: list[tuple[float, float]] = []
