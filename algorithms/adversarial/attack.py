@@ -450,11 +450,15 @@ def _per_view(values, n, what):
 
 def attack_iter(scene: Scene, classifier, cameras: Sequence[Camera],
                 params: AdversaryParams = AdversaryParams(), *, decrease=None, increase=None,
-                _out: dict | None = None) -> Iterator[AttackStep]:
+                center=None, _out: dict | None = None) -> Iterator[AttackStep]:
     """Run a lighting or geometry attack on the views ``cameras`` (rendered at
     ``params.resolution * params.supersample``), yielding an :class:`AttackStep` per iteration
     (iteration 0 = before). ``decrease`` / ``increase`` are labels (names or indices; one for all
     views or one per view); ``decrease`` defaults to each view's top-1 before the attack.
+    ``center``: the centre of the norm ball (lighting (49, 3) or unit-box vertices (n, 3));
+    default the start (the scene's), as in the thesis. A start inside a ball around another
+    centre is what rendered data augmentation uses (:mod:`.augment`: a random light in the ball
+    around a base light, then the attack); the result's ``norm`` is then measured from it.
     The final :class:`AttackResult` is stored in ``_out["result"]`` when a dict is given."""
     validate_params(params)
     names = classifier.class_names
@@ -467,6 +471,14 @@ def attack_iter(scene: Scene, classifier, cameras: Sequence[Camera],
     r = params.ball()
     x0 = (scene.lighting if mode == "lighting" else scene.V).copy()
     x = x0.copy()
+    if center is not None:
+        x0 = np.asarray(center, dtype=np.float64)
+        if x0.shape != x.shape or not np.isfinite(x0).all():
+            raise ParameterError(f"The norm ball's centre must be finite with the shape "
+                                 f"{x.shape} of what the attack changes; got {x0.shape}.")
+        if np.abs(x - x0).max() > r * (1 + 1e-9):
+            raise ParameterError("The attack's start lies outside its norm ball (radius "
+                                 f"{r:g}) around the given centre.")
     gamma = params.step * (1.0 if mode == "lighting" else r / DEFAULT_RADIUS["lighting"]
                            if params.radius > 0 else
                            DEFAULT_RADIUS["geometry"] / DEFAULT_RADIUS["lighting"])

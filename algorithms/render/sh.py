@@ -84,7 +84,7 @@ __all__ = ["SH_DEGREE", "n_coefficients", "sh_index", "clamped_cosine_coefficien
            "convolution_weights", "sh_basis", "sh_basis_gradient", "sh_basis_vjp", "sh_basis_polar",
            "sh_basis_gradient_polar", "ENVIRONMENTS", "ENVIRONMENT_SOURCE", "environment",
            "SHShading", "SHState", "SHGradients", "sh_render", "sh_image_vjp", "face_albedo",
-           "read_mesh_colors", "sh_face_colors_torch"]
+           "read_mesh_colors", "sh_face_colors_torch", "rotate_lighting"]
 
 SH_DEGREE = 6
 
@@ -372,6 +372,31 @@ def environment(name: str = "Grace Cathedral", degree: int = SH_DEGREE) -> np.nd
     k = min(9, len(U))
     U[:k] = ENVIRONMENTS[key][:k]
     return U
+
+
+def rotate_lighting(U, R) -> np.ndarray:
+    """The SH lighting ``U ((l+1)^2, C)`` turned by the rotation matrix ``R (3, 3)``: the light
+    that arrived from direction ``w`` arrives from ``R w``, ``U'(w) = U(R^T w)``. A rotation
+    keeps each degree's band, so the coefficients of every degree are refitted exactly (least
+    squares on 4 x (l+1)^2 + 64 Fibonacci-sphere directions; error ~1e-15)."""
+    U = np.asarray(U, dtype=np.float64)
+    R = np.asarray(R, dtype=np.float64)
+    if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-8):
+        raise ParameterError("rotate_lighting needs a 3 x 3 rotation matrix.")
+    flat = U.ndim == 1
+    U2 = U[:, None] if flat else U
+    d = _check_degree(int(round(math.sqrt(U2.shape[0]))) - 1)
+    if (d + 1) ** 2 != U2.shape[0]:
+        raise ParameterError(f"SH lighting needs (l+1)^2 rows; got {U2.shape[0]}.")
+    k = 4 * (d + 1) ** 2 + 64
+    i = np.arange(k) + 0.5
+    z = 1 - 2 * i / k
+    phi = i * math.pi * (3 - math.sqrt(5))
+    r = np.sqrt(1 - z * z)
+    W = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    B = sh_basis(W, d)
+    out = np.linalg.lstsq(B, sh_basis(W @ R, d) @ U2, rcond=None)[0]
+    return out[:, 0] if flat else out
 
 
 # --------------------------------------------------------------------------------------------

@@ -225,6 +225,21 @@ def make_executor(job: Job, workers: int, scheduler: str | None):
     return ex, lambda: ex.shutdown(wait=True, cancel_futures=True), None, workers
 
 
+@contextlib.contextmanager
+def process_pool(workers: int, initializer=None, initargs=()) -> Iterator[cf.Executor]:
+    """A local pool of ``workers`` "spawn" processes like the batch's own (they never import
+    the caller's main script, :func:`_worker_context`), each seeing one thread for OpenMP /
+    BLAS / Numba (the cores are shared by the processes); shut down on leaving, queued work
+    cancelled. For other commands that spread work over processes (``stylize3d augment``)."""
+    with _threads_per_process(1):
+        ex = cf.ProcessPoolExecutor(max_workers=workers, mp_context=_worker_context(),
+                                    initializer=initializer, initargs=initargs)
+        try:
+            yield ex
+        finally:
+            ex.shutdown(wait=True, cancel_futures=True)
+
+
 class _NoTraceback:
     """A logging filter: Dask's own log lines without their tracebacks, empty ones dropped.
     When the scheduler stops, Dask's client logs "ERROR -" with two tracebacks (a closed

@@ -12,7 +12,8 @@ every method sub-command takes a mesh file or a project (``.s3d``) and ``--param
 One module per method family registers its sub-parsers (``COMMANDS``, ``add_parsers(sub)``):
 :mod:`~app.cli.mesh_tools` (info, clean), :mod:`~app.cli.smooth` (smooth, multigrid-info),
 :mod:`~app.cli.deform` (cubic), :mod:`~app.cli.analogy`, :mod:`~app.cli.study`, :mod:`~app.cli.spectral`
-(coarsen), :mod:`~app.cli.paparazzi`, :mod:`~app.cli.adversary`, :mod:`~app.cli.subdivision`
+(coarsen), :mod:`~app.cli.paparazzi`, :mod:`~app.cli.adversary`, :mod:`~app.cli.augment`
+(augment, augment-train), :mod:`~app.cli.subdivision`
 (subdivide, subdivide-train, subdivide-eval).
 """
 
@@ -41,6 +42,7 @@ COMMAND_MODULES: dict[str, tuple[str, ...]] = {
     "spectral": ("coarsen",),
     "paparazzi": ("paparazzi",),
     "adversary": ("adversary",),
+    "augment": ("augment", "augment-train"),
     "subdivision": ("subdivide", "subdivide-train", "subdivide-eval"),
     "batch": ("batch",),
 }
@@ -49,7 +51,8 @@ _MODULE_OF = {c: m for m, cs in COMMAND_MODULES.items() for c in cs}
 
 #: names re-exported lazily (PEP 562): ``app.cli.cmd_cubic`` imports :mod:`app.cli.deform`
 _LAZY = {
-    "cmd_adversary": "adversary", "cmd_analogy": "analogy", "cmd_cubic": "deform",
+    "cmd_adversary": "adversary", "cmd_augment": "augment", "cmd_augment_train": "augment",
+    "cmd_analogy": "analogy", "cmd_cubic": "deform",
     "cmd_clean": "mesh_tools", "cmd_info": "mesh_tools", "cmd_paparazzi": "paparazzi",
     "cmd_multigrid_info": "smooth", "cmd_smooth": "smooth", "cmd_coarsen": "spectral",
     "cmd_study": "study", "cmd_subdivide": "subdivision", "cmd_subdivide_eval": "subdivision",

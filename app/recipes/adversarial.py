@@ -80,7 +80,7 @@ from app.recipes import Recipe, blob_bytes, blob_path, put_blob, register, uncha
 
 __all__ = ["LIGHTING", "GEOMETRY", "CLASSIFY", "PreviewStep", "AttackStep", "classifier_of",
            "load_classifier_file", "remember_classifier", "class_names_of", "resolve_label",
-           "top_k", "environment_lighting", "full_lighting", "face_colors_ref",
+           "top_k", "environment_lighting", "full_lighting", "face_colors_ref", "albedo_of",
            "face_colors_of", "read_face_colors", "azimuths_of", "exact_moves", "frame_of",
            "lighting_steps", "geometry_steps", "classify_steps", "attack_outcome",
            "classify_outcome"]
@@ -282,6 +282,12 @@ def _albedo_of(state, options: dict):
                                  "or use one surface colour.")
         return C
     return np.array([float(x) for x in options.get("color", DEFAULT_COLOR)])
+
+
+def albedo_of(state, options: dict):
+    """The surface colours of a run's options: the per-face colours of ``face_colors`` (checked
+    against the mesh) or the one ``color``."""
+    return _albedo_of(state, options)
 
 
 def frame_of(state) -> list[float]:
