@@ -391,11 +391,14 @@ def nonmanifold_edges(F) -> np.ndarray:
     return E[counts > 2]
 
 
-def _corner_fans(d: _EdgeData, n: int) -> tuple[np.ndarray, np.ndarray]:
+def _corner_fans(d: _EdgeData, n: int, cut: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """Label the fan of each corner.
 
     Corner ``c * m + f`` is vertex ``F[f, c]``. Corners at the same vertex in faces that share an
-    edge through that vertex are linked; connected corners form a fan.
+    edge through that vertex are linked; connected corners form a fan. ``cut`` ((e,) bool over
+    the unique edges, optional): faces sharing a cut edge are not linked through it (the
+    surface is cut open there).
 
     Returns (labels (3m,), fans_per_vertex (n,)).
     """
@@ -407,6 +410,9 @@ def _corner_fans(d: _EdgeData, n: int) -> tuple[np.ndarray, np.ndarray]:
     same = d.EMAP[hs[1:]] == d.EMAP[hs[:-1]]
     h1 = hs[:-1][same]
     h2 = hs[1:][same]
+    if cut is not None:
+        keep = ~cut[d.EMAP[h1]]
+        h1, h2 = h1[keep], h2[keep]
     f1, c1 = h1 % m, h1 // m
     f2, c2 = h2 % m, h2 // m
     # endpoints of each half-edge as corners: start corner (c+1)%3, end corner (c+2)%3
@@ -777,6 +783,24 @@ def _orientation_data(d: _EdgeData) -> tuple[np.ndarray, np.ndarray, bool]:
     flip = parity.astype(bool)
     ok = (rel ^ parity[f1] ^ parity[f2]) == 0
     return flip, lab.astype(np.int64), bool(ok.all())
+
+
+def _inconsistent_edges(d: _EdgeData, flip: np.ndarray) -> np.ndarray:
+    """(e,) bool over the unique edges: interior edges whose two faces still disagree about the
+    outside once the faces in ``flip`` are flipped (none on an orientable surface with the flips
+    of :func:`_orientation_data`; on a one-sided one, a seam that makes it two-sided when cut).
+
+    Around an interior manifold vertex the faces form a disc, which is orientable, so an even
+    number of these edges meets there: the seam runs from boundary to boundary or closes on
+    itself, and cutting it (:func:`_corner_fans` with ``cut``) separates every one of its edges.
+    """
+    hs = d.order
+    same = d.EMAP[hs[1:]] == d.EMAP[hs[:-1]]
+    h1, h2 = hs[:-1][same], hs[1:][same]
+    bad = (d.fwd[h1] == d.fwd[h2]) ^ flip[h1 % d.m] ^ flip[h2 % d.m]
+    out = np.zeros(len(d.counts), dtype=bool)
+    out[d.EMAP[h1[bad]]] = True
+    return out
 
 
 def orient_consistently(F) -> tuple[np.ndarray, np.ndarray, bool]:

@@ -36,9 +36,12 @@ Issue codes (severity; whether :func:`clean_mesh` fixes it; what ``indices`` hol
     others.
 ``nonmanifold_vertices`` (error; yes; vertices)
     Vertices whose faces form more than one fan. Each extra fan gets its own copy of the vertex.
-``inconsistent_orientation`` (warning; yes if orientable; ``(k, 2)`` edges)
+``inconsistent_orientation`` (warning; yes; ``(k, 2)`` edges)
     Neighbouring faces disagree about the outside. Faces are flipped by a breadth-first search
-    over each patch (its lowest-index face keeps its orientation).
+    over each patch (its lowest-index face keeps its orientation). A one-sided surface (a
+    Moebius strip, a model whose orientation flips along a seam) cannot be oriented as it is:
+    Clean first cuts it open along the edges where the search's orientation still flips (the
+    seam gets a boundary on each side, as mesh repair tools do), then orients it.
 ``inward_orientation`` (warning; yes; faces of those parts)
     Closed, consistently oriented parts with negative signed volume (inside-out). Flipped.
 ``multiple_components`` (info), ``boundary`` (info), ``genus`` (info)
@@ -61,6 +64,7 @@ from .components import connected_components as _cc
 from ..errors import InvalidMeshError, ParameterError
 from .topology import (
     _corner_fans,
+    _inconsistent_edges,
     _EdgeData,
     _genus_from,
     _orientation_data,
@@ -395,7 +399,9 @@ def _coincident_representatives(V: np.ndarray, candidates: np.ndarray, tol: floa
 
 
 def _bad_vertices_after(F: np.ndarray, n: int) -> np.ndarray:
-    """Boolean (n,) mask: vertices on a non-manifold edge or with several fans in F."""
+    """Boolean (n,) mask: vertices on a non-manifold edge or with several fans in F, and, on an
+    edge-manifold F that is one-sided, the vertices of the seam where its orientation flips
+    (merging the two sides of a seam Clean cut open would make the surface one-sided again)."""
     bad = np.zeros(n, dtype=bool)
     if F.shape[0] == 0:
         return bad
@@ -403,6 +409,10 @@ def _bad_vertices_after(F: np.ndarray, n: int) -> np.ndarray:
     bad[d.E[d.counts > 2].ravel()] = True
     _, fans = _corner_fans(d, n)
     bad[:fans.size] |= fans > 1
+    if not bad.any():
+        flip, _, orientable = _orientation_data(d)
+        if not orientable:
+            bad[d.E[_inconsistent_edges(d, flip)].ravel()] = True
     return bad
 
 
@@ -717,7 +727,8 @@ def validate_mesh(V, F, notes: Iterable[str] = ()) -> MeshReport:
                     f"{_n(kept_apart, 'vertex', 'vertices')} {_verb(kept_apart, 'sits', 'sit')} at "
                     "the same position as another vertex but "
                     f"{_verb(kept_apart, 'is', 'are')} kept separate, because merging would make "
-                    "the surface non-manifold (for example two parts touching at one point).",
+                    "the surface non-manifold (for example two parts touching at one point) "
+                    "or one-sided (the two sides of a seam Clean cut open).",
                     count=kept_apart,
                     fixable=False,
                     indices=dup_idx,
@@ -789,10 +800,11 @@ def validate_mesh(V, F, notes: Iterable[str] = ()) -> MeshReport:
         if orientable_known is False:
             msg = (
                 f"Neighbouring triangles disagree about which side is outside along "
-                f"{_n(k, 'edge')}, and the surface is not orientable (like a Moebius strip), so "
-                "this cannot be fixed automatically."
+                f"{_n(k, 'edge')}, and the surface is one-sided (like a Moebius strip). 'Clean' "
+                "can cut it open along a seam where the orientation flips, so that it has two "
+                "sides (the seam becomes a boundary)."
             )
-            fixable = False
+            fixable = True
         else:
             msg = (
                 f"Neighbouring triangles disagree about which side is outside along "
@@ -1178,6 +1190,17 @@ def _clean_pass(st: _State, weld_tolerance: float, orient_outward: bool) -> None
         d = _EdgeData(st.F)
         if not (d.counts > 2).any():
             flip, patch, orientable = _orientation_data(d)
+            if not orientable:  # one-sided: cut it open where the orientation still flips
+                seam = _inconsistent_edges(d, flip)
+                labels, _ = _corner_fans(d, st.V.shape[0], cut=seam)
+                n_before = st.V.shape[0]
+                _split_fans(st, labels, d.m)
+                k = int(seam.sum())
+                st.actions.append(
+                    f"Cut the one-sided surface open along {_n(k, 'edge')} where its "
+                    f"orientation flips ({_n(st.V.shape[0] - n_before, 'vertex', 'vertices')} "
+                    "doubled), so that it has two sides; the seam is now a boundary."
+                )
             if flip.any():
                 k = int(flip.sum())
                 st.F[flip] = st.F[flip][:, [0, 2, 1]]

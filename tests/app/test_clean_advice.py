@@ -8,19 +8,23 @@ from algorithms.mesh import write_mesh
 from tests.conftest import mobius_strip
 
 
-def test_status_bar_advice_for_non_orientable_mesh(window, dialogs, tmp_path):
+def test_a_one_sided_mesh_is_sent_to_clean_which_cuts_it_open(window, dialogs, tmp_path):
     V, F = mobius_strip()
     path = tmp_path / "mobius.obj"
     write_mesh(path, V, F)
-    assert window.open_path(path)  # only a warning Clean cannot fix: opens without a question
-    assert not dialogs.questions
+    dialogs.answers.append("Open as it is")
+    assert window.open_path(path)
     text = window.stats_label.text()
-    assert "problem" in text and "Clean Mesh" not in text and "Clean cannot fix" in text
-    assert "cannot fix" in window.stats_label.toolTip()
-    # Clean itself agrees: nothing it can do, and it says so
-    assert not window.clean_mesh()
-    assert "Not fixed" in dialogs.infos[-1][1] and "not orientable" in dialogs.infos[-1][1]
-    assert "Clean Mesh" not in window.stats_label.text()
+    assert "problem" in text and "Edit > Clean Mesh" in text and "cannot fix" not in text
+    # Clean cuts it open along its seam and says so; then nothing is left to fix, and Undo
+    # brings the one-sided mesh back
+    assert window.clean_mesh()
+    said = dialogs.infos[-1][1]
+    assert "Cut the one-sided surface open along" in said and "Not fixed" not in said
+    assert "problem" not in window.stats_label.text()
+    assert len(window.document.F) == len(F) and len(window.document.V) > len(V)
+    window.undo_stack.undo()
+    assert len(window.document.V) == len(V)
 
 
 def test_status_bar_sends_to_clean_when_clean_can_fix(window, dialogs, tmp_path):

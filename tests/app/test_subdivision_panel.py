@@ -263,17 +263,19 @@ def test_default_run_on_a_dense_mesh_says_what_the_network_did(window, dialogs, 
     assert "Loop subdivision was used" in text and "Coarsen first" in text
 
 
-def test_a_mesh_clean_cannot_fix_gets_advice_that_works_and_no_working_status(
+def test_a_one_sided_mesh_gets_advice_that_works_and_no_working_status(
         window, dialogs, qtbot, tmp_path, monkeypatch):
-    """Issue 41 item 1: on a mesh Clean cannot fix, Subdivision said "'Clean' can fix both",
-    Clean then said nothing could be fixed, and nothing suggested Loop, which works; while the
-    error dialog was open the status bar still said "working" with Cancel (Esc)."""
+    """Issue 41 item 1: on a mesh Clean could not fix, Subdivision said "'Clean' can fix both",
+    Clean then said nothing could be fixed; while the error dialog was open the status bar
+    still said "working" with Cancel (Esc). Clean now cuts a one-sided strip open (issue 38):
+    the message sends the user to Clean, and after Clean the network runs."""
     from algorithms.mesh import write_mesh
     from tests.algorithms.subdivision.test_baselines import _moebius
 
     V, F = _moebius(40)
     path = tmp_path / "strip.obj"
     write_mesh(path, V, F)
+    dialogs.answers.append("Open as it is")
     assert window.open_path(path)
     panel = window.panels["Subdivision"]
     panel.raise_()
@@ -293,10 +295,11 @@ def test_a_mesh_clean_cannot_fix_gets_advice_that_works_and_no_working_status(
         panel.run_button.click()
     qtbot.waitUntil(lambda: bool(seen), timeout=10000)
     text, cancel, job, progress = seen[0]
-    assert "'Clean' cannot fix it" in text and "Method to 'loop'" in text, text
+    assert "'Clean' fixes this." in text, text
     assert not (cancel or job or progress)  # not "working" behind the message
-    # the advice works: Loop subdivides it
-    panel.form.set_value("method", "loop")
+    # the advice works: after Clean the default method subdivides it
+    assert window.clean_mesh()
+    n_faces = len(window.document.F)
     with qtbot.waitSignal(window.job_committed, timeout=60000):
         panel.run_button.click()
-    assert len(window.document.F) == len(F) * 4 ** panel.form.params().levels
+    assert len(window.document.F) == n_faces * 4 ** panel.form.params().levels

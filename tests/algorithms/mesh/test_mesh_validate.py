@@ -275,22 +275,54 @@ def test_inconsistent_and_inward_orientation():
     assert signed_volume(res.V, res.F) < 0
 
 
-def test_non_orientable_is_not_fixable():
-    t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
-    ring = lambda w: np.column_stack([(1 + w * np.cos(t / 2)) * np.cos(t), (1 + w * np.cos(t / 2)) * np.sin(t), w * np.sin(t / 2)])
+def _strip(n=16, twist=True):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    half = t / 2 if twist else 0 * t
+    ring = lambda w: np.column_stack([(1 + w * np.cos(half)) * np.cos(t),
+                                      (1 + w * np.cos(half)) * np.sin(t), w * np.sin(half)])
     V = np.vstack([ring(-0.3), ring(0.3)])
-    n = 16
     F = []
     for i in range(n):
         a, b = i, n + i
-        c, d = (i + 1, n + i + 1) if i < n - 1 else (n, 0)
+        c, d = ((i + 1, n + i + 1) if i < n - 1 else ((n, 0) if twist else (0, n)))
         F += [[a, c, b], [b, c, d]]
-    r = validate_mesh(V, np.array(F))
+    return V, np.array(F)
+
+
+def test_a_one_sided_surface_is_cut_open_along_its_seam_by_clean():
+    V, F = _strip()
+    r = validate_mesh(V, F)
     issue = r.get("inconsistent_orientation")
-    assert issue is not None and not issue.fixable and "not orientable" in issue.message
+    assert issue is not None and issue.fixable and "one-sided" in issue.message
     assert r.stats["orientable"] is False and r.stats["genus"] is None
-    res = clean_mesh(V, np.array(F))
-    assert any(a.startswith("Not fixed: ") for a in res.actions)
+    assert r.stats["boundary_loops"] == 1  # a Moebius strip has one border
+    res = clean_mesh(V, F)
+    assert any(a.startswith("Cut the one-sided surface open along ") for a in res.actions)
+    assert not any(a.startswith("Not fixed") for a in res.actions), res.actions
+    after = validate_mesh(res.V, res.F)
+    assert "inconsistent_orientation" not in after and after.stats["orientable"] is True
+    assert not after.errors and not after.warnings and not after.needs_cleaning
+    # the same triangles, in place: only the seam's vertices got a second copy
+    assert len(res.F) == len(F) and len(V) < len(res.V) <= len(V) + 4
+    np.testing.assert_array_equal(res.V[: len(V)], V)
+    np.testing.assert_allclose(np.sort(res.V[res.F].reshape(len(F), -1), axis=1),
+                               np.sort(V[F].reshape(len(F), -1), axis=1))
+    # the cut seam: copies at one position, kept apart (merging would make it one-sided)
+    dup = after.get("duplicate_vertices")
+    assert dup is not None and not dup.fixable and "one-sided" in dup.message
+    # every edge of the result has its two triangles agreeing: a real orientation
+    Fr = res.F
+    half = np.concatenate([Fr[:, [0, 1]], Fr[:, [1, 2]], Fr[:, [2, 0]]])
+    assert len({tuple(h) for h in half.tolist()}) == len(half)
+    # cleaning again changes nothing (the seam is not welded back)
+    again = clean_mesh(res.V, res.F)
+    assert again.actions == ["Nothing to fix: the mesh is clean."]
+    # a two-sided strip with mixed orientation is only re-oriented, never cut
+    V2, F2 = _strip(twist=False)
+    F2[::3] = F2[::3][:, [0, 2, 1]]
+    res2 = clean_mesh(V2, F2)
+    assert not any("Cut" in a for a in res2.actions) and len(res2.V) == len(V2)
+    assert validate_mesh(res2.V, res2.F).stats["orientable"] is True
 
 
 def test_infos_components_boundary_genus():
@@ -500,26 +532,25 @@ def test_clean_fixes_random_corruption(case):
 
 # ------------------------------------------------------------------------------ advice (issue 10)
 def test_advice_never_offers_clean_for_what_clean_cannot_fix():
-    V, F = mobius_strip()
+    V, F = torus()
+    F = np.vstack([F, [[0, 1, len(V) + 3]]])  # a triangle that uses a vertex that does not exist
     report = validate_mesh(V, F)
-    issue = report.get("inconsistent_orientation")
-    assert issue is not None and not issue.fixable and not report.needs_cleaning
+    issue = report.get("index_out_of_range")
+    assert issue is not None and not issue.fixable
     assert "Use 'Clean'" not in report.advice and "Use 'Clean'" not in report.summary()
-    assert "'Clean' cannot fix: inconsistent orientation" in report.advice
-    assert "mesh editor" in report.advice and report.advice in report.summary()
-    # and Clean indeed leaves it: the advice after cleaning is the same
-    res = clean_mesh(V, F)
-    after = validate_mesh(res.V, res.F)
-    assert "inconsistent_orientation" in after and after.advice == report.advice
+    assert "'Clean' cannot fix: " in report.advice
+    assert "export the model again" in report.advice and report.advice in report.summary()
 
 
 def test_advice_splits_fixable_and_unfixable_problems():
     V, F = mobius_strip()
     V2 = np.vstack([V, [[5.0, 5.0, 5.0]]])  # an unused vertex: Clean fixes that
-    report = validate_mesh(V2, F)
+    F2 = np.vstack([F, [[0, 1, len(V2) + 3]]])  # and a broken triangle: Clean cannot
+    report = validate_mesh(V2, F2)
     assert report.needs_cleaning
-    assert report.advice.startswith("Use 'Clean' to fix: unused vertices.")
-    assert "'Clean' cannot fix: inconsistent orientation" in report.advice
+    assert report.advice.startswith("Use 'Clean' to fix: unused vertices")
+    assert "inconsistent orientation" in report.advice.split("'Clean' cannot fix")[0]
+    assert "'Clean' cannot fix: " in report.advice
     # a clean mesh needs no advice
     Vt, Ft = torus()
     assert validate_mesh(Vt, Ft).advice == ""

@@ -104,22 +104,32 @@ def _moebius(n=24, w=0.3):
     return V, np.array(F)
 
 
-def test_advice_to_clean_only_when_clean_fixes_it_else_loop():
+def test_advice_to_clean_only_when_clean_fixes_it_else_loop(monkeypatch):
     """Issue 41 item 1: a mesh Clean cannot fix was told "'Clean' can fix both", and Clean then
     said "Nothing could be fixed automatically": circular advice. Now the message advises Clean
-    only when Clean fixes it, and otherwise names Loop, which works on it."""
+    only when Clean fixes it, and otherwise names Loop, which works on it. A one-sided strip is
+    now fixed by Clean (it cuts the seam open, issue 38), so it is told to clean."""
     from algorithms.mesh.subdivision import loop_subdivide
     from algorithms.mesh.validate import clean_mesh
-    from algorithms.subdivision.data import check_manifold
+    from algorithms.subdivision import data
 
     V, F = _moebius()
     with pytest.raises(InvalidMeshError) as e:
         butterfly_subdivide(V, F, 1)
+    assert "'Clean' fixes this." in str(e.value), str(e.value)
+    c = clean_mesh(V, F)
+    assert c.actions[0].startswith("Cut the one-sided surface open")
+    Vb, Fb = butterfly_subdivide(c.V, c.F, 1)         # the advice works
+    assert len(Fb) == 4 * len(F) and np.isfinite(Vb).all()
+    # where Clean would not fix it, the message says so and names Loop, which works
+    monkeypatch.setattr(data, "_clean_fixes_edges", lambda V, F: False)
+    with pytest.raises(InvalidMeshError) as e:
+        butterfly_subdivide(V, F, 1)
     msg = str(e.value)
     assert "'Clean' cannot fix it" in msg and "--method loop" in msg, msg
-    assert clean_mesh(V, F).actions[0] == "Nothing could be fixed automatically."
-    Vl, Fl = loop_subdivide(V, F, 1)                 # the advice works
+    Vl, Fl = loop_subdivide(V, F, 1)
     assert len(Fl) == 4 * len(F) and np.isfinite(Vl).all()
+    monkeypatch.undo()
     # a closed mesh with one triangle flipped: Clean fixes it, and the message says so
     from algorithms.mesh.samples import sample_path
     from algorithms.mesh import read_mesh
@@ -128,7 +138,7 @@ def test_advice_to_clean_only_when_clean_fixes_it_else_loop():
     F2 = m.F.copy()
     F2[0] = F2[0, ::-1]
     with pytest.raises(InvalidMeshError) as e:
-        check_manifold(m.V, F2, "Neural subdivision")
+        data.check_manifold(m.V, F2, "Neural subdivision")
     assert "'Clean' fixes this." in str(e.value)
     c = clean_mesh(m.V, F2)
-    check_manifold(c.V, c.F, "Neural subdivision")  # no error after Clean
+    data.check_manifold(c.V, c.F, "Neural subdivision")  # no error after Clean
