@@ -36,11 +36,16 @@ from PySide6.QtWidgets import (QCheckBox, QColorDialog, QComboBox, QCompleter, Q
                                QProgressBar, QPushButton, QSlider, QVBoxLayout, QWidget)
 
 from algorithms.adversarial.attack import DEFAULT_RADIUS, AdversaryParams
+from algorithms.adversarial.augment import AugmentParams
 from algorithms.errors import Stylize3DError
 from algorithms.render.sh import ENVIRONMENTS
+from app import dialogs
+from app.forms import ParamsForm
 from app.jobs import JobRunner
 from app.panels.base import MethodPanel
 from app.recipes import adversarial as rcp
+from app.recipes import augment as aug
+from app.widgets import CollapsibleSection
 from app.recipes.adversarial import AttackStep, PreviewStep, top_k  # noqa: F401 (re-exported)
 
 #: the coefficients with a slider: degrees 0-2 (index l*l + l + m), what each pattern looks like
@@ -168,6 +173,8 @@ class AdversarialPanel(MethodPanel):
         # attacks): that result is classified in the frame the attack saw it in
         self._attack_frame: tuple | None = None
         self._preview_stale = True
+        self._augmenting = False          # the running job makes training images
+        self.augment_summary: dict | None = None   # the last finished one's summary
         self.preview_runner = JobRunner(self)
         self.preview_runner.finished.connect(self._on_preview_done)
         self.preview_runner.failed.connect(self._on_preview_failed)
@@ -400,6 +407,29 @@ class AdversarialPanel(MethodPanel):
         box.setVisible(False)
         lay.insertWidget(lay.indexOf(self.image_box) + 1, box)
         self.before_after_box = box
+
+        # training images (thesis §3.5): the same recipe as `stylize3d augment`
+        sec = CollapsibleSection("Training images (thesis §3.5)")
+        sec.setToolTip("Settings of Make training images…: how many images, which lighting, "
+                       "image size, attack iterations.")
+        tl = QVBoxLayout(sec.body)
+        tl.setContentsMargins(12, 0, 0, 0)
+        self.augment_form = ParamsForm(AugmentParams)
+        tl.addWidget(self.augment_form)
+        end = lay.count() - 1 if lay.itemAt(lay.count() - 1).spacerItem() else lay.count()
+        lay.insertWidget(end, sec)                       # last: after the attack's settings
+        self.augment_section = sec
+        self.augment_button = QPushButton("Make training images…")
+        self.augment_button.setToolTip(
+            "Render this shape many times (random views, distances and grey backgrounds) under "
+            "random or adversarial lighting, the lighting attack against the classifier above, "
+            "into a folder you choose: FOLDER/LABEL/0000.png, ... and manifest.jsonl (LABEL = "
+            "the true label). Runs in the background with progress; Stop keeps the images made "
+            "so far, and running it again on the same folder adds only the missing ones. Train "
+            "a classifier on them with: stylize3d augment-train FOLDER -o weights.pt "
+            "(thesis §3.5, rendered adversarial data augmentation).")
+        self.augment_button.clicked.connect(lambda: self.make_training_images())
+        lay.insertWidget(lay.indexOf(sec) + 1, self.augment_button)
 
         # footer: the two attacks instead of Run
         self.attack_light_button = self.run_button     # Run = the lighting attack (see run)
@@ -942,6 +972,7 @@ class AdversarialPanel(MethodPanel):
         def factory():
             return recipe.steps(state, params, options, cache)
 
+        self.plot.title = self.plot_title
         self.plot.clear()
         what = "lighting" if mode == "lighting" else "shape"
         self.status_label.setText(f"Attacking the {what}…")
@@ -962,7 +993,7 @@ class AdversarialPanel(MethodPanel):
         then, and while an attack runs, the buttons say why they wait."""
         ready = (not self.window_.document.is_empty and self.probs is not None
                  and not self._attacking())
-        for b in (self.attack_light_button, self.attack_geom_button):
+        for b in (self.attack_light_button, self.attack_geom_button, self.augment_button):
             b.setEnabled(ready)
         why = ("" if ready else "Open a mesh first." if self.window_.document.is_empty
                else "An attack is running." if self._attacking()
@@ -970,8 +1001,90 @@ class AdversarialPanel(MethodPanel):
         self.attack_light_button.setStatusTip(why)
         self.attack_geom_button.setStatusTip(why)
 
+    # -- training images --------------------------------------------------------------------
+    def make_training_images(self, folder: str | None = None) -> bool:
+        """Start *Make training images…* on the document's mesh (the recipe of ``stylize3d
+        augment``, :mod:`app.recipes.augment`) into ``folder`` (None: ask for one); False when
+        refused or cancelled (the reason is in the status line)."""
+        state = self.window_.document.state
+        if state is None:
+            self.status_label.setText("Open a mesh first (File > Open).")
+            return False
+        if self.window_.runner.busy:
+            self.status_label.setText("Wait for the running job to finish (or Stop it).")
+            return False
+        try:
+            self.check_label(self.true_edit)
+        except Stylize3DError:
+            return False
+        label = self.true_edit.text().strip()
+        if not label and self.probs is not None:
+            label = top_k(self.probs, self.class_names(), 1)[0][0]
+        if not label:
+            self.status_label.setText("Type the true label first: it names the images' folder.")
+            return False
+        if folder is None:
+            folder = dialogs.open_folder(self, "Folder for the training images")
+            if not folder:
+                return False
+        params = self.augment_form.params()
+        src = self.window_.document.path
+        options = {"dataset": str(folder), "label": label, "classifier": self._classifier_ref,
+                   "color": [float(x) for x in self.color],
+                   "face_colors": self._face_colors_ref(state),
+                   "mesh": src.name if src else "mesh", "mesh_index": 0, "overwrite": False}
+        try:
+            todo, done = aug.plan_request(state, params, options, self.class_names())
+        except Stylize3DError as exc:
+            if "--overwrite" not in str(exc):
+                self.status_label.setText(str(exc))
+                return False
+            if not dialogs.confirm(self, "Replace training images?",
+                                   str(exc).replace("pass --overwrite", "replace them")
+                                   + "\n\nReplace them?", yes="Replace"):
+                return False
+            options["overwrite"] = True
+            todo, done = aug.plan_request(state, params, options, self.class_names())
+        if not todo:
+            self.status_label.setText(f"All {len(done)} images are already in {folder}.")
+            return False
+        options.update(indices=todo, skipped=len(done))
+        self._augmenting = True
+        self.augment_summary = None
+        self.plot.title = "The classifier's confidence in the true class per training image"
+        self.plot.clear()
+        self.status_label.setText(f"Making {len(todo)} training image(s) ({len(done)} already "
+                                  "there)…")
+        recipe = aug.AUGMENT_RECIPE
+        self.window_.start_analysis_job(
+            self.title, lambda: recipe.steps(state, params, options, {}))
+        return True
+
+    def _augment_done(self, step) -> None:
+        self._augmenting = False
+        self.stop_button.setEnabled(False)
+        self.augment_summary = dict(getattr(step, "summary", {}) or {})
+        text = f"Training images: {step.message}."
+        self.status_label.setText(text)
+        self.window_.report(text)
+        self._preview_stale = True
+        QTimer.singleShot(0, self.schedule_preview)
+
+    def _augment_stopped(self, message: str) -> None:
+        self._augmenting = False
+        self.status_label.setText(f"{message} The training images made so far are kept (the "
+                                  "manifest lists them); Make training images… on the same "
+                                  "folder makes the missing ones.")
+        self.stop_button.setEnabled(False)
+        QTimer.singleShot(0, self.schedule_preview)
+
     def _on_metrics(self, history) -> None:
         if not self._mine():
+            return
+        if self._augmenting:
+            for _it, m in history:
+                if "true_probability" in m:
+                    self.plot.append("true class", m["true_probability"])
             return
         target = bool(self.target_edit.text().strip())
         for _it, m in history:
@@ -981,6 +1094,12 @@ class AdversarialPanel(MethodPanel):
                 self.plot.append("target", m["confidence_increased"])
 
     def _on_preview(self, step) -> None:
+        if self._mine() and self._augmenting and isinstance(step, aug.DatasetStep):
+            if step.image is not None:
+                self.image_label.setPixmap(image_to_pixmap(step.image, IMAGE_SIZE))
+                self.image_note.setText("Making training images: the last image written.")
+            self.status_label.setText(f"Image {step.iteration}/{step.total}: {step.message}")
+            return
         if not self._mine() or not isinstance(step, AttackStep):
             return
         if step.images is not None and len(step.images) and step.top5:
@@ -994,6 +1113,9 @@ class AdversarialPanel(MethodPanel):
 
     def _on_finished(self, step) -> None:
         if self.window_.last_job_name != self.title:
+            return
+        if self._augmenting:
+            self._augment_done(step)
             return
         self.stop_button.setEnabled(False)
         res = getattr(step, "result", None)
@@ -1027,6 +1149,9 @@ class AdversarialPanel(MethodPanel):
 
     def _on_stopped(self, message: str) -> None:
         if self.window_.last_job_name != self.title:
+            return
+        if self._augmenting:
+            self._augment_stopped(message)
             return
         super()._on_stopped(message)
         if self._attack_lighting_before is not None and self._attack_mode == "lighting":

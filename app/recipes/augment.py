@@ -20,7 +20,7 @@ status 3) unless ``overwrite`` is set.
 ``label`` (the true class, a name or number of the classifier's classes), ``mesh`` (its name in the manifest), ``mesh_index`` (0), ``classifier``
 (a blob reference, None = the installed one), ``color`` / ``face_colors`` (as the attack
 recipes'), ``overwrite`` (False), ``indices`` (the images to make; None = those the plan finds
-missing).
+missing) and ``skipped`` (with ``indices``: how many the caller found made, for the summary).
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from algorithms.steps import Step
 from app.recipes import Recipe, add_blob, blob_bytes, register, unchanged_result
 
 __all__ = ["AUGMENT", "MANIFEST", "DatasetStep", "image_steps", "augment_outcome",
-           "read_manifest", "plan_images", "label_of", "dataset_steps", "read_dataset",
+           "read_manifest", "plan_images", "plan_request", "label_of", "dataset_steps", "read_dataset",
            "train_steps"]
 
 AUGMENT = "Adversarial lighting: training images"
@@ -64,8 +64,8 @@ def read_manifest(dataset) -> dict[str, dict]:
     return last
 
 
-def label_of(options: dict, classifier) -> tuple[int, str]:
-    """``(class index, folder name)`` of ``options["label"]`` in ``classifier``'s classes."""
+def label_of(options: dict, class_names) -> tuple[int, str]:
+    """``(class index, folder name)`` of ``options["label"]`` among ``class_names``."""
     from algorithms.adversarial.labels import resolve_label, short_name
     from algorithms.errors import ParameterError
 
@@ -73,8 +73,8 @@ def label_of(options: dict, classifier) -> tuple[int, str]:
     if not text:
         raise ParameterError("Say what the object is (--label, or the panel's True label): the "
                              "images go into a folder of that name.")
-    k = resolve_label(text, classifier.class_names)
-    return k, short_name(classifier.class_names[k]).replace("/", "-")
+    k = resolve_label(text, class_names)
+    return k, short_name(class_names[k]).replace("/", "-")
 
 
 def _mesh_digest(state, options: dict) -> str:
@@ -142,6 +142,15 @@ def plan_images(state, params, options: dict, folder: str) -> tuple[list[int], l
     return todo, done
 
 
+def plan_request(state, params, options: dict, class_names) -> tuple[list[int], list[int]]:
+    """:func:`plan_images` of a run's options, the label resolved among ``class_names``
+    (no classifier is loaded: quick enough for the GUI thread)."""
+    from algorithms.adversarial.augment import check_params
+
+    check_params(params)
+    return plan_images(state, params, options, label_of(options, class_names)[1])
+
+
 def _write_png(path: Path, image: np.ndarray) -> None:
     import io
 
@@ -192,13 +201,13 @@ def image_steps(state, params, options: dict | None = None, cache: dict | None =
 
     options = dict(options or {})
     clf = adv.classifier_of(options.get("classifier"))
-    label, folder = label_of(options, clf)
+    label, folder = label_of(options, clf.class_names)
     dataset = Path(options["dataset"])
     k = int(options.get("mesh_index", 0))
     if options.get("indices") is None:
         todo, done = plan_images(state, params, options, folder)
     else:
-        todo, done = [int(j) for j in options["indices"]], []
+        todo, done = [int(j) for j in options["indices"]], [None] * int(options.get("skipped", 0))
     keys = _keys(state, params, options, folder, todo)
     (dataset / folder).mkdir(parents=True, exist_ok=True)
     scene = prepare_scene(np.asarray(state.V), np.asarray(state.F),
@@ -269,7 +278,7 @@ def dataset_steps(meshes, params, options: dict, *, workers: int = 1, chunk: int
     check_params(params)
     check_dataset_folder(options["dataset"], bool(options.get("overwrite")))
     clf = adv.classifier_of(options.get("classifier"))
-    _, folder = label_of(options, clf)
+    _, folder = label_of(options, clf.class_names)
     plans, skipped = [], 0
     for k, (name, state, own) in enumerate(meshes):
         opts = {**options, **own, "mesh": name, "mesh_index": k}
