@@ -413,7 +413,8 @@ def write_docs(res):
     lines += ["", _wrap("Time per seed (one thread, seconds, mean over seeds): " + ", ".join(
         f"{k} {np.mean([s['times'][k] for s in res['seeds']]):.0f}" for k in keys)
         + f"; the whole run {res['seconds'] / 60:.1f} min."), "",
-        "Run:", "", "    OMP_NUM_THREADS=1 taskset -c 1 .venv/bin/python benchmarks/augmentation.py "
+        "Run:", "",
+        "    OMP_NUM_THREADS=1 taskset -c 1 .venv/bin/python benchmarks/augmentation.py "
         f"--seeds {a['seeds']} --count {a['count']} --rounds {a['rounds']} --epochs "
         f"{a['epochs']} --resolution {a['resolution']} --iterations {a['iterations']} "
         f"--test-views {a['test_views']} --attack-views {a['attack_views']} "

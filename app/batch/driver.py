@@ -79,23 +79,32 @@ def default_memory_limit(workers: int) -> int:
 
 
 # ----------------------------------------------------------------------------- the report
+def json_records(path) -> Iterator[dict]:
+    """The JSON objects of a JSON-lines file written by :class:`ReportWriter`, in order (a
+    damaged line -- a write cut short -- is skipped); nothing when the file is missing."""
+    p = Path(path)
+    if not p.is_file():
+        return
+    with open(p, encoding="utf-8", errors="replace") as fh:
+        for line in fh:
+            try:
+                rec = json.loads(line)
+            except ValueError:
+                continue
+            if isinstance(rec, dict):
+                yield rec
+
+
 def read_report(path) -> dict[str, dict]:
     """The last record of each input in a report (a damaged line -- a write cut short -- is
     ignored), plus ``"__task_ids__"``: the task ids recorded."""
     last: dict[str, dict] = {}
     ids: set[str] = set()
-    p = Path(path)
-    if p.is_file():
-        with open(p, encoding="utf-8", errors="replace") as fh:
-            for line in fh:
-                try:
-                    rec = json.loads(line)
-                except ValueError:
-                    continue
-                if isinstance(rec, dict) and "input" in rec:
-                    last[rec["input"]] = rec
-                    if rec.get("task_id"):
-                        ids.add(rec["task_id"])
+    for rec in json_records(path):
+        if "input" in rec:
+            last[rec["input"]] = rec
+            if rec.get("task_id"):
+                ids.add(rec["task_id"])
     last["__task_ids__"] = ids  # type: ignore[assignment]
     return last
 

@@ -17,9 +17,9 @@ that holds files but no manifest, is refused (:class:`~algorithms.errors.MeshWri
 status 3) unless ``overwrite`` is set.
 
 ``options`` of the recipe (one mesh; the document's in the panel): ``dataset`` (folder),
-``label`` (the true class, a name or number of the classifier's classes), ``mesh`` (its name in the manifest), ``mesh_index`` (0), ``classifier``
-(a blob reference, None = the installed one), ``color`` / ``face_colors`` (as the attack
-recipes'), ``overwrite`` (False), ``indices`` (the images to make; None = those the plan finds
+``label`` (the true class, a name or number of the classifier's classes), ``mesh`` (its name in
+the manifest), ``mesh_index`` (0), ``classifier`` (a blob reference, None = the installed one),
+``color`` / ``face_colors`` (as the attack recipes'), ``overwrite`` (False), ``indices`` (the images to make; None = those the plan finds
 missing) and ``skipped`` (with ``indices``: how many the caller found made, for the summary).
 """
 
@@ -38,8 +38,8 @@ from algorithms.steps import Step
 from app.recipes import Recipe, add_blob, blob_bytes, register, unchanged_result
 
 __all__ = ["AUGMENT", "MANIFEST", "DatasetStep", "image_steps", "augment_outcome",
-           "read_manifest", "plan_images", "plan_request", "label_of", "dataset_steps", "read_dataset",
-           "train_steps"]
+           "read_manifest", "plan_images", "plan_request", "label_of", "dataset_steps",
+           "read_dataset", "train_steps", "check_dataset_folder"]
 
 AUGMENT = "Adversarial lighting: training images"
 MANIFEST = "manifest.jsonl"
@@ -49,19 +49,10 @@ MANIFEST = "manifest.jsonl"
 def read_manifest(dataset) -> dict[str, dict]:
     """The last record of each image file (``"LABEL/NNNN.png"``) in ``DATASET/manifest.jsonl``
     (a line cut short by a crash is ignored)."""
-    last: dict[str, dict] = {}
-    p = Path(dataset) / MANIFEST
-    if not p.is_file():
-        return last
-    with open(p, encoding="utf-8", errors="replace") as fh:
-        for line in fh:
-            try:
-                rec = json.loads(line)
-            except ValueError:
-                continue
-            if isinstance(rec, dict) and isinstance(rec.get("file"), str):
-                last[rec["file"]] = rec
-    return last
+    from app.batch.driver import json_records
+
+    return {rec["file"]: rec for rec in json_records(Path(dataset) / MANIFEST)
+            if isinstance(rec.get("file"), str)}
 
 
 def label_of(options: dict, class_names) -> tuple[int, str]:
