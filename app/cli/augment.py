@@ -22,8 +22,10 @@ import sys
 import time
 
 from algorithms.errors import ParameterError
-from app.cli.common import (MESH_HELP, add_params_arguments, add_params_file_argument,
-                            check_output, method_params, print_json, read_valid)
+from app.cli.common import (MESH_HELP, Terminated, add_params_arguments,
+                            add_params_file_argument, check_output, method_params, print_json,
+                            read_valid)
+from app.cli.common import say as common_say
 
 COMMANDS = ("augment", "augment-train")
 PANEL = "Adversarial lighting"
@@ -84,11 +86,20 @@ def cmd_augment(args: argparse.Namespace) -> int:
                "classifier": _classifier_ref(args)}
     workers = args.workers or max(1, min(2, len(meshes), os.cpu_count() or 1))
     last = None
-    for last in aug.dataset_steps(meshes, params, options, workers=workers):
-        if last.record:
-            rec = last.record
-            extra = f" ({rec['note']})" if rec.get("note") else ""
-            say(f"[{last.iteration}/{last.total}] {last.message}{extra}")
+    try:
+        for last in aug.dataset_steps(meshes, params, options, workers=workers):
+            if last.record:
+                rec = last.record
+                extra = f" ({rec['note']})" if rec.get("note") else ""
+                say(f"[{last.iteration}/{last.total}] {last.message}{extra}")
+    except KeyboardInterrupt as e:  # Ctrl+C, or SIGTERM (common.Terminated)
+        term = isinstance(e, Terminated)
+        done = last.iteration if last is not None and last.record else 0
+        common_say(f"stylize3d augment: {'stopped (SIGTERM)' if term else 'interrupted'}. "
+                   f"The {done} image(s) made are kept and listed in "
+                   f"{os.path.join(args.output, aug.MANIFEST)}; run the same command again to "
+                   "make the rest.")
+        return 143 if term else 130
     s = dict(last.summary)
     seconds = time.perf_counter() - t0
     notes = [r for r in aug.read_manifest(args.output).values()
