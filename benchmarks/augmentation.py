@@ -37,7 +37,7 @@ docs/images/augmentation.png (matplotlib) from the run.
     OMP_NUM_THREADS=1 taskset -c 1 .venv/bin/python benchmarks/augmentation.py [--quick]
         [--seeds 5] [--count 12] [--rounds 2] [--epochs 10] [--resolution 128]
         [--iterations 30] [--test-views 12] [--attack-views 3] [--test-iterations 30]
-        [--write-docs]
+        [--radius 0.5] [--write-docs] [--json FILE] [--from-json FILE --write-docs]
 """
 
 from __future__ import annotations
@@ -193,7 +193,8 @@ def run(args):
         t_seed = time.perf_counter()
         times = {}
         t = time.perf_counter()
-        aug0 = AugmentParams(resolution=args.resolution, iterations=args.iterations)
+        aug0 = AugmentParams(resolution=args.resolution, iterations=args.iterations,
+                             radius=args.radius)
         test = probe_test(scenes, seed, args.test_views, aug0)
         test_feats = features(base, np.stack([it["image"] for it in test]))
         test_labels = np.array([it["c"] for it in test])
@@ -371,7 +372,8 @@ def write_docs(res):
         "EfficientNet-lite0 with its ImageNet head restricted to those classes, its last layers "
         f"fine-tuned ({a['epochs']} epochs) on {n_img} rendered images per regime "
         f"({a['count']} per mesh per round, {a['rounds']} round(s); {a['resolution']} px; "
-        f"random views, distances and grey backgrounds; adversarial lights: at most "
+        f"random views, distances and grey backgrounds; lights in the L∞ ball of radius "
+        f"{a.get('radius', 0.5):g} around a neutral white light; adversarial lights: at most "
         f"{a['iterations']} attack steps against the model of the previous round). Tests: "
         f"{a['test_views']} unseen views per mesh lit by the published light probes "
         "(Grace Cathedral, Eucalyptus Grove, St. Peter's Basilica; 9 coefficients each, "
@@ -418,7 +420,9 @@ def write_docs(res):
         f"--seeds {a['seeds']} --count {a['count']} --rounds {a['rounds']} --epochs "
         f"{a['epochs']} --resolution {a['resolution']} --iterations {a['iterations']} "
         f"--test-views {a['test_views']} --attack-views {a['attack_views']} "
-        f"--test-iterations {a['test_iterations']} --write-docs", "", KEEP]
+        f"--test-iterations {a['test_iterations']}"
+        + (f" --radius {a['radius']:g}" if a.get("radius", 0.5) != 0.5 else "")
+        + " --write-docs", "", KEEP]
     md.write_text("\n".join(lines) + (kept if kept else "\n"))
     print(f"wrote {md}" + (f" and {png}" if has_plot else ""))
 
@@ -431,6 +435,8 @@ def main(argv=None):
     ap.add_argument("--epochs", type=int, default=10)
     ap.add_argument("--resolution", type=int, default=128)
     ap.add_argument("--iterations", type=int, default=30, help="training attack (thesis 30)")
+    ap.add_argument("--radius", type=float, default=0.5,
+                    help="the training lights' ball around the neutral light (thesis: 0.5)")
     ap.add_argument("--test-views", type=int, default=12)
     ap.add_argument("--attack-views", type=int, default=3)
     ap.add_argument("--test-iterations", type=int, default=30)

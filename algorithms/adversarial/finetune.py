@@ -55,7 +55,7 @@ class FinetuneParams:
                             tooltip="Images per SGD step.")
     layers: str = param("last", label="Layers trained", choices=("head", "last"),
                         tooltip="head: the classification layer only; last: also the last "
-                                "1x1 convolution and its batch norm (module docstring).")
+                                "1x1 convolution (320 -> 1280 channels) and its batch norm.")
     seed: int = param(0, label="Random seed", minimum=0, maximum=2**31 - 1, step=1,
                       tooltip="Order of the images in each epoch.")
 
