@@ -19,8 +19,15 @@ Choices written down here (the thesis gives no smoothing method for the foundati
   from 574 to 214 (ears, fingers and feet kept; the largest move of a step is 0.4 mean edge
   lengths) and spot from 77 to about 70 without merging the legs.
 
-* The time step is dimensionless: h = ``step_size`` × (total surface area of the input), so the
-  same setting smooths a mesh the same amount whatever its units.
+* The time step is dimensionless: h = ``step_size`` × (surface area of the input), so the
+  same setting smooths a mesh the same amount whatever its units. The area is each part's own
+  (connected component): a mesh of many parts is smoothed part by part as if each were alone.
+  With the whole mesh's area a tiny part got a step thousands of times too large, collapsed
+  to a point and made the system singular (the corpus of issue 38: abominevole, cycloidal,
+  lato000, office_chair stopped with "Factor is exactly singular").
+* ``fix_boundary`` is on by default (issue 38): on open meshes the flows pull the borders in,
+  and the triangles along a free border collapsed to zero area within three steps on scans
+  (Laurana50k, mountain of the corpus: bending energy NaN); closed meshes are not affected.
 * ``keep_size`` (default on) undoes the shrinking of these flows after every step, as in
   Desbrun et al. 1999: the mesh is translated back to its area-weighted centroid and scaled back
   to its enclosed volume (closed meshes; noise adds much area but little volume, so this is the
@@ -50,7 +57,7 @@ import scipy.sparse as sp
 from .errors import InvalidMeshError, ParameterError
 from .linalg import SPDSolver
 from .mesh.operators import cotangent_laplacian, face_areas, mass_matrix, signed_volume
-from .mesh.topology import boundary_loops
+from .mesh.topology import boundary_loops, connected_components
 from .params import param, validate_params
 from .steps import Step, run_to_end
 
@@ -80,8 +87,10 @@ class SmoothParams:
         tooltip="Move and scale the result back to the original centre and surface area after "
                 "every step, so the shape does not shrink.")
     fix_boundary: bool = param(
-        False, label="Fix boundary",
-        tooltip="Keep the vertices on open borders where they are (meshes with holes only).")
+        True, label="Fix boundary",
+        tooltip="Keep the vertices on open borders where they are (meshes with holes only). "
+                "Off: the borders are smoothed too and shrink; the thin strips of triangles "
+                "along them can collapse.")
 
 
 def _centroid_and_area(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, float]:
@@ -126,7 +135,12 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
     if area0 <= 0:
         raise InvalidMeshError("The mesh has zero surface area, so there is nothing to smooth.")
     diag = float(np.linalg.norm(V0.max(axis=0) - V0.min(axis=0)))
-    h = params.step_size * area0
+    # one time step per part (its own area): a small part (a screw, an eye, a fragment of a
+    # scan) is smoothed as much as it would be alone, not collapsed to a point by a step sized
+    # for the whole mesh. K couples only vertices of one part, so H K stays symmetric.
+    n_parts, part = connected_components(F, len(V0), over="vertices")
+    part_area = np.bincount(part[F[:, 0]], weights=face_areas(V0, F), minlength=n_parts)
+    H = sp.diags(params.step_size * part_area[part])
     L0 = cotangent_laplacian(V0, F)
     if not np.isfinite(L0.data).all():
         raise InvalidMeshError("The mesh has degenerate (zero-area) triangles, so smoothing "
@@ -156,7 +170,7 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
     solver = None
     if params.flow == "laplacian":
         M0 = mass_matrix(V0, F)
-        solver = factor(M0 + h * K0, once=False)
+        solver = factor(M0 + H @ K0, once=False)
 
     X = V0.copy()
     for it in range(1, params.iterations + 1):
@@ -165,7 +179,7 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
         else:
             M = mass_matrix(X, F)
             K = K0 if params.flow == "cmcf" else -cotangent_laplacian(X, F)
-            solver = factor(M + h * K, once=True)
+            solver = factor(M + H @ K, once=True)
         extra = {}
         if multigrid is None:
             Xn = solver.solve(M @ X, X[fixed] if fixed.size else None)

@@ -198,3 +198,44 @@ def test_default_flow_smooths_armadillo_without_spikes():
     old = [st.metrics["bending_energy"] for st in
            smooth_iter(d.V, d.F, SmoothParams(flow="laplacian", step_size=1e-4))]
     assert old[-1] > old[0]
+
+
+def test_each_part_is_smoothed_as_if_it_were_alone():
+    """Issue 38: the time step was sized by the whole mesh's area, so a tiny part got a step
+    thousands of times too large, collapsed to a point and made the system singular ("Factor is
+    exactly singular" on four corpus meshes). Each part now has its own step."""
+    Vb, Fb = noisy_sphere(2)
+    Vs, Fs = noisy_sphere(3)
+    Vs = 0.01 * Vs + np.array([3.0, 0.0, 0.0])  # a part 10,000 times smaller in area
+    V = np.vstack([Vb, Vs])
+    F = np.vstack([Fb, Fs + len(Vb)])
+    p = SmoothParams(step_size=1e-3, iterations=5, keep_size=False)
+    both = smooth(V, F, p)
+    np.testing.assert_allclose(both[len(Vb):], smooth(Vs, Fs, p), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(both[:len(Vb)], smooth(Vb, Fb, p), rtol=0, atol=1e-10)
+    small = face_areas(both[len(Vb):], Fs).sum()
+    assert 0.5 * face_areas(Vs, Fs).sum() < small  # not collapsed
+
+
+def test_open_borders_stay_by_default_and_their_triangles_do_not_collapse():
+    """Issue 38: free borders were pulled in and the strips of triangles along them collapsed
+    to zero area within three steps on scans (bending energy NaN). ``fix_boundary`` is now on
+    by default; closed meshes are not affected."""
+    from algorithms.mesh import grid
+    from algorithms.mesh.topology import boundary_loops
+
+    assert SmoothParams().fix_boundary
+    V, F = grid(20, 20)
+    rng = np.random.default_rng(5)
+    V = V.copy()
+    V[:, 2] += 0.02 * rng.standard_normal(len(V))
+    b = np.concatenate(boundary_loops(F))
+    steps = list(smooth_iter(V, F, SmoothParams()))
+    out = steps[-1].V
+    np.testing.assert_array_equal(out[b], V[b])
+    assert all(np.isfinite(s.metrics["bending_energy"]) for s in steps)
+    assert (face_areas(out, F) / face_areas(V, F)).min() > 0.1
+    # a closed mesh: the same result with the setting on or off (it has no border)
+    Vc, Fc = noisy_sphere(4)
+    np.testing.assert_array_equal(smooth(Vc, Fc, SmoothParams()),
+                                  smooth(Vc, Fc, SmoothParams(fix_boundary=False)))
