@@ -216,9 +216,8 @@ def _flaps(d: _EdgeData) -> tuple[np.ndarray, np.ndarray]:
     if key.size and np.bincount(key, minlength=2 * e).max() > 1:
         raise InvalidMeshError(
             "Neighbouring triangles are oriented inconsistently (some normals point inwards, "
-            "some outwards). 'Clean' can re-orient them when the surface has two sides; a "
-            "one-sided part (like a Moebius strip) cannot be oriented: delete it or cut it in "
-            "a mesh editor."
+            "some outwards). 'Clean' (or --clean) re-orients them; a one-sided part (like a "
+            "Moebius strip) it first cuts open along the seam where the orientation flips."
         )
     h = np.arange(3 * d.m)
     EF = np.full((e, 2), -1, dtype=np.int64)

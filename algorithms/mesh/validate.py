@@ -38,10 +38,14 @@ Issue codes (severity; whether :func:`clean_mesh` fixes it; what ``indices`` hol
     Vertices whose faces form more than one fan. Each extra fan gets its own copy of the vertex.
 ``inconsistent_orientation`` (warning; yes; ``(k, 2)`` edges)
     Neighbouring faces disagree about the outside. Faces are flipped by a breadth-first search
-    over each patch (its lowest-index face keeps its orientation). A one-sided surface (a
-    Moebius strip, a model whose orientation flips along a seam) cannot be oriented as it is:
-    Clean first cuts it open along the edges where the search's orientation still flips (the
-    seam gets a boundary on each side, as mesh repair tools do), then orients it.
+    over each patch (its lowest-index face keeps its orientation).
+``one_sided`` (warning; yes; ``(k, 2)`` edges)
+    The same on a surface that cannot be oriented as it is (a Moebius strip, a Klein bottle, a
+    model whose orientation flips along a seam). Clean cuts it open along the edges where the
+    search's orientation still flips (the seam gets a boundary on each side, as mesh repair
+    tools do), then orients it. Methods that do not need an orientation (cubic stylization
+    cubifies a Klein bottle, thesis Fig. 5.12) run on it as it is: the commands do not refuse
+    a mesh for this alone (``MeshReport.blocking``).
 ``inward_orientation`` (warning; yes; faces of those parts)
     Closed, consistently oriented parts with negative signed volume (inside-out). Flipped.
 ``multiple_components`` (info), ``boundary`` (info), ``genus`` (info)
@@ -143,6 +147,7 @@ _SHORT_NAMES = {
     "nonmanifold_edges": "edges shared by 3+ triangles",
     "nonmanifold_vertices": "non-manifold vertices",
     "inconsistent_orientation": "inconsistent orientation",
+    "one_sided": "one-sided surface (cut open)",
     "inward_orientation": "inside-out parts",
 }
 
@@ -153,10 +158,6 @@ _REMEDIES = {
     "nonfinite": "the file's coordinates are damaged: export the model again",
     "index_out_of_range": ("the file is damaged: export the model again (or 'stylize3d clean' "
                            "with --remove-invalid-faces deletes those triangles)"),
-    "inconsistent_orientation": ("the surface is one-sided (like a Moebius strip): delete the "
-                                 "triangles along the listed edges in a mesh editor (e.g. "
-                                 "Blender or MeshLab) and fill the hole, or export the model "
-                                 "again; methods still run, but normals flip across that seam"),
 }
 
 
@@ -197,6 +198,15 @@ class MeshReport:
     def needs_cleaning(self) -> bool:
         """True when some error or warning can be fixed by :func:`clean_mesh`."""
         return any(i.fixable and i.severity in ("error", "warning") for i in self.issues)
+
+    @property
+    def blocking(self) -> bool:
+        """True when a method must not run on the mesh as it is: an error, or a fixable warning
+        other than a one-sided surface (which the methods that need an orientation refuse
+        themselves, pointing to Clean; cubic stylization runs on it)."""
+        return bool(self.errors) or any(
+            i.fixable and i.severity == "warning" and i.code != "one_sided"
+            for i in self.issues)
 
     @property
     def advice(self) -> str:
@@ -814,7 +824,7 @@ def validate_mesh(V, F, notes: Iterable[str] = ()) -> MeshReport:
             fixable = True
         issues.append(
             MeshIssue(
-                "inconsistent_orientation",
+                "one_sided" if orientable_known is False else "inconsistent_orientation",
                 "warning",
                 msg,
                 count=k,

@@ -213,7 +213,7 @@ def read_valid(path: str, *, clean: bool = False, quiet: bool = False, project=N
                 print(f"clean: {a}", file=sys.stderr)
         data = MeshData(res.V, res.F, list(data.notes) + list(res.actions))
         report = validate_mesh(data.V, data.F, notes=data.notes)
-    if report.errors or report.needs_cleaning:
+    if report.blocking:
         hint = ("" if clean or not report.needs_cleaning else
                 f"\nAdd --clean to fix what can be fixed first, or run: "
                 f"stylize3d clean {path} -o cleaned"

@@ -108,3 +108,27 @@ def test_no_progressive_and_explicit_progressive(small_auto_threshold, capsys, t
     code = cli.main([command, src, "-o", str(tmp_path / "c.obj"), "--no-progressive",
                      "--progressive-faces", "800", *extra])
     assert code == 5 and "contradict" in capsys.readouterr().err
+
+
+def test_a_one_sided_mesh_runs_where_no_orientation_is_needed_and_clean_cuts_it(
+        capsys, tmp_path):
+    """Issue 38: a one-sided surface is not refused by the commands (cubic cubifies a Klein
+    bottle, thesis Fig. 5.12); a method that needs an orientation says that --clean cuts it
+    open, and with --clean it runs."""
+    from algorithms.mesh import write_mesh
+    from tests.conftest import mobius_strip
+
+    V, F = mobius_strip(24)
+    src = tmp_path / "strip.obj"
+    write_mesh(src, V, F)
+    assert cli.main(["cubic", str(src), "-o", str(tmp_path / "c.obj")]) == 0
+    assert len(read_mesh(tmp_path / "c.obj").V) == len(V)  # as it is: not cut
+    capsys.readouterr()
+    code = cli.main(["smooth", str(src), "-o", str(tmp_path / "s.obj")])
+    err = capsys.readouterr().err
+    assert code != 0 and "--clean" in err and "one-sided" in err
+    assert not (tmp_path / "s.obj").exists()
+    assert cli.main(["smooth", str(src), "-o", str(tmp_path / "s.obj"), "--clean"]) == 0
+    err = capsys.readouterr().err
+    assert "Cut the one-sided surface open along" in err
+    assert len(read_mesh(tmp_path / "s.obj").V) > len(V)

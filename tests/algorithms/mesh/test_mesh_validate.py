@@ -292,15 +292,17 @@ def _strip(n=16, twist=True):
 def test_a_one_sided_surface_is_cut_open_along_its_seam_by_clean():
     V, F = _strip()
     r = validate_mesh(V, F)
-    issue = r.get("inconsistent_orientation")
+    issue = r.get("one_sided")
     assert issue is not None and issue.fixable and "one-sided" in issue.message
+    assert r.needs_cleaning and not r.blocking  # methods that need no orientation still run
     assert r.stats["orientable"] is False and r.stats["genus"] is None
     assert r.stats["boundary_loops"] == 1  # a Moebius strip has one border
     res = clean_mesh(V, F)
     assert any(a.startswith("Cut the one-sided surface open along ") for a in res.actions)
     assert not any(a.startswith("Not fixed") for a in res.actions), res.actions
     after = validate_mesh(res.V, res.F)
-    assert "inconsistent_orientation" not in after and after.stats["orientable"] is True
+    assert "one_sided" not in after and "inconsistent_orientation" not in after
+    assert after.stats["orientable"] is True
     assert not after.errors and not after.warnings and not after.needs_cleaning
     # the same triangles, in place: only the seam's vertices got a second copy
     assert len(res.F) == len(F) and len(V) < len(res.V) <= len(V) + 4
@@ -549,7 +551,7 @@ def test_advice_splits_fixable_and_unfixable_problems():
     report = validate_mesh(V2, F2)
     assert report.needs_cleaning
     assert report.advice.startswith("Use 'Clean' to fix: unused vertices")
-    assert "inconsistent orientation" in report.advice.split("'Clean' cannot fix")[0]
+    assert "one-sided surface" in report.advice.split("'Clean' cannot fix")[0]
     assert "'Clean' cannot fix: " in report.advice
     # a clean mesh needs no advice
     Vt, Ft = torus()
