@@ -252,7 +252,7 @@ def run_pipeline(job: Pipeline, task: dict, rec: dict) -> tuple:
             figures.append({"step": cmd, "faces": int(len(state.F))})
         else:
             report = validate_mesh(state.V, state.F)
-            if report.errors or report.needs_cleaning:
+            if report.blocking:
                 raise InvalidMeshError(f"step {k + 1} ({cmd}) cannot take the mesh as it is:\n"
                                        f"{report.summary()}\nAdd a clean step before it.")
             after, last, recipe = run_step(step, state)

@@ -1,0 +1,92 @@
+"""benchmarks/corpus.py (issue 38): its classes on synthetic outcomes, its fold and spike
+measures on made-up damage, and one end-to-end run of a folder of two small meshes (one of
+them broken so that the advice to clean is followed), without pictures."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from algorithms.mesh import icosphere, write_mesh
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def corpus():
+    spec = importlib.util.spec_from_file_location("corpus_bench", ROOT / "benchmarks" / "corpus.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_classes(corpus):
+    c = corpus._classify
+    ok = {"moved": 0.05, "faces_out": 100}
+    assert c(None, 300, "", {}, None, True, 10, 300)[0] == "over time"
+    assert c(70, 1, "stylize3d: an unexpected error", {}, None, True, 10, 300)[0] == "crash"
+    assert c(-11, 1, "", {}, None, True, 10, 300)[0] == "crash"
+    assert c(0, 1, "Traceback (most recent call last)", {}, ok, True, 10, 300)[0] == "crash"
+    assert c(3, 1, "x cannot be processed", {}, None, True, 10, 300)[0] == "refused"
+    assert c(0, 61, "", {}, ok, True, 10, 300)[0] == "over time"
+    assert c(0, 61, "", {}, ok, True, 200_000, 300)[0] == "result"  # big meshes may take longer
+    assert c(0, 1, "", {"method_used": "loop", "fallback": True}, ok, False, 10, 300)[0] == \
+        "substitution"
+    assert c(0, 1, "", {"runs": [{"fallback": True}]}, ok, False, 10, 300)[0] == "substitution"
+    assert c(0, 1, "", {}, {"nan": True}, True, 10, 300)[0] == "artefact"
+    assert c(0, 1, "", {}, {**ok, "degenerate_made": 3}, True, 10, 300)[0] == "artefact"
+    assert c(0, 1, "", {}, {**ok, "folds_made": 1}, True, 10, 300)[0] == "artefact"
+    assert c(0, 1, "", {}, {**ok, "folds_made": 1, "faces_out": 5000}, True, 10, 300)[0] == \
+        "result"  # under 0.1 % of the triangles
+    assert c(0, 1, "", {}, {**ok, "intersections_in": 2, "intersections_out": 3}, True, 10,
+             300)[0] == "artefact"
+    assert c(0, 1, "", {}, {**ok, "spike": 0.02}, True, 10, 300)[0] == "artefact"
+    assert c(0, 1, "", {}, {"moved": 0.001}, True, 10, 300)[0] == "no effect"
+    assert c(0, 1, "", {}, {"moved": 0.001}, False, 10, 300)[0] == "result"  # not a deformer
+    assert c(0, 1, "", {}, ok, True, 10, 300)[0] == "result"
+
+
+def test_folds_and_json_reading(corpus):
+    V, F = icosphere(2)
+    assert not corpus._folds(V, F).any()
+    ring = np.unique(F[(F == 0).any(axis=1)])
+    ring = ring[ring != 0]
+    W = V.copy()
+    W[0] += 2.0 * (V[ring[0]] - V[0])  # dragged past a neighbour: the far triangles fold over
+    assert corpus._folds(W, F).sum() == 2
+    W = V.copy()
+    W[0] *= 0.5  # a deep pit is not a fold
+    assert not corpus._folds(W, F).any()
+    text = "progress\n{\n  \"a\": 1,\n  \"fallback\": true\n}\n"
+    assert corpus._last_json(text) == {"a": 1, "fallback": True}
+    assert corpus._last_json('x\n{"b": 2}\n') == {"b": 2} and corpus._last_json("none") == {}
+
+
+def test_a_small_folder_end_to_end(tmp_path):
+    folder = tmp_path / "meshes"
+    folder.mkdir()
+    V, F = icosphere(3)
+    rng = np.random.default_rng(0)
+    W = V + 0.03 * rng.standard_normal(V.shape)
+    write_mesh(folder / "ball.obj", W, F)
+    write_mesh(folder / "loose.obj", np.vstack([W, [[4.0, 4.0, 4.0]]]), F)  # an unused vertex
+    out = tmp_path / "corpus.md"
+    records = tmp_path / "records.json"
+    p = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "corpus.py"), "--corpus",
+                        str(folder), "--methods", "smooth", "--jobs", "2", "--no-pictures",
+                        "--out", str(out), "--json", str(records), "--work",
+                        str(tmp_path / "work")], cwd=ROOT, capture_output=True, text=True,
+                       timeout=600)
+    assert p.returncode == 0, p.stderr[-2000:]
+    recs = {r["mesh"]: r for r in json.loads(records.read_text())}
+    assert recs["ball.obj"]["kind"] == "result" and recs["ball.obj"]["exit"] == 0
+    assert recs["loose.obj"]["kind"] == "advice works" and recs["loose.obj"]["clean"]
+    page = out.read_text()
+    assert "| ball.obj | 1,280 | ok |" in page and "| loose.obj | 1,280 | ok* |" in page
+    assert "| smooth | 1 | 1 | 0 |" in page and str(tmp_path) not in page
