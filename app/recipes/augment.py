@@ -12,7 +12,9 @@ seed, the classifier's ``top1_before`` / ``top1_after``, ..., see
 
 Resuming: an image whose PNG exists and whose last manifest record has the same ``key`` (a hash
 of the mesh, its colours, the label, the classifier, the params and the image's place) is
-skipped; the same seed gives the same images. A PNG that exists with another key, or a folder
+skipped; the same seed gives the same images, bit for bit, whatever the number of worker
+processes (each image is computed with one PyTorch thread: the attack's gradients round
+differently with other thread counts). A PNG that exists with another key, or a folder
 that holds files but no manifest, is refused (:class:`~algorithms.errors.MeshWriteError`, exit
 status 3) unless ``overwrite`` is set.
 
@@ -172,6 +174,27 @@ class _Manifest:
 
 
 # ------------------------------------------------------------------------------ one mesh
+def _one_thread(steps):
+    """``steps`` computed with one PyTorch thread (restored between steps): the attack's
+    gradients round differently with other thread counts, and an image must not depend on
+    whether it was made here or in a worker process (one thread each), nor on ``--workers``
+    (the same seed gives the same images, bit for bit)."""
+    import torch
+
+    it = iter(steps)
+    while True:
+        before = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            step = next(it)
+        except StopIteration:
+            return
+        finally:
+            torch.set_num_threads(before)
+        yield step
+
+
+
 @dataclasses.dataclass
 class DatasetStep(Step):
     """An image written (``record``, ``image``) or, at the end of a dataset run, its summary
@@ -187,7 +210,7 @@ def image_steps(state, params, options: dict | None = None, cache: dict | None =
     """Make and write one mesh's missing images (module docstring), one step per image; the
     last step's ``summary`` counts made, skipped and fooled images."""
     from algorithms.adversarial.attack import prepare_scene
-    from algorithms.adversarial.augment import augment_iter, summarize
+    from algorithms.adversarial.augment import augment_iter, base_lighting, summarize
     from app.recipes import adversarial as adv
 
     options = dict(options or {})
@@ -202,11 +225,12 @@ def image_steps(state, params, options: dict | None = None, cache: dict | None =
     keys = _keys(state, params, options, folder, todo)
     (dataset / folder).mkdir(parents=True, exist_ok=True)
     scene = prepare_scene(np.asarray(state.V), np.asarray(state.F),
-                          albedo=adv.albedo_of(state, options), lighting="Grace Cathedral")
+                          albedo=adv.albedo_of(state, options),
+                          lighting=base_lighting(params.base_lighting))  # (each image: its own)
     manifest = _Manifest(dataset) if options.get("manifest", True) else None
     records = []
     try:
-        for step in augment_iter(scene, clf, label, params, todo, mesh_index=k):
+        for step in _one_thread(augment_iter(scene, clf, label, params, todo, mesh_index=k)):
             rec = {"file": _file_of(folder, params, k, step.record["index"]),
                    "mesh": str(options.get("mesh") or "mesh"), "label": folder,
                    "class": label, "classifier": getattr(clf, "name", "classifier"),
