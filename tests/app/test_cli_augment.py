@@ -94,10 +94,17 @@ def test_layout_manifest_resume_and_workers(meshes, tmp_path, capsys):
 
 
 def test_adversarial_mode_records_the_attack(meshes, tmp_path, capsys):
+    import torch
+
     ds = tmp_path / "adv"
-    code, rep, err = augment(capsys, str(ORANGE), "--label", "orange", "-o", str(ds),
-                             "--count", "6", "--radius", "0.1", "--resolution", "48",
-                             "--supersample", "1", "--iterations", "2")
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2)   # in this process; the images are made with one thread anyway
+    try:
+        code, rep, err = augment(capsys, str(ORANGE), "--label", "orange", "-o", str(ds),
+                                 "--count", "6", "--radius", "0.1", "--resolution", "48",
+                                 "--supersample", "1", "--iterations", "2")
+    finally:
+        torch.set_num_threads(threads)
     assert code == 0, err
     recs = manifest(ds)
     assert len(recs) == 6 and all(r["mode"] == "adversarial" for r in recs)
@@ -109,6 +116,30 @@ def test_adversarial_mode_records_the_attack(meshes, tmp_path, capsys):
     for r in recs:
         assert r["iterations"] <= 2 and (r["fooled"] or r["note"])
         assert r["norm"] <= 0.1 + 1e-12
+    assert torch.get_num_threads() == threads
+    # the attack's images do not depend on where they are made (worker processes: one
+    # PyTorch thread each)
+    ds2 = tmp_path / "adv2"
+    code, _, err = augment(capsys, str(ORANGE), str(ORANGE), "--label", "orange", "-o",
+                           str(ds2), "--count", "6", "--radius", "0.1", "--resolution", "48",
+                           "--supersample", "1", "--iterations", "2", "--workers", "2")
+    assert code == 0, err
+    assert {k: v for k, v in pngs(ds2).items() if int(k[:4]) < 6} == pngs(ds)
+    # how: each image is computed with one thread, the caller's count restored in between
+    from app.recipes.augment import _one_thread
+
+    def probe():
+        for _ in range(3):
+            yield torch.get_num_threads()
+
+    torch.set_num_threads(2)
+    try:
+        seen = []
+        for n in _one_thread(probe()):
+            seen.append((n, torch.get_num_threads()))
+    finally:
+        torch.set_num_threads(threads)
+    assert seen == [(1, 2)] * 3
 
 
 def test_bad_input_gets_plain_messages(meshes, tmp_path, capsys):
