@@ -391,6 +391,15 @@ def write_docs(res):
         lines.append(f"| {titles[name]} | {_pm(sm['probe:' + name])} | "
                      f"{_pm(sm['attacked:' + name])} |")
     lines += ["", _wrap(f"Light-probe test: {verdict(sm)}"), ""]
+    pairs = []
+    for test, what in (("probe", "light probes"), ("attacked", "after the attack")):
+        for hi, lo in (("adversarial", "random"), ("random", "none")):
+            d = np.array([s[test][hi] - s[test][lo] for s in res["seeds"]])
+            sd = d.std(ddof=1) if len(d) > 1 else 0.0
+            pairs.append(f"{what}, {hi} − {lo}: {100 * d.mean():+.1f} ± {100 * sd:.1f} points "
+                         f"({int((d > 0).sum())} of {len(d)} seeds above 0)")
+    lines += [_wrap("Paired by seed (each seed's models share their test images; mean ± sd "
+                    "of the per-seed differences): " + "; ".join(pairs) + "."), ""]
     if has_plot:
         lines += ["![Accuracy per training regime](../images/augmentation.png)", ""]
     lines += ["Per seed (light probes / after the attack, %):", "",

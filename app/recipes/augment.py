@@ -21,8 +21,9 @@ status 3) unless ``overwrite`` is set.
 ``options`` of the recipe (one mesh; the document's in the panel): ``dataset`` (folder),
 ``label`` (the true class, a name or number of the classifier's classes), ``mesh`` (its name in
 the manifest), ``mesh_index`` (0), ``classifier`` (a blob reference, None = the installed one),
-``color`` / ``face_colors`` (as the attack recipes'), ``overwrite`` (False), ``indices`` (the images to make; None = those the plan finds
-missing) and ``skipped`` (with ``indices``: how many the caller found made, for the summary).
+``color`` / ``face_colors`` (as the attack recipes'), ``overwrite`` (False), ``indices`` (the
+images to make; None = those the plan finds missing) and ``skipped`` (with ``indices``: how many
+the caller found made, for the summary).
 """
 
 from __future__ import annotations
@@ -194,7 +195,6 @@ def _one_thread(steps):
         yield step
 
 
-
 @dataclasses.dataclass
 class DatasetStep(Step):
     """An image written (``record``, ``image``) or, at the end of a dataset run, its summary
@@ -221,7 +221,8 @@ def image_steps(state, params, options: dict | None = None, cache: dict | None =
     if options.get("indices") is None:
         todo, done = plan_images(state, params, options, folder)
     else:
-        todo, done = [int(j) for j in options["indices"]], [None] * int(options.get("skipped", 0))
+        todo = [int(j) for j in options["indices"]]
+        done = [None] * int(options.get("skipped", 0))
     keys = _keys(state, params, options, folder, todo)
     (dataset / folder).mkdir(parents=True, exist_ok=True)
     scene = prepare_scene(np.asarray(state.V), np.asarray(state.F),
