@@ -95,3 +95,27 @@ def test_make_training_images_streams_stops_and_resumes(window, qtbot, tmp_path,
     assert not panel.make_training_images(str(ds))
     assert dialogs.questions and "other settings" in dialogs.questions[-1][1]
     assert (ds / "manifest.jsonl").read_bytes() == before
+
+
+def test_the_panel_loads_weights_trained_on_its_images(window, qtbot, tmp_path):
+    """Images from the panel, fine-tuned by the recipe `augment-train` runs, loaded back with
+    Load…: the panel classifies with the dataset's classes."""
+    from algorithms.adversarial.finetune import FinetuneParams, save_finetuned
+    from app.recipes.augment import train_steps
+
+    panel = open_panel(window, qtbot)
+    for label, lighting in (("orange", "none"), ("lemon", "random")):
+        panel.true_edit.setText(label)
+        small(panel, 4, lighting)
+        with qtbot.waitSignal(window.runner.finished, timeout=120000):
+            assert panel.make_training_images(str(tmp_path / "ds"))
+    steps = list(train_steps([tmp_path / "ds"], FinetuneParams(epochs=3)))
+    w = tmp_path / "w.pt"
+    save_finetuned(w, steps[-1], steps[-1].class_indices)
+    with qtbot.waitSignal(panel.classified, timeout=60000):
+        assert panel.load_classifier(str(w))
+    assert "2 classes" in panel.classifier_name
+    assert {n.split(",")[0] for n in panel.class_names()} == {"orange", "lemon"}
+    names = [n for n, _p in panel.top5_view.entries]
+    assert set(names) == {"orange", "lemon"}
+    assert sum(p for _n, p in panel.top5_view.entries) == pytest.approx(1.0, abs=1e-4)
