@@ -86,7 +86,7 @@ class AugmentParams:
     seed: int = param(0, label="Random seed", minimum=0, maximum=2**31 - 1, step=1,
                       tooltip="The same seed makes the same images (views, backgrounds, "
                               "lights).")
-    radius: float = param(0.5, label="Norm-ball radius", minimum=0.0, maximum=2.0, step=0.05,
+    radius: float = param(0.5, label="Norm-ball radius", minimum=0.0, maximum=1.0, step=0.05,
                           decimals=3,
                           tooltip="Largest change of any lighting coefficient from the base "
                                   "lighting, for random and adversarial lights (thesis App. "
