@@ -17,9 +17,14 @@ of the shape (thesis ch. 3, parametric adversaries; algorithms/adversarial).
   before / after images are shown side by side at the end. A lighting attack changes the panel's
   lighting (Revert takes it back); a geometry attack is one undoable command (Ctrl+Z restores
   the vertices exactly).
+* "Make training images…" (thesis §3.5) renders the shape under random or adversarial lighting
+  into a dataset folder on the window's job runner (the recipe of ``stylize3d augment``,
+  app/recipes/augment.py; its settings in the folded "Training images" section): progress and
+  the last image stream in, Stop keeps what was made, the document never changes.
 
 Every job is a recipe of app/recipes/adversarial.py ("Adversarial lighting", "Adversarial
-lighting: geometry", "Adversarial lighting: classify"), run with :meth:`job_options` read on the
+lighting: geometry", "Adversarial lighting: classify") or app/recipes/augment.py ("Adversarial
+lighting: training images"), run with :meth:`job_options` read on the
 GUI thread when it starts; the command line, the study replay and scripts run the same ones.
 """
 
@@ -45,8 +50,8 @@ from app.jobs import JobRunner
 from app.panels.base import MethodPanel
 from app.recipes import adversarial as rcp
 from app.recipes import augment as aug
-from app.widgets import CollapsibleSection
 from app.recipes.adversarial import AttackStep, PreviewStep, top_k  # noqa: F401 (re-exported)
+from app.widgets import CollapsibleSection
 
 #: the coefficients with a slider: degrees 0-2 (index l*l + l + m), what each pattern looks like
 SH_ROWS = (("l=0", "ambient", "the same light from every direction"),
