@@ -80,14 +80,15 @@ class SubdivideParams:
                                tooltip="0: off. Otherwise QSlim the mesh to about this many "
                                        "vertices first (e.g. 400), so you can watch the method "
                                        "rebuild the detail.")
-    dense_input: str = param("loop", label="Mesh denser than trained", choices=("loop", "scale",
-                                                                              "off"),
-                             advanced=True,
+    dense_input: str = param("guard", label="Mesh denser than trained",
+                             choices=("guard", "loop", "scale", "off"), advanced=True,
                              tooltip="The network was trained on coarse meshes (150-300 "
-                                     "vertices) and leaves dimples on much denser ones. loop: "
-                                     "use Loop subdivision there (a message says so); scale: "
-                                     "run the network scaled to its training edge length "
-                                     "(far fewer dimples, not none); off: run it as is.")
+                                     "vertices) and can leave dimples on denser ones. guard: "
+                                     "run it (scaled to its training edge length) and keep its "
+                                     "result unless it is more than twice as bent as modified "
+                                     "butterfly's, else use Loop subdivision (a message says "
+                                     "so); loop: Loop whenever the mesh is denser than trained; "
+                                     "scale: always the network, scaled; off: as is.")
 
 
 def _torch():

@@ -295,10 +295,12 @@ def add_parsers(sub) -> None:
     s.add_argument("--levels", type=int, help="1 to 3 levels. Default: 2.")
     s.add_argument("--method", choices=("neural", "loop", "butterfly", "midpoint"),
                    help="Default: neural (with the shipped weights).")
-    s.add_argument("--dense-input", choices=("loop", "scale", "off"),
-                   help="neural, on a mesh denser than the network's training meshes: loop "
-                        "(use Loop subdivision, said on stderr), scale (run the network scaled "
-                        "to its training edge length), off (as is). Default: loop.")
+    s.add_argument("--dense-input", choices=("guard", "loop", "scale", "off"),
+                   help="neural: guard (the network, scaled to its training edge length on a "
+                        "denser mesh; its result is kept unless it is more than twice as bent "
+                        "as modified butterfly's, else Loop subdivision, said on stderr), loop "
+                        "(Loop on any mesh denser than the training meshes), scale (always the "
+                        "network, scaled), off (as is). Default: guard.")
     s.add_argument("--coarsen-first", type=int, metavar="N",
                    help="QSlim the mesh to about N vertices first, as the Subdivision panel "
                         "does (0: off). Default: 0.")

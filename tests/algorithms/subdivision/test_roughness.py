@@ -76,3 +76,32 @@ def test_blob_sample_no_rougher_than_loop():
     VL, FL = subdivide_baseline(m.V, m.F, 2, "loop")
     assert bending_energy(r.state.V, r.state.F) <= bending_energy(VL, FL) * (1 + 1e-9)
     assert r.outcome["note"]
+
+
+def test_the_guard_keeps_the_network_where_it_is_no_bumpier_than_butterfly():
+    """Issue 36: the guard decides from what the network produced, not from the density. On a
+    coarse input (the blob QSlimmed to 400 vertices) it keeps the network's result, bit for
+    bit the scaled network's; on the blob as it is (3,232 vertices) the network's result is
+    about 3x as bent as modified butterfly's (dimples), and Loop's is used, said in the note."""
+    from algorithms.subdivision.inference import (GUARD_BENDING_FACTOR, SubdividedStep,
+                                                  neural_subdivision_iter)
+    from algorithms.subdivision.metrics import coarsen_to_vertices
+
+    m = read_mesh(BLOB)
+    net = load_network(None)
+
+    def last(V, F, dense):
+        steps = list(neural_subdivision_iter(V, F, 2, net, dense=dense))
+        assert isinstance(steps[-1], SubdividedStep)
+        return steps[-1]
+
+    Vc, Fc = coarsen_to_vertices(m.V, m.F, 400)
+    kept = last(Vc, Fc, "guard")
+    assert not kept.fallback and kept.metrics["bending_vs_butterfly"] <= GUARD_BENDING_FACTOR
+    np.testing.assert_array_equal(kept.V, last(Vc, Fc, "scale").V)
+    dense = last(m.V, m.F, "guard")
+    assert dense.fallback and dense.metrics["bending_vs_butterfly"] > GUARD_BENDING_FACTOR
+    VL, FL = subdivide_baseline(m.V, m.F, 2, "loop")
+    np.testing.assert_array_equal(dense.V, VL)
+    assert "as bent as modified butterfly's" in dense.note and "Loop subdivision" in dense.note
+    assert "about 450 vertices" in dense.note  # the 'Coarsen first' advice, as before
