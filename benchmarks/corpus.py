@@ -350,7 +350,10 @@ def _page(records: list[dict], methods: list[str], meshes: list[Path], args, sec
         "script's docstring: ok = a visible, artefact-free result; ok* = after the advice of "
         "the refusal (Clean) was followed; R = refused with a message; – = no visible effect; "
         "X = artefact; S = another method ran (said in the output); T = over time; "
-        "C! = crash or traceback.",
+        "C! = crash or traceback." + (
+            " Part of the table comes from an earlier run of the same script (--merge): the "
+            "pairs run this time replaced that run's, and the time above is this run's only."
+            if args.merge else ""),
         "",
         "| mesh | triangles | " + " | ".join(methods) + " |",
         "|---|---:|" + "---|" * len(methods),
@@ -406,6 +409,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--images", default=str(ROOT / "docs" / "images"))
     ap.add_argument("--no-pictures", action="store_true")
     ap.add_argument("--json", default="", help="also write every record to this file")
+    ap.add_argument("--merge", default="",
+                    help="records of an earlier run (--json): the pairs run now replace theirs, "
+                         "the page shows all (rerun one method after a change)")
     ap.add_argument("--one", nargs=2, metavar=("METHOD", "MESH"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.one:
@@ -443,6 +449,16 @@ def main(argv: list[str] | None = None) -> int:
             print(f"[{k}/{len(pairs)}] {r['mesh']:<28} {r['method']:<20} {r['kind']:<13} "
                   f"{r.get('seconds', '')} s  {r.get('why', '')[:90]}", flush=True)
     seconds = time.perf_counter() - t0
+    if args.merge:
+        done = {(r["mesh"], r["method"]) for r in records}
+        earlier = json.loads(Path(args.merge).read_text())
+        records = [r for r in earlier if (r["mesh"], r["method"]) not in done] + records
+        methods = list(dict.fromkeys([r["method"] for r in earlier] + methods))
+        names = {r["mesh"] for r in records}
+        meshes = sorted({m for m in meshes} | {m for folder in [args.corpus, *args.extra]
+                                               for m in Path(folder).iterdir()
+                                               if m.name in names}, key=lambda m: m.name)
+        methods = [m for m in METHODS if m in methods]
     if args.json:
         Path(args.json).write_text(json.dumps(records, indent=1))
     sheets = [] if args.no_pictures else _contact_sheets(records, methods, Path(args.images))
