@@ -159,3 +159,14 @@ def bad_files(tmp_path) -> dict[str, Path]:
     p.write_text("\n".join(lines) + "\n")
     files["duplicates"] = p
     return files
+
+
+def load_benchmark(name: str):
+    """The module ``benchmarks/NAME.py`` (benchmarks are scripts, not a package)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(f"{name}_bench",
+                                                  ROOT / "benchmarks" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod

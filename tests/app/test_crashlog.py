@@ -86,11 +86,11 @@ def _gone(pid: int) -> bool:
         return True
 
 
-def _start_cubic(tmp_path, *extra, env=None):
+def _start_cubic(tmp_path, *extra, env=None, command=SLOW_CUBIC):
     """The slow cubic command, its stderr going to a file (:func:`_stderr` reads it)."""
     err = tmp_path / "stderr.txt"
     with open(err, "w") as fh:
-        proc = subprocess.Popen([*STYLIZE3D, *SLOW_CUBIC, "-o", str(tmp_path / "out.obj"),
+        proc = subprocess.Popen([*STYLIZE3D, *command, "-o", str(tmp_path / "out.obj"),
                                  *extra], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=fh,
                                 env=env)
     return proc, err
@@ -249,12 +249,8 @@ def test_a_command_whose_caller_ignores_sigint_ignores_it_too(tmp_path, crash_di
     """``stylize3d cubic ... &`` in a script: SIGINT is ignored, so the command keeps running
     through a SIGINT sent to it, as it would without a supervisor, and writes its results."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the command (the fixture resets)
-    out = tmp_path / "out.obj"
-    short = ["cubic", str(BLOB), "--lambda", "0.2", "0.4", "0.6", "0.8", "-o", str(out)]
-    err = tmp_path / "stderr.txt"
-    with open(err, "w") as fh:
-        proc = subprocess.Popen([*STYLIZE3D, *short], cwd=ROOT, stdout=subprocess.DEVNULL,
-                                stderr=fh)
+    proc, err = _start_cubic(tmp_path, command=["cubic", str(BLOB), "--lambda", "0.2", "0.4",
+                                                "0.6", "0.8"])
     try:
         child = _wait_for(lambda: _child_pid(crash_dir), proc=proc)
         _wait_for(lambda: "iteration" in _stderr(err), proc=proc)
