@@ -285,7 +285,7 @@ def run_one(method: str, mesh: Path, work: Path, timeout: float) -> dict:
     if clean and kind == "result":
         kind = "advice works"
     elif clean and kind == "refused":
-        why = f"{rec.get('refusal', '')} (and with --clean: {why})"
+        why = f"refused, and with --clean: {why}"
     rec.update(kind=kind, why=why, seconds=round(seconds, 2), exit=rc, clean=clean,
                measure=m)
     png = work / f"{mesh.stem}__{method}.png"
@@ -387,7 +387,7 @@ def _page(records: list[dict], methods: list[str], meshes: list[Path], args, sec
         if r["kind"] not in ("result", "advice works"):
             # file names only: the page never points at folders outside the repository
             why = re.sub(r"(?<![\w/])(?:\.{1,2})?/(?:[\w.+-]+/)*([\w.+-]+)", r"\1",
-                         str(r.get("why", "")))
+                         " ".join(str(r.get("why", "")).split()))[:240]
             lines.append(f"- {r['mesh']}, {r['method']}: **{r['kind']}** — {why}")
     if sheets:
         lines += ["", "## Contact sheets", ""]

@@ -128,9 +128,17 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
         check_output(args.output, args.overwrite)
     data, _ = read_input(args, quiet=True)
     n = len(data.V)
-    if not 2 * (params.k or round(params.m / 3)) < params.m < n:
-        raise ParameterError(f"Need 2k < m < n (here n = {n}, m = {params.m}, k = "
-                             f"{params.k or round(params.m / 3)}).")
+    k = params.k or round(params.m / 3)
+    if not 2 * k < params.m < n:
+        if params.m >= n:
+            m_ok = max(n // 2, 2 * params.k + 1) if params.k else n // 2
+            fix = (f"ask for fewer: --m {m_ok}" if 3 <= m_ok < n and 2 * (params.k or round(
+                m_ok / 3)) < m_ok else "this mesh is too small to coarsen")
+            raise ParameterError(f"This mesh has {n:,} vertices, and the coarse operator was "
+                                 f"to have {params.m:,} (--m, which must be fewer): {fix}.")
+        raise ParameterError(f"{k} eigenvectors (--k) need more than {2 * k} coarse vertices "
+                             f"(--m {params.m}): ask for --k {max((params.m - 1) // 2, 1)} or "
+                             f"fewer, or a larger --m below {n:,}.")
     recipe = method_recipe("spectral", "Spectral coarsening")
     import time
 

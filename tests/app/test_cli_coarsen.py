@@ -61,3 +61,20 @@ def test_many_parts_ours_beats_amg_and_writes_npz(tmp_path):
     assert ours["eig_rel_err_mean"] < amg["eig_rel_err_mean"]
     z = np.load(out)
     assert tuple(z["L_shape"]) == (150, 150)
+
+
+def test_a_mesh_smaller_than_the_coarse_size_gets_advice_that_works(tmp_path, capsys):
+    """Issue 38 (the corpus): the default m = 500 on a 280-vertex mesh was refused with
+    "Need 2k < m < n"; the message now names the --m that works, and it does."""
+    from algorithms.mesh import icosphere, write_mesh
+    from app.cli import main
+
+    V, F = icosphere(2)  # 162 vertices
+    path = tmp_path / "small.obj"
+    write_mesh(path, V, F)
+    assert main(["coarsen", str(path)]) != 0
+    err = capsys.readouterr().err
+    assert "This mesh has 162 vertices" in err and "--m 81" in err
+    assert main(["coarsen", str(path), "--m", "81", "--json"]) == 0
+    assert main(["coarsen", str(path), "--m", "100", "--k", "60"]) != 0
+    assert "ask for --k 49 or fewer" in capsys.readouterr().err
