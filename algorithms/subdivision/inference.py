@@ -788,12 +788,12 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
     if dense == "guard":
         yield progress(f"Level {lv} of {lv}: comparing with modified butterfly subdivision")
         verdict = _bending_guard(V, F, lv, out, F_next, plan.ratio, plan.advice)
-        metrics["bending_vs_butterfly"] = verdict["ratio"]
+        if np.isfinite(verdict["ratio"]):
+            metrics["bending_vs_butterfly"] = verdict["ratio"]
         if verdict["loop"] is not None:
             Vl, Fl = verdict["loop"]
             yield SubdividedStep(1000, 1000, Vl, metrics, f"{len(Fl):,} triangles", F=Fl,
-                                 note=" ".join(x for x in (verdict["note"],) if x),
-                                 fallback=True)
+                                 note=verdict["note"], fallback=True)
             return
         note = " ".join(x for x in (note, verdict["note"]) if x)
     yield SubdividedStep(1000, 1000, out, metrics, f"{len(F_next):,} triangles", F=F_next,
@@ -832,7 +832,8 @@ def _bending_guard(V, F, levels: int, V_net, F_net, ratio: float = float("nan"),
     why = ""
     if bent > GUARD_BENDING_FACTOR:
         why = (f"the network's result was {bent:.1f}x as bent as modified butterfly's (dimples; "
-               f"more than {GUARD_BENDING_FACTOR:g}x)")
+               f"more than {GUARD_BENDING_FACTOR:g}x)" if np.isfinite(bent) else
+               "the network's result was bent where modified butterfly's is flat")
     else:
         planar = planar_faces(V, F)
         if planar.any():
@@ -844,14 +845,14 @@ def _bending_guard(V, F, levels: int, V_net, F_net, ratio: float = float("nan"),
     if not why:
         return {"ratio": float(bent), "loop": None, "note": ""}
     Vl, Fl = subdivide_baseline(V, F, levels, "loop")
-    dense = (f"This mesh is denser than the network was trained for (its edges are "
+    where = (f"This mesh is denser than the network was trained for (its edges are "
              f"{1 / ratio:.1f}x shorter than its training meshes'); "
              if np.isfinite(ratio) and 0 < ratio < 1 / SCALE_TOLERANCE else "On this mesh ")
     return {"ratio": float(bent),
             "loop": (np.asarray(Vl, dtype=np.float64), np.asarray(Fl, dtype=np.int64)),
-            "note": f"{dense}{why}, so Loop subdivision was used. 'Coarsen first' to "
-                    f"{f'about {advice}' if advice else 'a few hundred'} vertices lets the "
-                    f"network rebuild the detail."}
+            "note": f"{where}{why}, so Loop subdivision was used."
+                    + (f" 'Coarsen first' to about {advice} vertices lets the network rebuild "
+                       f"the detail." if advice else "")}
 
 
 def neural_subdivide_np(V, F, levels: int, network: Network, *, adapt_scale: bool = True,
