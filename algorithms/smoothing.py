@@ -146,6 +146,7 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
         raise InvalidMeshError("The mesh has degenerate (zero-area) triangles, so smoothing "
                                "weights are undefined. Run Clean first to remove them.")
     K0 = -L0  # positive semidefinite stiffness
+    HK0 = H @ K0  # the time-stepped stiffness of the fixed operator (laplacian, cmcf): once
 
     used = np.zeros(len(V0), dtype=bool)
     used[F.ravel()] = True
@@ -170,7 +171,7 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
     solver = None
     if params.flow == "laplacian":
         M0 = mass_matrix(V0, F)
-        solver = factor(M0 + H @ K0, once=False)
+        solver = factor(M0 + HK0, once=False)
 
     X = V0.copy()
     for it in range(1, params.iterations + 1):
@@ -178,8 +179,8 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
             M = M0
         else:
             M = mass_matrix(X, F)
-            K = K0 if params.flow == "cmcf" else -cotangent_laplacian(X, F)
-            solver = factor(M + H @ K, once=True)
+            HK = HK0 if params.flow == "cmcf" else H @ -cotangent_laplacian(X, F)
+            solver = factor(M + HK, once=True)
         extra = {}
         if multigrid is None:
             Xn = solver.solve(M @ X, X[fixed] if fixed.size else None)

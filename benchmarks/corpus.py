@@ -106,14 +106,13 @@ def _last_json(text: str) -> dict:
     return {}
 
 
-def _fallback(record: dict) -> bool:
+def _fallback(record) -> bool:
+    """Whether a command's --json (or any object or list in it) says ``"fallback": true``."""
+    if isinstance(record, list):
+        return any(_fallback(item) for item in record)
     if not isinstance(record, dict):
         return False
-    if record.get("fallback"):
-        return True
-    return any(_fallback(v) for v in record.values() if isinstance(v, dict)) or any(
-        _fallback(v) for v in record.values() if isinstance(v, list)
-        for v in v if isinstance(v, dict))
+    return bool(record.get("fallback")) or any(_fallback(v) for v in record.values())
 
 
 def _folds(V, F) -> np.ndarray:

@@ -105,3 +105,27 @@ def test_the_guard_keeps_the_network_where_it_is_no_bumpier_than_butterfly():
     np.testing.assert_array_equal(dense.V, VL)
     assert "as bent as modified butterfly's" in dense.note and "Loop subdivision" in dense.note
     assert "about 450 vertices" in dense.note  # the 'Coarsen first' advice, as before
+
+
+def test_the_guard_does_not_run_the_network_on_a_big_dense_mesh(monkeypatch):
+    """A dense mesh whose result would be over GUARD_MAX_TRIANGLES gets Loop without the
+    network being run (comparing would cost minutes and GBs; igea: 43 s, 3.5 GB), said so."""
+    from algorithms.subdivision import inference
+
+    m = read_mesh(BLOB)
+    net = load_network(None)
+    monkeypatch.setattr(inference, "GUARD_MAX_TRIANGLES", 4 * len(m.F) - 1)
+
+    def no_network(*args, **kwargs):
+        raise AssertionError("the network ran")
+
+    monkeypatch.setattr(inference, "_stage", no_network)
+    last = list(inference.neural_subdivision_iter(m.V, m.F, 1, net, dense="guard"))[-1]
+    assert last.fallback and "over the" in last.note and "about 450 vertices" in last.note
+    VL, _ = subdivide_baseline(m.V, m.F, 1, "loop")
+    np.testing.assert_array_equal(last.V, VL)
+    # at the limit itself the network runs (and the guard compares)
+    monkeypatch.undo()
+    monkeypatch.setattr(inference, "GUARD_MAX_TRIANGLES", 4 * len(m.F))
+    last = list(inference.neural_subdivision_iter(m.V, m.F, 1, net, dense="guard"))[-1]
+    assert "over the" not in last.note
