@@ -691,7 +691,10 @@ class SubdividedStep(Step):
 
     F: np.ndarray | None = None
     note: str = ""
-    fallback: bool = False  # Loop subdivision was used instead of the network
+    fallback: bool = False  # Loop subdivision was used instead of the network (for any level)
+    #: what made each level: "neural" or "loop" (the guard can keep the network's first levels
+    #: and let Loop make the rest); empty on the progress steps
+    levels_used: tuple = ()
 
 
 def _check_levels(levels) -> int:
@@ -760,7 +763,7 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
             Vl, Fl = subdivide_baseline(Vl, Fl, 1, "loop")
         yield SubdividedStep(1000, 1000, np.asarray(Vl, dtype=np.float64), {},
                              f"{len(Fl):,} triangles", F=np.asarray(Fl, dtype=np.int64),
-                             note=note, fallback=True)
+                             note=note, fallback=True, levels_used=("loop",) * lv)
         return
     X = ((V - c) * s).astype(np.float32)
     acc = np.empty((len(X), FEATURES), np.float32)
@@ -772,6 +775,8 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
     X = X + acc[:, :3]
     Z = acc[:, 3:].copy()
     with_d = network.uses_differential_coordinates
+    guard = _Guard(V, F) if dense == "guard" else None
+    kept = None   # the guard's last accepted level: (V, F) in the input's units
     for li in range(lv):
         head = f"Level {li + 1} of {lv}"
         D = level.laplace(X).T.copy() if with_d else None
@@ -790,6 +795,18 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
         X = np.concatenate([X, mid])
         Z = np.concatenate([Z, accE[:, 3:]])
         F_next = refine(level.F, level.n, level.EF)
+        if guard is not None:
+            out = X.astype(np.float64) / s + c
+            if not np.isfinite(out).all():
+                raise InvalidMeshError("Neural subdivision produced invalid positions "
+                                       "(degenerate triangles in the input?). Run 'Clean' "
+                                       "first.")
+            yield progress(f"{head}: comparing with modified butterfly subdivision")
+            why = guard.check(li + 1, out, F_next)
+            if why:
+                yield from _guard_fallback(V, F, lv, li, kept, why, guard, plan, note)
+                return
+            kept = (out, F_next)
         if li + 1 < lv:
             yield progress(f"{head}: splitting the triangles")
             level = _Level(F_next, len(X))
@@ -800,30 +817,22 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
         raise InvalidMeshError("Neural subdivision produced invalid positions (degenerate "
                                "triangles in the input?). Run 'Clean' first.")
     metrics: dict = {}
-    if dense == "guard":
-        yield progress(f"Level {lv} of {lv}: comparing with modified butterfly subdivision")
-        verdict = _bending_guard(V, F, lv, out, F_next, plan.ratio, plan.advice)
-        if np.isfinite(verdict["ratio"]):
-            metrics["bending_vs_butterfly"] = verdict["ratio"]
-        if verdict["loop"] is not None:
-            Vl, Fl = verdict["loop"]
-            yield SubdividedStep(1000, 1000, Vl, metrics, f"{len(Fl):,} triangles", F=Fl,
-                                 note=verdict["note"], fallback=True)
-            return
-        note = " ".join(x for x in (note, verdict["note"]) if x)
+    if guard is not None:
+        if np.isfinite(guard.ratio):
+            metrics["bending_vs_butterfly"] = guard.ratio
+        note = " ".join(x for x in (note, guard.note) if x)
     yield SubdividedStep(1000, 1000, out, metrics, f"{len(F_next):,} triangles", F=F_next,
-                         note=note)
+                         note=note, levels_used=("neural",) * lv)
 
 
-def _bending_guard(V, F, levels: int, V_net, F_net, ratio: float = float("nan"),
-                   advice: int = 0) -> dict:
-    """The "guard" of ``dense="guard"``: Loop subdivision replaces the network's result
-    (``V_net, F_net``) when it is more than :data:`GUARD_BENDING_FACTOR` times as bent as
-    modified butterfly subdivision of the same input (discrete-shells bending energy,
+class _Guard:
+    """The "guard" of ``dense="guard"``, level by level: the network's result after ``k``
+    levels fails when it is more than :data:`GUARD_BENDING_FACTOR` times as bent as modified
+    butterfly subdivision of the same input to ``k`` levels (discrete-shells bending energy,
     :func:`~.metrics.bending_energy`), or when, on the input's flat regions
-    (:func:`~.metrics.planar_faces`), its triangles are more than
-    :data:`GUARD_PLANAR_DEGREES` (RMS) further from flat than butterfly's. Returns the bending
-    ratio, ``loop`` (its (V, F), or None: the network's result stays) and a note.
+    (:func:`~.metrics.planar_faces`), its triangles are more than :data:`GUARD_PLANAR_DEGREES`
+    (RMS) further from flat than butterfly's. The network's levels up to the last that passed
+    are kept and Loop subdivision makes the rest (:func:`_guard_fallback`).
 
     Why butterfly, not Loop: Loop smooths the detail away, so a network that rebuilds detail is
     always more bent than Loop (0.8-22x on 25 meshes coarsened to 400 vertices, where it beat
@@ -833,41 +842,78 @@ def _bending_guard(V, F, levels: int, V_net, F_net, ratio: float = float("nan"),
     meshes have no flat regions; dense CAD meshes do, and there the network was 1.2-2.3
     degrees off flat (fandisk, casting, block as they are) where butterfly and Loop are 0
     (docs/results/subdivision.md)."""
-    from .baselines import subdivide_baseline
-    from .metrics import bending_energy, planar_faces, planar_normal_deviation
 
-    try:
-        Vb, Fb = subdivide_baseline(V, F, levels, "butterfly")
-        ref = bending_energy(Vb, Fb)
-    except Stylize3DError:
-        return {"ratio": float("nan"), "loop": None,
-                "note": "(Modified butterfly could not run on this mesh, so the network's "
-                        "result was not compared with it.)"}
-    bent = bending_energy(V_net, F_net) / ref if ref > 0 else float("inf")
-    why = ""
-    if bent > GUARD_BENDING_FACTOR:
-        why = (f"the network's result was {bent:.1f}x as bent as modified butterfly's (dimples; "
-               f"more than {GUARD_BENDING_FACTOR:g}x)" if np.isfinite(bent) else
-               "the network's result was bent where modified butterfly's is flat")
-    else:
-        planar = planar_faces(V, F)
-        if planar.any():
-            dev = planar_normal_deviation(V, F, V_net, F_net, levels, planar)
-            dev_b = planar_normal_deviation(V, F, Vb, Fb, levels, planar)
+    def __init__(self, V, F):
+        self.V0, self.F0 = V, F
+        self.Vb, self.Fb = V, F     # butterfly, level by level (the same as all at once)
+        self.level = 0
+        self.ratio = float("nan")   # the last level's bending / butterfly's
+        self.note = ""
+        self.planar = None
+
+    def check(self, k: int, V_net, F_net) -> str:
+        """'' when the network's result after ``k`` levels passes, else why it fails."""
+        from .baselines import subdivide_baseline
+        from .metrics import bending_energy, planar_faces, planar_normal_deviation
+
+        if self.note:     # butterfly could not run: nothing to compare with
+            return ""
+        try:
+            self.Vb, self.Fb = subdivide_baseline(self.Vb, self.Fb, k - self.level, "butterfly")
+            self.level = k
+            ref = bending_energy(self.Vb, self.Fb)
+        except Stylize3DError:
+            self.note = ("(Modified butterfly could not run on this mesh, so the network's "
+                         "result was not compared with it.)")
+            return ""
+        bent = bending_energy(V_net, F_net) / ref if ref > 0 else float("inf")
+        self.ratio = float(bent)
+        if bent > GUARD_BENDING_FACTOR:
+            return (f"the network's result was {bent:.1f}x as bent as modified butterfly's "
+                    f"(dimples; more than {GUARD_BENDING_FACTOR:g}x)" if np.isfinite(bent) else
+                    "the network's result was bent where modified butterfly's is flat")
+        if self.planar is None:
+            self.planar = planar_faces(self.V0, self.F0)
+        if self.planar.any():
+            dev = planar_normal_deviation(self.V0, self.F0, V_net, F_net, k, self.planar)
+            dev_b = planar_normal_deviation(self.V0, self.F0, self.Vb, self.Fb, k, self.planar)
             if dev > dev_b + GUARD_PLANAR_DEGREES:
-                why = (f"the network's result bent its flat sides by {dev:.1f} degrees (RMS; "
-                       f"modified butterfly: {dev_b:.1f})")
-    if not why:
-        return {"ratio": float(bent), "loop": None, "note": ""}
-    Vl, Fl = subdivide_baseline(V, F, levels, "loop")
+                return (f"the network's result bent its flat sides by {dev:.1f} degrees (RMS; "
+                        f"modified butterfly: {dev_b:.1f})")
+        return ""
+
+
+def _guard_fallback(V, F, lv: int, li: int, kept, why: str, guard: _Guard, plan: ScalePlan,
+                    note: str) -> Iterator[Step]:
+    """The network failed the guard at level ``li + 1`` of ``lv``: Loop subdivision makes the
+    levels from there on, from the network's last accepted level ``kept`` (or from the input
+    when level 1 failed)."""
+    from .baselines import subdivide_baseline
+
+    Vl, Fl = (V, F) if kept is None else kept
+    for k in range(li, lv):
+        yield Step(int(1000 * k / lv), 1000, V, {},
+                   f"Level {k + 1} of {lv}: Loop subdivision")
+        Vl, Fl = subdivide_baseline(Vl, Fl, 1, "loop")
+    ratio = plan.ratio
     where = (f"This mesh is denser than the network was trained for (its edges are "
              f"{1 / ratio:.1f}x shorter than its training meshes'); "
              if np.isfinite(ratio) and 0 < ratio < 1 / SCALE_TOLERANCE else "On this mesh ")
-    return {"ratio": float(bent),
-            "loop": (np.asarray(Vl, dtype=np.float64), np.asarray(Fl, dtype=np.int64)),
-            "note": f"{where}{why}, so Loop subdivision was used."
-                    + (f" 'Coarsen first' to about {advice} vertices lets the network rebuild "
-                       f"the detail." if advice else "")}
+    if li == 0:
+        said = f"{where}{why}, so Loop subdivision was used."
+    else:
+        made = "level 1" if li == 1 else f"levels 1-{li}"
+        rest = f"level {li + 1}" if li + 1 == lv else f"levels {li + 1}-{lv}"
+        said = (f"The network made {made}; at level {li + 1} {why}, so Loop subdivision made "
+                f"{rest}.")
+    if plan.advice and li == 0:
+        said += (f" 'Coarsen first' to about {plan.advice} vertices lets the network rebuild "
+                 f"the detail.")
+    metrics = {"bending_vs_butterfly": guard.ratio} if np.isfinite(guard.ratio) else {}
+    yield SubdividedStep(1000, 1000, np.asarray(Vl, dtype=np.float64), metrics,
+                         f"{len(Fl):,} triangles", F=np.asarray(Fl, dtype=np.int64),
+                         note=said if li == 0 else " ".join(x for x in (note, said) if x),
+                         fallback=True, levels_used=("neural",) * li + ("loop",) * (lv - li))
 
 
 def neural_subdivide_np(V, F, levels: int, network: Network, *, adapt_scale: bool = True,

@@ -172,6 +172,9 @@ def _scalars(d: dict | None) -> dict:
             out[k] = f if math.isfinite(f) else None
         elif isinstance(v, str) and len(v) < 200:
             out[k] = v
+        elif (isinstance(v, (list, tuple)) and len(v) <= 16
+              and all(isinstance(x, str) and len(x) < 40 for x in v)):
+            out[k] = list(v)    # e.g. subdivision's levels_used
     return out
 
 

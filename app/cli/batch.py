@@ -70,7 +70,8 @@ def _substitution(rec: dict) -> str:
         return ""
     from app.recipes.subdivision import method_words
 
-    return "; " + method_words(str(fig.get("method_used", "")), True)
+    return "; " + method_words(str(fig.get("method_used", "")), True,
+                               fig.get("levels_used") or ())
 
 
 def _one_line(message: str, limit: int = 240) -> str:

@@ -103,8 +103,9 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
     note = str(getattr(last, "note", "") or "")
     method_used = str(getattr(last, "method_used", "") or params.method)
     fallback = bool(getattr(last, "fallback", False))
+    levels_used = list(getattr(last, "levels_used", ()) or [method_used] * int(params.levels))
     out = {"input": args.mesh, "output": args.output, "method": params.method,
-           "method_used": method_used, "fallback": fallback,
+           "method_used": method_used, "fallback": fallback, "levels_used": levels_used,
            "levels": params.levels, "coarsen_first": params.coarsen_first,
            "vertices_in": int(len(data.V)), "faces_in": int(len(data.F)),
            "vertices": int(len(V)), "faces": int(len(F)), "seconds": dt, "note": note}
@@ -115,7 +116,8 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
 
         if note:
             say(f"stylize3d subdivide: {note}")
-        print(f"Wrote {args.output}: {method_words(method_used, fallback)}, {params.levels} "
+        print(f"Wrote {args.output}: {method_words(method_used, fallback, levels_used)}, "
+              f"{params.levels} "
               f"level(s), {len(data.F):,} -> {len(F):,} triangles in {dt:.2f} s.")
     return 0
 

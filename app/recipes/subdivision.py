@@ -68,9 +68,12 @@ class MeshStep(Step):
     #: panel to show (see algorithms.subdivision.inference.scale_plan)
     note: str = ""
     #: the scheme that made the mesh: "neural", or "loop" when the network was not used
-    #: (``fallback``), or the classic scheme asked for
+    #: (``fallback``), "neural+loop" when the network made the first levels and Loop the rest
+    #: (``fallback`` too), or the classic scheme asked for
     method_used: str = ""
     fallback: bool = False
+    #: what made each level ("neural" / "loop" / the classic scheme), in order
+    levels_used: tuple = ()
 
 
 @dataclass
@@ -181,6 +184,7 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
     levels = int(params.levels)
     note = ""
     method_used, fallback = params.method, False
+    levels_used = (params.method,) * levels
     if params.method == "neural":
         from algorithms.subdivision.inference import SubdividedStep, neural_subdivision_iter
 
@@ -194,7 +198,8 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
                 yield step
         V, F, note = last.V, last.F, last.note
         fallback = bool(getattr(last, "fallback", False))
-        method_used = "loop" if fallback else "neural"
+        levels_used = tuple(last.levels_used) or (("loop" if fallback else "neural"),) * levels
+        method_used = "+".join(dict.fromkeys(levels_used))   # neural, loop or neural+loop
     else:
         from algorithms.subdivision.baselines import subdivide_baseline
 
@@ -207,13 +212,25 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
     message = f"{len(F):,} triangles" + (f". {note}" if note else "")
     yield MeshStep(1, 1, np.asarray(V, dtype=np.float64), {}, message,
                    F=np.asarray(F, dtype=np.int64), note=note, method_used=method_used,
-                   fallback=fallback)
+                   fallback=fallback, levels_used=levels_used)
 
 
-def method_words(method_used: str, fallback: bool) -> str:
-    """ "neural subdivision", "Loop subdivision instead of the network", ... (what ran)."""
-    name = {"neural": "neural", "loop": "Loop", "butterfly": "modified butterfly",
-            "midpoint": "mid-point"}.get(method_used, method_used)
+def method_words(method_used: str, fallback: bool, levels_used=()) -> str:
+    """ "neural subdivision", "Loop subdivision instead of the network", "neural subdivision
+    (level 1), then Loop instead of the network (level 2)", ... (what ran)."""
+    names = {"neural": "neural", "loop": "Loop", "butterfly": "modified butterfly",
+             "midpoint": "mid-point"}
+    if method_used == "neural+loop":
+        k = list(levels_used).count("neural") if levels_used else 0
+        n = len(levels_used)
+
+        def span(a, b):
+            return f"level {a}" if a == b else f"levels {a}-{b}"
+        if k and n > k:
+            return (f"neural subdivision ({span(1, k)}), then Loop instead of the network "
+                    f"({span(k + 1, n)})")
+        return "neural subdivision, then Loop instead of the network"
+    name = names.get(method_used, method_used)
     return f"{name} subdivision" + (" instead of the network" if fallback else "")
 
 
@@ -233,6 +250,8 @@ def _subdivision_outcome(last: Step) -> dict:
     if getattr(last, "method_used", ""):   # what ran, said everywhere (issues 36, 39)
         out["method_used"] = str(last.method_used)
         out["fallback"] = bool(last.fallback)
+        if getattr(last, "levels_used", ()):
+            out["levels_used"] = list(last.levels_used)
     return out
 
 

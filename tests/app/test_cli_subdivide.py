@@ -143,18 +143,27 @@ def test_what_ran_is_said_in_the_line_the_json_and_the_batch_report(tmp_path, ca
     from app.cli import main as cli_main
     from tests.conftest import SAMPLES
 
-    blob = str(SAMPLES / "blob.obj")   # 2 levels: the network's dimples fail the guard: Loop
+    blob = str(SAMPLES / "blob.obj")   # 2 levels: level 2's dimples fail the guard: Loop
     assert cli_main(["subdivide", blob, "-o", str(tmp_path / "a.obj")]) == 0
     out = capsys.readouterr().out
-    assert "Loop subdivision instead of the network" in out
+    assert ("neural subdivision (level 1), then Loop instead of the network (level 2), "
+            "2 level(s)") in out
     assert cli_main(["subdivide", blob, "-o", str(tmp_path / "b.obj"), "--json"]) == 0
     d = _json.loads(capsys.readouterr().out)
-    assert d["method"] == "neural" and d["method_used"] == "loop" and d["fallback"] is True
+    assert d["method"] == "neural" and d["method_used"] == "neural+loop"
+    assert d["fallback"] is True and d["levels_used"] == ["neural", "loop"]
     assert "as bent as modified butterfly's" in d["note"]
+    assert "Loop subdivision made level 2" in d["note"]
+    fan = str(ROOT / "tests" / "data" / "fandisk.off")   # flat sides bent at level 1: all Loop
+    assert cli_main(["subdivide", fan, "-o", str(tmp_path / "f.obj"), "--json"]) == 0
+    d = _json.loads(capsys.readouterr().out)
+    assert d["method_used"] == "loop" and d["levels_used"] == ["loop", "loop"]
+    assert d["fallback"] is True and "flat sides" in d["note"]
     assert cli_main(["subdivide", blob, "-o", str(tmp_path / "c.obj"), "--levels", "1",
                      "--coarsen-first", "300", "--json"]) == 0
     d = _json.loads(capsys.readouterr().out)
     assert d["method_used"] == "neural" and d["fallback"] is False
+    assert d["levels_used"] == ["neural"]
     assert cli_main(["subdivide", blob, "-o", str(tmp_path / "d.obj"), "--levels", "1",
                      "--method", "butterfly"]) == 0
     assert "modified butterfly subdivision, 1 level" in capsys.readouterr().out
@@ -164,5 +173,6 @@ def test_what_ran_is_said_in_the_line_the_json_and_the_batch_report(tmp_path, ca
     assert _json.loads(cap.out)["substituted"] == 1
     (rec,) = [_json.loads(x) for x in (tmp_path / "batch" / "batch-report.jsonl").read_text()
               .splitlines() if '"done"' in x]
-    assert rec["figures"]["method_used"] == "loop" and rec["figures"]["fallback"] is True
-    assert "Loop subdivision instead of the network" in cap.err
+    assert rec["figures"]["method_used"] == "neural+loop" and rec["figures"]["fallback"] is True
+    assert rec["figures"]["levels_used"] == ["neural", "loop"]
+    assert "then Loop instead of the network (level 2)" in cap.err

@@ -69,7 +69,7 @@ def test_baselines_are_the_algorithms(spot, method):
     V, F = subdivide_baseline(spot.V, spot.F, 1, method)
     assert np.array_equal(r.state.V, V) and np.array_equal(r.state.F, F)
     assert r.outcome == {"vertices": len(V), "faces": 4 * len(spot.F), "method_used": method,
-                         "fallback": False}
+                         "fallback": False, "levels_used": [method]}
     assert not r.state.fields and r.last.F.dtype == np.int64
 
 

@@ -71,11 +71,20 @@ def test_fandisk_scaled_network_far_less_pitted_than_unguarded():
     assert scaled < raw / 4  # measured 3.1 vs 32 degrees (Loop: 0.01)
 
 
-def test_blob_sample_no_rougher_than_loop():
+def test_blob_sample_default_no_bumpier_than_the_guard_allows():
+    """The blob sample at its own density, 2 levels, defaults: the network's level 1 passes
+    the guard and level 2 (3x as bent as butterfly's) does not, so Loop makes level 2. The
+    result is within the guard's factor of butterfly's bending (measured 1.12x; Loop's is
+    0.88x butterfly's), and the outcome says which scheme made each level."""
+    from algorithms.subdivision.inference import GUARD_BENDING_FACTOR
+
     m, r = _default_run(BLOB, 2)
-    VL, FL = subdivide_baseline(m.V, m.F, 2, "loop")
-    assert bending_energy(r.state.V, r.state.F) <= bending_energy(VL, FL) * (1 + 1e-9)
-    assert r.outcome["note"]
+    VB, FB = subdivide_baseline(m.V, m.F, 2, "butterfly")
+    bent = bending_energy(r.state.V, r.state.F) / bending_energy(VB, FB)
+    assert bent <= GUARD_BENDING_FACTOR
+    assert r.outcome["levels_used"] == ["neural", "loop"]
+    assert r.outcome["method_used"] == "neural+loop" and r.outcome["fallback"] is True
+    assert "Loop subdivision made level 2" in r.outcome["note"]
 
 
 def test_the_guard_keeps_the_network_where_it_is_no_bumpier_than_butterfly():
@@ -99,12 +108,33 @@ def test_the_guard_keeps_the_network_where_it_is_no_bumpier_than_butterfly():
     kept = last(Vc, Fc, "guard")
     assert not kept.fallback and kept.metrics["bending_vs_butterfly"] <= GUARD_BENDING_FACTOR
     np.testing.assert_array_equal(kept.V, last(Vc, Fc, "scale").V)
+    assert kept.levels_used == ("neural", "neural")
+    # per level: on the blob as it is, level 1 passes (1.5x butterfly's bending), level 2 is
+    # 3.0x: the network's level 1 is kept and Loop subdivides it once
     dense = last(m.V, m.F, "guard")
     assert dense.fallback and dense.metrics["bending_vs_butterfly"] > GUARD_BENDING_FACTOR
-    VL, FL = subdivide_baseline(m.V, m.F, 2, "loop")
+    assert dense.levels_used == ("neural", "loop")
+    one = list(neural_subdivision_iter(m.V, m.F, 1, net, dense="guard"))[-1]
+    assert one.levels_used == ("neural",) and not one.fallback
+    assert one.metrics["bending_vs_butterfly"] <= GUARD_BENDING_FACTOR
+    VL, FL = subdivide_baseline(one.V, one.F, 1, "loop")
     np.testing.assert_array_equal(dense.V, VL)
-    assert "as bent as modified butterfly's" in dense.note and "Loop subdivision" in dense.note
-    assert "about 450 vertices" in dense.note  # the 'Coarsen first' advice, as before
+    np.testing.assert_array_equal(dense.F, FL)
+    assert "as bent as modified butterfly's" in dense.note
+    assert "The network made level 1; at level 2" in dense.note
+    assert "Loop subdivision made level 2" in dense.note
+    # a 3-level run whose level 2 fails: levels 2-3 by Loop, said so
+    three = list(neural_subdivision_iter(m.V, m.F, 3, net, dense="guard"))[-1]
+    assert three.levels_used == ("neural", "loop", "loop")
+    assert "Loop subdivision made levels 2-3" in three.note
+    # a level-1 failure (the flat sides of fandisk as it is): Loop for every level, with the
+    # 'Coarsen first' advice
+    f = read_mesh(FANDISK)
+    flat = last(f.V, f.F, "guard")
+    assert flat.levels_used == ("loop", "loop") and "flat sides" in flat.note
+    VL, _ = subdivide_baseline(f.V, f.F, 2, "loop")
+    np.testing.assert_array_equal(flat.V, VL)
+    assert "'Coarsen first' to about" in flat.note
 
 
 def test_the_guard_does_not_run_the_network_on_a_big_dense_mesh(monkeypatch):
