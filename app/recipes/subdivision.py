@@ -171,10 +171,17 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
     V, F = np.asarray(state.V), np.asarray(state.F)
     if params.coarsen_first and params.coarsen_first < len(V):
         def work(progress):
-            from algorithms.subdivision.metrics import coarsen_to_vertices
+            from algorithms.errors import ParameterError
+            from algorithms.subdivision.metrics import coarsen_to_vertices, coarsening_problem
 
             progress(0.1, f"QSlim to {params.coarsen_first} vertices")
-            return coarsen_to_vertices(V, F, params.coarsen_first)
+            Vc, Fc = coarsen_to_vertices(V, F, params.coarsen_first)
+            why = coarsening_problem(V, F, Vc, Fc, params.coarsen_first)
+            if why:   # issue 36 item 4: never subdivide a collapsed copy
+                raise ParameterError(
+                    f"'Coarsen first' to {params.coarsen_first} vertices collapsed this mesh "
+                    f"({why}). Use a larger count, or 0 to subdivide the mesh as it is.")
+            return Vc, Fc
 
         box: dict = {}
         yield from with_progress(work, state.V, box)

@@ -176,3 +176,43 @@ def test_what_ran_is_said_in_the_line_the_json_and_the_batch_report(tmp_path, ca
     assert rec["figures"]["method_used"] == "neural+loop" and rec["figures"]["fallback"] is True
     assert rec["figures"]["levels_used"] == ["neural", "loop"]
     assert "then Loop instead of the network (level 2)" in cap.err
+
+
+def test_a_coarsening_that_collapses_the_mesh_is_refused(tmp_path, capsys):
+    """Issue 36 item 4: 'Coarsen first' on a surface with a long border (a terrain) left QSlim
+    36 vertices of the 150 asked for; the network then subdivided a collapsed copy. Now the
+    command says what collapsed and what to do (exit 5, a setting that cannot work; nothing
+    written), and the larger
+    count it points to works."""
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.primitives import grid
+    from app.cli import main as cli_main
+
+    V, F = grid(60, 60)
+    V = np.asarray(V, dtype=np.float64)
+    V[:, 2] = 0.05 * np.sin(3 * V[:, 0]) * np.cos(2 * V[:, 1])
+    src = tmp_path / "terrain.obj"
+    write_mesh(src, V, F)
+    out = tmp_path / "o.obj"
+    assert cli_main(["subdivide", str(src), "-o", str(out), "--coarsen-first", "150"]) == 5
+    err = capsys.readouterr().err
+    assert "'Coarsen first' to 150 vertices collapsed this mesh" in err
+    assert "only 36 vertices" in err and "Use a larger count" in err and "Traceback" not in err
+    assert not out.exists()
+    assert cli_main(["subdivide", str(src), "-o", str(out), "--coarsen-first", "300",
+                     "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["coarsen_first"] == 300 and d["method_used"] == "neural" and out.exists()
+
+
+def test_coarsening_problem_on_a_closed_mesh_that_stays_whole():
+    from algorithms.subdivision.metrics import coarsen_to_vertices, coarsening_problem
+
+    m = read_mesh(SPOT)
+    Vc, Fc = coarsen_to_vertices(m.V, m.F, 300)
+    assert coarsening_problem(m.V, m.F, Vc, Fc, 300) == ""
+    # two copies side by side, one of them dropped: a part vanished
+    V2 = np.concatenate([m.V, m.V + [10.0, 0, 0]])
+    F2 = np.concatenate([m.F, m.F + len(m.V)])
+    why = coarsening_problem(V2, F2, Vc, Fc, 300)
+    assert "1 of its 2 parts vanished" in why and "size shrank" in why
