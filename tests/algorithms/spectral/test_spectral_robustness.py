@@ -211,3 +211,35 @@ def test_runaway_qslim_input_finishes_under_a_memory_limit():
     assert "['amg', 'ours'] QSlim" in r.stdout
     # refused up front for its input, not stopped by running out of memory
     assert "oriented" in r.stdout and "memory" not in r.stdout
+
+
+def _capped_icosphere(offset):
+    """An icosphere with one edge split by a vertex ``offset`` off its midpoint (outwards): the
+    triangle over the old edge is a cap whose corners lie on a line to about offset^2."""
+    V, F = primitives.icosphere(3)
+    a, b, c = F[0]
+    mid = (V[a] + V[b]) / 2
+    V = np.vstack([V, mid + offset * mid / np.linalg.norm(mid)])
+    w = len(V) - 1
+    return V, np.vstack([F[1:], [[a, w, c], [w, b, c], [a, b, w]]])
+
+
+def test_collapsed_triangles_refuse_intrinsic_delaunay_with_advice_that_works():
+    """libigl's intrinsic edge flipping ran for minutes or past 4 GB on meshes with triangles
+    whose corners lie on a line (7 smoothed corpus meshes; a Greek helmet with 2 such caps,
+    whose areas are not small enough to count as zero-area). Now: a plain message naming the
+    cotangent operator, which works on the same mesh."""
+    from algorithms.spectral.operators import collapsed_triangles
+
+    V, F = _capped_icosphere(1e-8)
+    assert collapsed_triangles(V, F).sum() == 1
+    with pytest.raises(InvalidMeshError, match="1 triangle of this mesh is collapsed.*"
+                                               "cotangent operator"):
+        build_operator(V, F, "intrinsic_delaunay")
+    L, M, _, _ = build_operator(V, F, "cotangent")
+    assert np.isfinite(L.data).all() and L.shape == (len(V), len(V))
+    # a cap that is merely thin (corners 1e-3 of an edge off the line) is built
+    V, F = _capped_icosphere(1e-3)
+    assert not collapsed_triangles(V, F).any()
+    L, _, _, _ = build_operator(V, F, "intrinsic_delaunay")
+    assert np.isfinite(L.data).all()
