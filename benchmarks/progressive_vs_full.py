@@ -1,0 +1,114 @@
+"""Progressive meshes against full resolution, per λ and copy size (issue 37).
+
+For one mesh (cleaned, optionally Loop-subdivided): full resolution at the thesis's stopping rule
+for each λ (the peer, in the same run), then progressive meshes with each copy size ``--m``:
+the change of the area-weighted mean L1 norm of the unit vertex normals ("change"), its ratio
+to full resolution's, and the share of area whose normal lies within 10° of an axis ("share")
+with its difference in points. With ``--long N`` full resolution also runs on for N iterations
+without the stopping rule (printed every 50), to see how far the rule is from convergence.
+
+Usage::
+
+    .venv/bin/python benchmarks/progressive_vs_full.py MESH [--loop 1] [--lam 0.1 0.2 0.5]
+        [--m 20000 50000] [--long 600]
+
+Rows are JSON lines (one per measurement), then a markdown table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def axis_share(V, F, degrees: float = 10.0) -> float:
+    """Share of the area (barycentric vertex areas) whose unit normal is within ``degrees`` of
+    a coordinate axis."""
+    from algorithms.mesh.operators import barycentric_vertex_areas, vertex_normals
+
+    N = vertex_normals(V, F)
+    a = barycentric_vertex_areas(V, F)
+    return float(a[np.abs(N).max(1) >= np.cos(np.radians(degrees))].sum() / a.sum())
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("mesh")
+    ap.add_argument("--loop", type=int, default=0, help="Loop subdivision levels first")
+    ap.add_argument("--lam", nargs="*", type=float, default=[0.1, 0.2, 0.5])
+    ap.add_argument("--m", nargs="*", type=int, default=[20000, 50000])
+    ap.add_argument("--long", type=int, default=0, help="full resolution without the rule")
+    a = ap.parse_args(argv)
+
+    from algorithms.deform.cubic import CubicParams, CubicStylizer, mean_l1_of_normals
+    from algorithms.deform.progressive import ProgressiveCubic
+    from algorithms.mesh import loop_subdivide, read_mesh
+    from algorithms.mesh.validate import clean_mesh
+
+    md = read_mesh(a.mesh)
+    c = clean_mesh(md.V, md.F)
+    V, F = (loop_subdivide(c.V, c.F, a.loop) if a.loop else (c.V, c.F))
+    name = Path(a.mesh).name + (f" Loop x{a.loop}" if a.loop else "")
+    c0 = mean_l1_of_normals(V, F)
+    rows = []
+
+    def emit(**row):
+        row = {"mesh": name, "faces": int(len(F)), **row}
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+
+    t = time.perf_counter()
+    st = CubicStylizer(V, F)
+    set_up = time.perf_counter() - t
+    full = {}
+    for lam in a.lam:
+        t = time.perf_counter()
+        last, k = None, 0
+        for last in st.steps(CubicParams(lam=lam)):
+            k += 1
+        full[lam] = (c0 - mean_l1_of_normals(last.V, F), axis_share(last.V, F))
+        emit(lam=lam, method="full", change=full[lam][0], share=full[lam][1], iterations=k,
+             seconds=time.perf_counter() - t, set_up_seconds=set_up)
+        if a.long:
+            t = time.perf_counter()
+            for s in st.steps(CubicParams(lam=lam, rel_displacement_tol=0.0,
+                                          max_iterations=a.long)):
+                if s.iteration % 50 == 0 or s.iteration == a.long:
+                    emit(lam=lam, method="full, no rule", iteration=s.iteration,
+                         change=c0 - mean_l1_of_normals(s.V, F), share=axis_share(s.V, F),
+                         relative_move=s.metrics.get("displacement"),
+                         seconds=time.perf_counter() - t)
+    del st
+    for m in a.m:
+        t = time.perf_counter()
+        pc = ProgressiveCubic(V, F, target_faces=m)
+        pre = time.perf_counter() - t
+        for lam in a.lam:
+            t = time.perf_counter()
+            Vp = pc.stylize(CubicParams(lam=lam))
+            ch, sh = c0 - mean_l1_of_normals(Vp, F), axis_share(Vp, F)
+            emit(lam=lam, method=f"progressive m={m}", change=ch, share=sh,
+                 ratio=ch / full[lam][0], share_points=100 * (sh - full[lam][1]),
+                 seconds=time.perf_counter() - t, preprocessing_seconds=pre)
+    print()
+    print("| λ | full: change / share / iterations | " +
+          " | ".join(f"m {m}: ratio / Δshare (points)" for m in a.m) + " |")
+    print("|---|---|" + "---|" * len(a.m))
+    for lam in a.lam:
+        f = next(r for r in rows if r["lam"] == lam and r["method"] == "full")
+        cells = [f"{r['ratio']:.2f} / {r['share_points']:+.1f}" for m in a.m
+                 for r in rows if r["lam"] == lam and r["method"] == f"progressive m={m}"]
+        print(f"| {lam:g} | {f['change']:.3f} / {f['share']:.3f} / {f['iterations']} | "
+              + " | ".join(cells) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
