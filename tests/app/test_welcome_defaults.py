@@ -133,8 +133,8 @@ def test_the_subdivision_card_shows_the_network_not_loop(window, dialogs, qtbot)
     # the advice the defaults give on this mesh names the same count
     mesh = read_mesh(SAMPLES / "blob.obj")
     res = run("subdivision", (mesh.V, mesh.F), {}, {})
-    # (with the weights shipped since 2026-11-29 the guard keeps the network here, scaled: no
-    # fallback, the same advice; with those before, Loop made level 2)
+    # (the network makes level 1, Loop level 2: the guard's stricter factor on a denser mesh)
+    assert res.outcome["levels_used"] == ["neural", "loop"]
     assert "about 450 vertices" in res.outcome["note"]
     panel.live_box.setChecked(False)
     steps = []
