@@ -1,7 +1,7 @@
 """Neural subdivision's guard measured on real meshes nobody trained on (issue 36, item 1).
 
-For every mesh of the given folders (cleaned; the shipped network's training shape, armadillo,
-and any ``--exclude`` left out), coarsened by QSlim to each ``--sizes`` vertex count, and for
+For every mesh of the given folders (cleaned; the shipped network's training shapes and any
+``--exclude`` left out), coarsened by QSlim to each ``--sizes`` vertex count, and for
 each of ``--levels`` levels, four results are compared with the original mesh:
 
 * ``forced``    the network on every level (``dense="scale"``: scaled to its training edge
@@ -45,8 +45,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 MESH_SUFFIXES = {".obj", ".ply", ".off", ".stl"}
-#: the shipped weights' training shape (resources/subdivision/README.md): never evaluated
-TRAINED_ON = {"armadillo.obj"}
+#: the shipped weights' training shapes (resources/subdivision/README.md): never evaluated
+TRAINED_ON = {"armadillo.obj", "bob.obj", "spot_lowres.obj", "fandisk.off", "rocker-arm.obj"}
 METHODS = ("forced", "guard", "loop", "butterfly")
 
 
