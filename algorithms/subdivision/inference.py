@@ -866,19 +866,22 @@ class _Guard:
     def check(self, k: int, V_net, F_net) -> str:
         """'' when the network's result after ``k`` levels passes, else why it fails."""
         from .baselines import subdivide_baseline
-        from .metrics import bending_energy, planar_faces, planar_normal_deviation
+        from .metrics import (_interior_edges, bending_energy, planar_faces,
+                              planar_normal_deviation)
 
         if self.note:     # butterfly could not run: nothing to compare with
             return ""
         try:
             self.Vb, self.Fb = subdivide_baseline(self.Vb, self.Fb, k - self.level, "butterfly")
             self.level = k
-            ref = bending_energy(self.Vb, self.Fb)
+            same = self.Fb.shape == F_net.shape and np.array_equal(self.Fb, F_net)
+            edges = _interior_edges(F_net, len(V_net)) if same else None
+            ref = bending_energy(self.Vb, self.Fb, edges)
         except Stylize3DError:
             self.note = ("(Modified butterfly could not run on this mesh, so the network's "
                          "result was not compared with it.)")
             return ""
-        bent = bending_energy(V_net, F_net) / ref if ref > 0 else float("inf")
+        bent = bending_energy(V_net, F_net, edges) / ref if ref > 0 else float("inf")
         self.ratio = float(bent)
         if bent > self.factor:
             return (f"the network's result was {bent:.2f}x as bent as modified butterfly's "

@@ -65,12 +65,13 @@ def _interior_edges(F, n):
     return hf.face[keep], hf.twin_face[keep], hf.ijkl[keep, 0], hf.ijkl[keep, 1]
 
 
-def bending_energy(V, F) -> float:
+def bending_energy(V, F, edges=None) -> float:
     """Discrete-shells bending energy ``sum_e 3 theta_e^2 |e|^2 / (A_1 + A_2)`` over the
-    interior edges (module docstring); dimensionless."""
+    interior edges (module docstring); dimensionless. ``edges``: ``_interior_edges(F,
+    len(V))`` when already known (two meshes with the same faces share it)."""
     V = np.asarray(V, dtype=np.float64)
     N, A = _face_normals(V, np.asarray(F, dtype=np.int64))
-    fa, fb, i, j = _interior_edges(F, len(V))
+    fa, fb, i, j = _interior_edges(F, len(V)) if edges is None else edges
     theta = np.arccos(np.clip((N[fa] * N[fb]).sum(axis=1), -1.0, 1.0))
     e2 = ((V[i] - V[j]) ** 2).sum(axis=1)
     return float((3.0 * theta ** 2 * e2 / np.maximum(A[fa] + A[fb], 1e-300)).sum())
