@@ -180,31 +180,44 @@ def test_what_ran_is_said_in_the_line_the_json_and_the_batch_report(tmp_path, ca
     assert "then Loop instead of the network (level 2)" in cap.err
 
 
-def test_a_coarsening_that_collapses_the_mesh_is_refused(tmp_path, capsys):
+def test_a_coarsening_that_collapses_the_mesh_is_refused(tmp_path, capsys, monkeypatch):
     """Issue 36 item 4: 'Coarsen first' on a surface with a long border (a terrain) left QSlim
-    36 vertices of the 150 asked for; the network then subdivided a collapsed copy. Now the
-    command says what collapsed and what to do (exit 5, a setting that cannot work; nothing
-    written), and the larger
-    count it points to works."""
+    36 vertices of the 150 asked for, and the network then subdivided a collapsed copy. The
+    count QSlim aims at now counts the border (140 vertices of 150 here), and a copy that still
+    collapses (made here by a decimation to 8 triangles: QSlim stops at 7) is refused: the command says what
+    collapsed and what to do (exit 5, a setting that cannot work) and writes nothing."""
     from algorithms.mesh import write_mesh
+    from algorithms.mesh.decimate import decimate
     from algorithms.mesh.primitives import grid
+    from algorithms.subdivision import metrics
     from app.cli import main as cli_main
 
     V, F = grid(60, 60)
     V = np.asarray(V, dtype=np.float64)
     V[:, 2] = 0.05 * np.sin(3 * V[:, 0]) * np.cos(2 * V[:, 1])
+    Vc, Fc = metrics.coarsen_to_vertices(V, F, 150)
+    assert 120 <= len(np.unique(Fc)) <= 180       # was 36 with the closed-mesh count
+    assert metrics.coarsening_problem(V, F, Vc, Fc, 150) == ""
     src = tmp_path / "terrain.obj"
     write_mesh(src, V, F)
     out = tmp_path / "o.obj"
+    assert cli_main(["subdivide", str(src), "-o", str(out), "--coarsen-first", "150",
+                     "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["coarsen_first"] == 150 and d["method_used"] == "neural" and out.exists()
+    out.unlink()
+
+    def collapsing(V, F, vertices):
+        d = decimate(np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64), 8,
+                     strategy="qslim")
+        return d.V, d.F
+
+    monkeypatch.setattr(metrics, "coarsen_to_vertices", collapsing)
     assert cli_main(["subdivide", str(src), "-o", str(out), "--coarsen-first", "150"]) == 5
     err = capsys.readouterr().err
     assert "'Coarsen first' to 150 vertices collapsed this mesh" in err
-    assert "only 36 vertices" in err and "Use a larger count" in err and "Traceback" not in err
-    assert not out.exists()
-    assert cli_main(["subdivide", str(src), "-o", str(out), "--coarsen-first", "300",
-                     "--json"]) == 0
-    d = json.loads(capsys.readouterr().out)
-    assert d["coarsen_first"] == 300 and d["method_used"] == "neural" and out.exists()
+    assert "only 7 vertices and 7 triangles were left" in err and "Use a larger count" in err
+    assert "Traceback" not in err and not out.exists()
 
 
 def test_coarsening_problem_on_a_closed_mesh_that_stays_whole():
