@@ -442,6 +442,12 @@ class ScalePlan:
     ratio: float = float("nan")
     advice: int = 0  # vertices for 'Coarsen first' on a denser mesh (0: none)
 
+    @property
+    def denser(self) -> bool:
+        """The mesh is denser than the training meshes (edges more than SCALE_TOLERANCE times
+        shorter)."""
+        return bool(np.isfinite(self.ratio) and 0 < self.ratio < 1 / SCALE_TOLERANCE)
+
 
 #: what to do with a mesh denser than the network's training meshes (see scale_plan); "guard"
 #: also compares the network's result with modified butterfly's on every mesh
@@ -490,7 +496,7 @@ def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = Tru
     ratio = ell / network.reference_edge
     if not np.isfinite(ratio) or ratio <= 0 or 1 / SCALE_TOLERANCE <= ratio <= SCALE_TOLERANCE:
         return ScalePlan(c, s, ratio=ratio)
-    trained = "the coarse meshes (150-300 vertices) the network was trained on"
+    trained = "the coarse meshes (a few hundred vertices) the network was trained on"
     if ratio > 1:
         return ScalePlan(c, s / ratio, f"This mesh's edges are {ratio:.1f}x longer than those of "
                                        f"{trained}, so it was scaled to match before "
@@ -782,8 +788,7 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
     X = X + acc[:, :3]
     Z = acc[:, 3:].copy()
     with_d = network.uses_differential_coordinates
-    denser = np.isfinite(plan.ratio) and 0 < plan.ratio < 1 / SCALE_TOLERANCE
-    guard = _Guard(V, F, GUARD_BENDING_FACTOR_DENSE if denser else GUARD_BENDING_FACTOR) \
+    guard = _Guard(V, F, GUARD_BENDING_FACTOR_DENSE if plan.denser else GUARD_BENDING_FACTOR) \
         if dense == "guard" else None
     kept = None   # the guard's last accepted level: (V, F) in the input's units
     for li in range(lv):
@@ -838,8 +843,8 @@ class _Guard:
     """The "guard" of ``dense="guard"``, level by level: the network's result after ``k``
     levels fails when it is more than ``factor`` (:data:`GUARD_BENDING_FACTOR`, or
     :data:`GUARD_BENDING_FACTOR_DENSE` on a mesh denser than the training meshes) times as bent
-    as modified
-    butterfly subdivision of the same input to ``k`` levels (discrete-shells bending energy,
+    as modified butterfly subdivision of the same input to ``k`` levels (discrete-shells
+    bending energy,
     :func:`~.metrics.bending_energy`), or when, on the input's flat regions
     (:func:`~.metrics.planar_faces`), its triangles are more than :data:`GUARD_PLANAR_DEGREES`
     (RMS) further from flat than butterfly's. The network's levels up to the last that passed
@@ -910,10 +915,9 @@ def _guard_fallback(V, F, lv: int, li: int, kept, why: str, guard: _Guard, plan:
         yield Step(int(1000 * k / lv), 1000, V, {},
                    f"Level {k + 1} of {lv}: Loop subdivision")
         Vl, Fl = subdivide_baseline(Vl, Fl, 1, "loop")
-    ratio = plan.ratio
     where = (f"This mesh is denser than the network was trained for (its edges are "
-             f"{1 / ratio:.1f}x shorter than its training meshes'); "
-             if np.isfinite(ratio) and 0 < ratio < 1 / SCALE_TOLERANCE else "On this mesh ")
+             f"{1 / plan.ratio:.1f}x shorter than its training meshes'); "
+             if plan.denser else "On this mesh ")
     if li == 0:
         said = f"{where}{why}, so Loop subdivision was used."
     else:

@@ -82,12 +82,14 @@ class SubdivideParams:
                                        "rebuild the detail.")
     dense_input: str = param("guard", label="Mesh denser than trained",
                              choices=("guard", "loop", "scale", "off"), advanced=True,
-                             tooltip="The network was trained on coarse meshes (150-300 "
+                             tooltip="The network was trained on coarse meshes (a few hundred "
                                      "vertices) and can leave dimples on denser ones. guard: "
-                                     "run it (scaled to its training edge length) and keep its "
-                                     "result unless it is more than twice as bent as modified "
-                                     "butterfly's, else use Loop subdivision (a message says "
-                                     "so); loop: Loop whenever the mesh is denser than trained; "
+                                     "run it (scaled to its training edge length) and, level by "
+                                     "level, keep its result unless it is more than twice as "
+                                     "bent as modified butterfly's (1.25x on a denser mesh) or "
+                                     "bends flat sides; from there Loop subdivision makes the "
+                                     "levels (a message says so); loop: Loop whenever the mesh "
+                                     "is denser than trained; "
                                      "scale: always the network, scaled; off: as is.")
 
 
