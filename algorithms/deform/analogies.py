@@ -526,7 +526,7 @@ class ShapeAnalogy:
 
     # ---------------------------------------------------------------- the loop
     def steps(self, params: AnalogyParams = AnalogyParams(), *, target_map: TargetMap | None = None,
-              lam_per_vertex=None) -> Iterator[Step]:
+              lam_per_vertex=None, initial=None) -> Iterator[Step]:
         """Run Alg. 5, one :class:`~algorithms.steps.Step` per local-global iteration.
 
         Parameters
@@ -534,6 +534,9 @@ class ShapeAnalogy:
         params : AnalogyParams.
         target_map : TargetMap, optional, overrides the one given at construction.
         lam_per_vertex : (n,) float, optional, λ per vertex (replaces ``params.lam``).
+        initial : (n, 3) float, optional, positions the run starts from instead of the input's
+            (a warm start, e.g. a coarse result put back on this mesh); fixed vertices and
+            handles still take their prescribed positions.
 
         Yields
         ------
@@ -591,7 +594,12 @@ class ShapeAnalogy:
             n_in = self.face_normals if on_faces else self.vertex_normals
             a_in = self.face_areas if on_faces else self.vertex_areas
             lam_a = lam_c * a_in
-        U = V.copy()
+        if initial is None:
+            U = V.copy()
+        else:
+            U = np.array(initial, dtype=np.float64, copy=True)
+            if U.shape != V.shape or not np.isfinite(U).all():
+                raise ParameterError(f"The starting positions must be {n} finite points.")
         U[self._hard] = known[self._hard]
         N_cur, a_cur = self.normals(U, kind)
         T = targets_for(U, N_cur, a_cur)

@@ -389,35 +389,35 @@ class ArapSystem:
         self._cell, self._tail, self._head, self._w = cell, tail, head, w
         d = V[head] - V[tail]  # (T, 3) rest edges
         self._rest_edges = d
-        T = len(cell)
 
-        # K[3 i + alpha, v] = sum_{t in cell i} w_t d_t[alpha] (G_t v), G_t = e_head - e_tail
-        wd = w[:, None] * d  # (T, 3)
-        rows = (3 * cell[:, None] + np.arange(3)[None, :])  # (T, 3)
-        rows = np.concatenate([rows.ravel(), rows.ravel()])
-        cols = np.concatenate([np.repeat(head, 3), np.repeat(tail, 3)])
-        vals = np.concatenate([wd.ravel(), -wd.ravel()])
-        self.K = sp.csr_matrix((vals, (rows, cols)), shape=(3 * nc, n))
-        self.K.sum_duplicates()
-        self._KT = self.K.T.tocsr()
+        # K[3 i + alpha, v] = sum_{t in cell i} w_t d_t[alpha] (G_t v), G_t = e_head - e_tail,
+        # assembled from its 3x1 blocks (duplicates summed once per (cell, vertex)): building
+        # it from the T = 9 m spokes-and-rims terms directly held six arrays of 2 T entries at
+        # once (a 6 GB peak at 1.3M triangles)
         self._blocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._tblocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._crows: tuple[np.ndarray, np.ndarray, sp.csr_matrix] | None = None
+        self.K = self._k_from_blocks()
+        self._KT = self.K.T.tocsr()
 
-        # C_i = sum_{t in cell i} w d d^T
-        outer = (wd[:, :, None] * d[:, None, :]).reshape(T, 9)
+        # C_i = sum_{t in cell i} w d d^T (accumulated per entry: no (T, 9) array)
         self.rest_covariance = np.column_stack(
-            [np.bincount(cell, weights=outer[:, k], minlength=nc) for k in range(9)]
-        ).reshape(nc, 3, 3)
+            [np.bincount(cell, weights=w * d[:, a] * d[:, b], minlength=nc)
+             for a in range(3) for b in range(3)]).reshape(nc, 3, 3)
         self._trace_rest_covariance = float(np.trace(self.rest_covariance, axis1=1,
                                                      axis2=2).sum())
 
-        # Q = G^T W G
-        qr = np.concatenate([tail, head, tail, head])
-        qc = np.concatenate([tail, head, head, tail])
-        qv = np.concatenate([w, w, -w, -w])
+        # Q = G^T W G, from the weights summed per directed edge (tail, head)
+        ekey, einv = np.unique(tail * n + head, return_inverse=True)
+        ew = np.bincount(einv.reshape(-1), weights=w, minlength=len(ekey))
+        del einv
+        et, eh = ekey // n, ekey % n
+        qr = np.concatenate([et, eh, et, eh])
+        qc = np.concatenate([et, eh, eh, et])
+        qv = np.concatenate([ew, ew, -ew, -ew])
         self.Q = sp.csc_matrix((qv, (qr, qc)), shape=(n, n))
         self.Q.sum_duplicates()
+        del qr, qc, qv
 
         self.referenced = np.zeros(n, dtype=bool)
         self.referenced[F.ravel()] = True
@@ -511,17 +511,36 @@ class ArapSystem:
         kern.block_covariances(ptr, col, val, np.ascontiguousarray(U).reshape(self.n, 3), S)
         return S
 
+    def _k_from_blocks(self) -> sp.csr_matrix:
+        """``K`` as a CSR matrix (3 n_cells, n) built from :meth:`_k_blocks` (canonical: sorted
+        column indices, no duplicates)."""
+        ptr, col, val = self._k_blocks()
+        counts = np.diff(ptr)
+        row_counts = np.repeat(counts, 3)
+        indptr = np.concatenate([[0], np.cumsum(row_counts)]).astype(np.int64)
+        row = np.repeat(np.arange(3 * self.n_cells, dtype=np.int64), row_counts)
+        blk = ptr[row // 3] + (np.arange(indptr[-1], dtype=np.int64) - indptr[row])
+        K = sp.csr_matrix((val[blk, row % 3], col[blk], indptr),
+                          shape=(3 * self.n_cells, self.n))
+        K.has_canonical_format = True
+        return K
+
     def _k_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``K`` stored by 3x1 blocks for the compiled kernels: for cell i, blocks
         ``ptr[i]:ptr[i+1]`` hold ``K[3 i + a, col[k]] = val[k, a]`` (built on first use)."""
         if self._blocks is None:
             n = self.n
-            wd = self._w[:, None] * self._rest_edges
             keys = np.concatenate([self._cell * n + self._head, self._cell * n + self._tail])
-            vals = np.concatenate([wd, -wd])
             uniq, inv = np.unique(keys, return_inverse=True)
-            val = np.column_stack([np.bincount(inv, weights=vals[:, a], minlength=len(uniq))
-                                   for a in range(3)])
+            del keys
+            inv = inv.reshape(-1)
+            T = len(self._cell)
+            val = np.empty((len(uniq), 3))
+            for a in range(3):
+                wd = self._w * self._rest_edges[:, a]
+                val[:, a] = (np.bincount(inv[:T], weights=wd, minlength=len(uniq))
+                             - np.bincount(inv[T:], weights=wd, minlength=len(uniq)))
+            del inv
             cell = uniq // n
             ptr = np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=self.n_cells))])
             self._blocks = (ptr.astype(np.int64), (uniq % n).astype(np.int64),

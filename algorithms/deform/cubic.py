@@ -859,7 +859,7 @@ class CubicStylizer:
         return L1Prox(B)
 
     def steps(self, params: CubicParams = CubicParams(), *, lam_per_vertex=None, lam_axes=None,
-              rotation=None, style_matrix=None, frames=None) -> Iterator[Step]:
+              rotation=None, style_matrix=None, frames=None, initial=None) -> Iterator[Step]:
         """Run Alg. 3, one :class:`~algorithms.steps.Step` per local-global iteration.
 
         Parameters
@@ -876,6 +876,9 @@ class CubicStylizer:
             is ``||B Q_i^T R_i n_i||_1``. Takes precedence over ``rotation`` and
             ``params.rot_x/y/z``, which are then ignored. Must be finite, orthonormal to 1e-6
             and have determinant +1 (:func:`validate_frames`).
+        initial : (n, 3) float, optional, positions (input units) the first local step starts
+            from instead of the input's (a warm start, e.g. a coarse solution put back on this
+            mesh); constrained coordinates still take their prescribed values.
 
         Yields
         ------
@@ -916,7 +919,13 @@ class CubicStylizer:
         use = admm_vertices(lam_a, self.normals)
         system, known, Vn = self.system, self.known, self.V_normalized
         state = AdmmState.initial(n, params.rho0)
-        U = Vn.copy()
+        if initial is None:
+            U = Vn.copy()
+        else:
+            U = np.array(initial, dtype=np.float64, copy=True)
+            if U.shape != (n, 3) or not np.isfinite(U).all():
+                raise ParameterError(f"The starting positions must be {n} finite points.")
+            U = (U - self.center) / self.scale
         U[system.constrained] = known[system.constrained]
         # the run stops on the tolerance: the number of iterations is not known in advance
         total_its = None if params.rel_displacement_tol > 0 else params.max_iterations

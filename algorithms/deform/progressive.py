@@ -82,6 +82,22 @@ last; no earlier Step repeats it). :func:`progressive_cubic_iter` first yields a
 ``iteration = 0`` Step with the input positions once pre-processing is done (its message says
 what the decimation did).
 
+Finishing on every triangle (``ProgressiveParams.finish``, the product's default; issue 37):
+after the replay, cubic stylization runs on the full mesh starting from the replayed result
+(:meth:`CubicStylizer.steps` with ``initial``), with the plain λ (or painted λ) and the same
+stopping rule, so the result minimizes the thesis's energy of the mesh the user gave. This is
+the coarse-to-fine (cascadic) way of solving a local-global problem: the coarse solve carries
+the large-scale deformation, which the full-resolution iterations propagate only slowly (their
+relative move falls below the thesis's 3e-3 long before convergence on big meshes), and the
+full-resolution iterations then flatten the details the copy cannot see, which converge fast.
+Measured (``benchmarks/progressive_vs_full.py``; energies of the full mesh, lower is closer to
+the minimum): igea (269k triangles) λ 0.1 / 0.2 / 0.5: 0.3149 / 0.6006 / 1.3787 in 27 / 21 / 11
+full-resolution iterations, against 0.3149 / 0.6122 / 1.4608 in 217 / 177 / 135 iterations
+from the input; the cold run needs about 250 and 400 iterations to reach the finished energies
+at λ 0.2 and 0.5. The copy alone keeps its own cubeness (0.69-1.11 of the cold run's change
+there), the finished result 0.94-1.30. It needs the full mesh's factorization (built once,
+with the decimation, and kept for every λ), so it costs more memory than the copy alone.
+
 Other choices:
 
 * Constraints (``fixed``, ``handles``, ``coord_constraints``) are kept through the decimation
@@ -200,6 +216,13 @@ class ProgressiveParams:
                 "cubic. Its λ is multiplied by (triangles / coarse triangles) to this power so "
                 "that the result is about as cubic as stylizing every triangle. 0: the paper's "
                 "plain λ (less cubic, keeps more detail).")
+    finish: bool = param(
+        True, label="Finish on every triangle",
+        tooltip="After the copy is stylized and the details are put back, go on stylizing "
+                "every triangle from there until it settles (the paper's stopping rule). "
+                "Reaches a lower energy than working on every triangle from the start, in a "
+                "fraction of its iterations. Off: only the copy is stylized, about a second "
+                "per λ, a quick preview that came out 0.4-1.4x as cubic on scans.")
     preview_every: int = param(
         10, label="Preview every", minimum=0, maximum=100000, step=1,
         tooltip="Show the full-resolution shape every this many coarse iterations while "
@@ -571,14 +594,16 @@ def _constraint_vertices(n: int, fixed, handles, coord_constraints):
     return ids
 
 
-#: Above this many triangles the app and the CLI stylize through affine progressive meshes unless
-#: told not to. Decided from measurements (``benchmarks/progressive.py --sweep``, one λ, the
-#: whole run: pre-processing + coarse solve + replay against factorization + solve on every
-#: triangle, 2 shared cores): progressive (m = 20,000) was faster at every size measured, from
-#: 42,752 triangles (bob Loop x1: 1.6x wall, 2.2x CPU) through 80k (2.4x), 117k (5.0x) to 1.29M
-#: (1.9x wall under load, 2.9x CPU). The threshold keeps more than a factor of 2 above the
-#: smallest size measured faster, so that the automatic choice is never the slower one (and
-#: the coarse copy is at most a fifth of the mesh).
+#: Above this many triangles the app and the CLI stylize through affine progressive meshes,
+#: finished on every triangle (``ProgressiveParams.finish``), unless told not to. The copy alone
+#: (``benchmarks/progressive.py --sweep``, one λ, the whole run) was faster than working on
+#: every triangle from 42,752 triangles on (bob Loop x1: 1.6x wall) through 117k (5.0x) to
+#: 1.29M (2.9x CPU), but less cubic on scans (0.42-1.27 of the cubeness change). Finished
+#: (``benchmarks/progressive_vs_full.py``, issue 37): at 117k-124k triangles the first λ took
+#: 0.59-0.79x the time of working on every triangle from the start, at energies within 0.31 %;
+#: at 269k-1.07M triangles 0.52-1.12x, at energies 7.7 % lower to 0.9 % higher (lower on 10 of
+#: 16 runs); every further λ 0.07-0.3x. The threshold keeps the coarse copy at most a fifth of
+#: the mesh.
 PROGRESSIVE_FASTER_FROM = 42_752
 AUTO_PROGRESSIVE_FACES = 100_000
 
@@ -587,22 +612,22 @@ def choose_progressive(n_faces: int, target_faces: int | None = None) -> tuple[b
     """Whether a mesh of ``n_faces`` triangles is stylized through progressive meshes by
     default, and why (a sentence for the user).
 
-    The rule (measured, see :data:`AUTO_PROGRESSIVE_FACES`): progressive above
-    ``AUTO_PROGRESSIVE_FACES`` triangles, where it is faster than working on every triangle
-    even for a single λ; below, every triangle directly.
+    The rule (measured, see :data:`AUTO_PROGRESSIVE_FACES`): progressive meshes, finished on
+    every triangle (``ProgressiveParams.finish``), above ``AUTO_PROGRESSIVE_FACES`` triangles,
+    where they reach a lower energy than working on every triangle from the start, in a
+    fraction of its iterations; below, every triangle from the start.
     """
     m = ProgressiveParams().target_faces if target_faces is None else int(target_faces)
     if n_faces > AUTO_PROGRESSIVE_FACES:
         return True, (f"this mesh has {n_faces:,} triangles, more than "
                       f"{AUTO_PROGRESSIVE_FACES:,}: from there on, stylizing a {m:,}-triangle "
-                      f"copy and putting the details back (affine progressive meshes) is "
-                      f"faster than working on every triangle (measured faster from "
-                      f"{PROGRESSIVE_FASTER_FROM:,} triangles on)")
+                      f"copy, putting the details back (affine progressive meshes) and then "
+                      f"finishing on every triangle from there gets closer to the shape asked "
+                      f"for than working on every triangle from the start, and in fewer "
+                      f"iterations")
     return False, (f"this mesh has {n_faces:,} triangles, not more than "
-                   f"{AUTO_PROGRESSIVE_FACES:,}: working on every triangle directly is "
-                   f"fast enough (progressive meshes were measured faster from "
-                   f"{PROGRESSIVE_FASTER_FROM:,} triangles on; the automatic switch keeps a "
-                   f"margin of more than 2x)")
+                   f"{AUTO_PROGRESSIVE_FACES:,}: working on every triangle from the start "
+                   f"converges well at this size")
 
 
 class AffineProgressiveMesh:
@@ -723,6 +748,40 @@ class AffineProgressiveMesh:
                            f"{self.n_coarse_faces:,} triangles; details restored on "
                            f"{len(self.F):,} triangles")
 
+    def finished_steps(self, coarse_steps: Iterator[Step], preview_every: int,
+                       finish: Callable[[np.ndarray], Iterator[Step]] | None) -> Iterator[Step]:
+        """:meth:`prolonged_steps`, then, with ``finish``, the run on every triangle started
+        from the prolonged result (module docstring, "Finishing on every triangle").
+
+        ``finish(V_start)`` yields the full-resolution Steps (iterations counted from 1); they
+        are yielded numbered after the coarse iterations, with ``coarse_iterations``,
+        ``fine_iterations`` and ``replay_seconds`` added to their metrics. Without ``finish``
+        this is :meth:`prolonged_steps`.
+        """
+        if finish is None:
+            yield from self.prolonged_steps(coarse_steps, preview_every)
+            return
+        last = None
+        for st in self.prolonged_steps(coarse_steps, preview_every):
+            if last is not None:
+                yield last
+            last = st
+        if last is None:
+            return
+        coarse_its = last.iteration
+        replay = last.metrics.get("replay_seconds")
+        yield Step(iteration=coarse_its, total=None, V=last.V, metrics=dict(last.metrics),
+                   message=f"{last.message}; finishing on every triangle")
+        for st in finish(last.V):
+            metrics = dict(st.metrics)
+            metrics.update(coarse_iterations=float(coarse_its),
+                           fine_iterations=float(st.iteration))
+            if replay is not None:
+                metrics["replay_seconds"] = replay
+            yield Step(iteration=coarse_its + st.iteration, total=None, V=st.V,
+                       metrics=metrics, message=f"on every triangle, {st.message}")
+
+
 class ProgressiveCubic(AffineProgressiveMesh):
     """Cubic stylization through an affine progressive mesh (thesis Alg. 4), precomputed once.
 
@@ -750,7 +809,8 @@ class ProgressiveCubic(AffineProgressiveMesh):
 
     def __init__(self, V, F, *, target_faces: int = 20000, strategy: str = "qslim",
                  tikhonov: float = 1e-6, fixed=None, handles=None, coord_constraints=None,
-                 normalize: bool = True, pin_one_vertex: bool = True, backend: str = "auto"):
+                 normalize: bool = True, pin_one_vertex: bool = True, backend: str = "auto",
+                 finish: bool = False):
         n = len(V) if np.ndim(V) == 2 else 0
         keep = _constraint_vertices(n, fixed, handles, coord_constraints)
         super().__init__(V, F, target_faces=target_faces, strategy=strategy, tikhonov=tikhonov,
@@ -768,6 +828,23 @@ class ProgressiveCubic(AffineProgressiveMesh):
                                       pin_one_vertex=pin_one_vertex, backend=backend)
         self.timings["stylizer"] = time.perf_counter() - t2
         self.timings["total"] += self.timings["stylizer"]
+        self._fine_args = dict(fixed=fixed, handles=handles, coord_constraints=coord_constraints,
+                               normalize=normalize, pin_one_vertex=pin_one_vertex,
+                               backend=backend)
+        self._fine: CubicStylizer | None = None
+        if finish:
+            self.fine_stylizer()
+
+    def fine_stylizer(self) -> CubicStylizer:
+        """The :class:`~algorithms.deform.cubic.CubicStylizer` of the input mesh that finishes
+        on every triangle (built on first use, with the same constraints; its seconds are added
+        to ``timings`` as ``fine_stylizer``)."""
+        if self._fine is None:
+            t = time.perf_counter()
+            self._fine = CubicStylizer(self.V, self.F, **self._fine_args)
+            self.timings["fine_stylizer"] = time.perf_counter() - t
+            self.timings["total"] += self.timings["fine_stylizer"]
+        return self._fine
 
     def lam_factor(self, lam_exponent: float = LAM_EXPONENT) -> float:
         """The factor of λ on the coarse mesh (:func:`coarse_lambda_factor`)."""
@@ -786,7 +863,7 @@ class ProgressiveCubic(AffineProgressiveMesh):
 
     def steps(self, params: CubicParams = CubicParams(), *, lam_per_vertex=None, lam_axes=None,
               rotation=None, style_matrix=None, preview_every: int = 10,
-              lam_exponent: float = LAM_EXPONENT) -> Iterator[Step]:
+              lam_exponent: float = LAM_EXPONENT, finish: bool = False) -> Iterator[Step]:
         """Stylize the coarse mesh and replay the splits, as Steps (module docstring).
 
         Parameters
@@ -799,30 +876,45 @@ class ProgressiveCubic(AffineProgressiveMesh):
         lam_exponent : float, λ (and painted λ) on the coarse mesh is multiplied by
             ``(triangles / coarse triangles) ** lam_exponent`` (module docstring,
             "Resolution"; 0: the thesis's plain λ).
+        finish : bool, then run cubic stylization on every triangle from the result (with
+            ``params`` and the plain λ / painted λ, to ``params``' stopping rule; module
+            docstring, "Finishing on every triangle").
 
         Yields
         ------
         Step with ``V`` (n, 3): previews, then the final full-resolution result. ``metrics``
         are the coarse run's (``energy``, ``arap``, ``l1``, ``displacement``, ...) plus
-        ``replay_seconds`` on the final Step.
+        ``replay_seconds`` on the final Step; with ``finish``, the prolonged result and then
+        one Step per full-resolution iteration (their metrics are the full mesh's, plus
+        ``coarse_iterations``, ``fine_iterations`` and ``replay_seconds``).
         """
         validate_params(params)
         preview_every = int(preview_every)
         if preview_every < 0:
             raise ParameterError("'Preview every' must be 0 or a positive number of iterations.")
         lam_c = self._coarse_lam(params, lam_per_vertex, lam_exponent)
-        yield from self.prolonged_steps(
+        fine = None
+        if finish:
+            stylizer = self.fine_stylizer()
+
+            def fine(V_start):
+                return stylizer.steps(params, lam_per_vertex=lam_per_vertex, lam_axes=lam_axes,
+                                      rotation=rotation, style_matrix=style_matrix,
+                                      initial=V_start)
+        yield from self.finished_steps(
             self.stylizer.steps(params, lam_per_vertex=lam_c, lam_axes=lam_axes,
-                                rotation=rotation, style_matrix=style_matrix), preview_every)
+                                rotation=rotation, style_matrix=style_matrix), preview_every,
+            fine)
 
     def stylize(self, params: CubicParams = CubicParams(), *, lam_per_vertex=None,
                 lam_axes=None, rotation=None, style_matrix=None,
                 callback: Callable[[Step], None] | None = None,
-                lam_exponent: float = LAM_EXPONENT) -> np.ndarray:
+                lam_exponent: float = LAM_EXPONENT, finish: bool = False) -> np.ndarray:
         """Run :meth:`steps` to the end (no previews) and return the (n, 3) stylized positions.
 
         ``callback(step)`` receives every coarse iteration's Step (coarse positions,
-        ``V`` (nc, 3)) and then the final full-resolution Step.
+        ``V`` (nc, 3)), then the full-resolution Step with the details restored, then (with
+        ``finish``) every full-resolution iteration's Step.
         """
         validate_params(params)
         lam_c = self._coarse_lam(params, lam_per_vertex, lam_exponent)
@@ -833,6 +925,10 @@ class ProgressiveCubic(AffineProgressiveMesh):
         if callback is not None:
             callback(Step(iteration=last.iteration, total=last.total, V=Vf,
                           metrics=dict(last.metrics), message="details restored"))
+        if finish:
+            Vf = run_to_end(self.fine_stylizer().steps(
+                params, lam_per_vertex=lam_per_vertex, lam_axes=lam_axes, rotation=rotation,
+                style_matrix=style_matrix, initial=Vf), callback).V
         return Vf
 
 
@@ -863,7 +959,8 @@ def progressive_cubic_iter(V, F, params: CubicParams = CubicParams(),
     pc = ProgressiveCubic(V, F, target_faces=progressive.target_faces,
                           strategy=progressive.strategy, tikhonov=progressive.tikhonov,
                           fixed=fixed, handles=handles, coord_constraints=coord_constraints,
-                          normalize=params.normalize, pin_one_vertex=params.pin_one_vertex)
+                          normalize=params.normalize, pin_one_vertex=params.pin_one_vertex,
+                          finish=progressive.finish)
     msg = (f"pre-processing done in {pc.timings['total']:.1f} s: {len(pc.F):,} -> "
            f"{pc.n_coarse_faces:,} triangles")
     if pc.notes:
@@ -873,7 +970,7 @@ def progressive_cubic_iter(V, F, params: CubicParams = CubicParams(),
     yield from pc.steps(params, lam_per_vertex=lam_per_vertex, lam_axes=lam_axes,
                         rotation=rotation, style_matrix=style_matrix,
                         preview_every=progressive.preview_every,
-                        lam_exponent=progressive.lam_exponent)
+                        lam_exponent=progressive.lam_exponent, finish=progressive.finish)
 
 
 def progressive_cubic(V, F, params: CubicParams = CubicParams(),
@@ -922,6 +1019,12 @@ def progressive_analogy_iter(V, F, target_map, params=None,
     c_handles = None if handles is None else (apm.coarse_ids(handles[0]), handles[1])
     analogy = ShapeAnalogy(apm.V_coarse, apm.F_coarse, target_map, fixed=apm.coarse_ids(fixed),
                            handles=c_handles)
+    fine = None
+    if progressive.finish:
+        fine_analogy = ShapeAnalogy(V, F, target_map, fixed=fixed, handles=handles)
+
+        def fine(V_start):
+            return fine_analogy.steps(params, lam_per_vertex=lam_per_vertex, initial=V_start)
     seconds = time.perf_counter() - t0
     msg = (f"pre-processing done in {seconds:.1f} s: {len(apm.F):,} -> "
            f"{apm.n_coarse_faces:,} triangles")
@@ -930,5 +1033,5 @@ def progressive_analogy_iter(V, F, target_map, params=None,
     yield Step(iteration=0, total=None, V=apm.V.copy(),
                metrics={"preprocess_seconds": seconds}, message=msg)
     lam_c = None if lam_per_vertex is None else apm.coarse_lambda(lam_per_vertex)
-    yield from apm.prolonged_steps(analogy.steps(params, lam_per_vertex=lam_c),
-                                   progressive.preview_every)
+    yield from apm.finished_steps(analogy.steps(params, lam_per_vertex=lam_c),
+                                  progressive.preview_every, fine)

@@ -61,7 +61,8 @@ def analogy_progressive(args: argparse.Namespace, options: dict, n_faces: int) -
     project's saved choice, else the automatic one for big meshes (the panel has no such
     switch, so a project without it keeps the command's automatic choice). Returns whether
     progressive meshes were chosen automatically."""
-    if args.progressive_faces is None and not args.no_progressive and "progressive" in options:
+    if (args.progressive_faces is None and not args.no_progressive and not args.coarse_only
+            and "progressive" in options):
         if options["progressive"] is not None:  # no previews on the command line
             options["progressive"] = {**options["progressive"], "preview_every": 0}
         return False
@@ -128,12 +129,19 @@ def cmd_analogy(args: argparse.Namespace) -> int:
                     "iterations": last.iteration, "seconds": seconds,
                     "progressive_faces": None if prog is None else int(prog["target_faces"]),
                     "progressive_auto": auto,
+                    "progressive_finish": None if prog is None else bool(prog.get("finish")),
                     "mean_angle_before": before[0], "max_angle_before": before[1],
                     "mean_angle_after": after[0], "max_angle_after": after[1]})
     else:
         print(f"Stylized {args.mesh} after {what} in {seconds:.2f} s ({last.iteration} "
               f"iterations); mean angle to the target normals {before[0]:.1f}° -> "
               f"{after[0]:.1f}°; wrote {args.output}.")
+        if prog is not None:
+            faces = int(prog["target_faces"])
+            print(f"Worked through a {faces:,}-triangle copy, then on every triangle from its "
+                  f"result." if prog.get("finish") else
+                  f"Worked through a {faces:,}-triangle copy alone (the details put back, not "
+                  f"finished on every triangle).")
     return 0
 
 

@@ -202,7 +202,8 @@ def analogy_steps(state, params, options: dict | None = None, cache: dict | None
     tmap, _what = style_target_map(options, cache)
     prog = options.get("progressive")
     if prog is not None:
-        prog = params_from_dict(ProgressiveParams, prog)
+        # options saved before "finish" existed ran on the copy alone: replay them so
+        prog = params_from_dict(ProgressiveParams, {"finish": False, **prog})
         return progressive_analogy_iter(state.V, state.F, tmap, params, prog)
     return shape_analogy_of(state, cache).steps(params, target_map=tmap)
 

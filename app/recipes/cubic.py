@@ -4,7 +4,8 @@ Inputs from the document state: the λ scale field (``lambda_scale``, times ``pa
 fixed region (``fixed``), the plane region (``plane``, flattened along ``options["plane_axis"]``
 at its mean coordinate), point handles and painted local cube frames (``frame_r*``, degrees).
 Options: ``plane_axis`` (0-2), ``progressive`` (a ProgressiveParams dict, or None for every
-triangle), ``multigrid`` (bool: the multigrid global solve).
+triangle; a dict without ``finish``, saved before it existed, runs on the copy alone as it did
+then), ``multigrid`` (bool: the multigrid global solve).
 """
 
 from __future__ import annotations
@@ -65,7 +66,9 @@ def cubic_steps(state, params, options: dict | None = None, cache: dict | None =
     cache = {} if cache is None else cache
     plane_axis = int(options.get("plane_axis", 0))
     prog = options.get("progressive")
-    prog = None if prog is None else params_from_dict(ProgressiveParams, prog)
+    # options saved before "finish" existed ran on the copy alone: replay them so
+    prog = None if prog is None else params_from_dict(ProgressiveParams,
+                                                      {"finish": False, **prog})
     multigrid = bool(options.get("multigrid", False)) and prog is None
     fixed, handles, plane = constraints_of(state, plane_axis)
     key = (id(state.V), id(state.F), fixed.tobytes(),
@@ -87,7 +90,7 @@ def cubic_steps(state, params, options: dict | None = None, cache: dict | None =
                                   strategy=prog.strategy, tikhonov=prog.tikhonov,
                                   fixed=fixed, handles=handles, coord_constraints=plane,
                                   normalize=params.normalize,
-                                  pin_one_vertex=params.pin_one_vertex)
+                                  pin_one_vertex=params.pin_one_vertex, finish=prog.finish)
     cache["key"], cache["solver"] = key, solver
     scale = state.fields.get(LAMBDA_FIELD)
     lam_v = None if scale is None else params.lam * np.asarray(scale)
@@ -100,7 +103,8 @@ def cubic_steps(state, params, options: dict | None = None, cache: dict | None =
         raise ParameterError("Painted local cube frames do not work with progressive meshes "
                              "yet: switch progressive meshes off, or clear the frames.")
     return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation,
-                        preview_every=prog.preview_every, lam_exponent=prog.lam_exponent)
+                        preview_every=prog.preview_every, lam_exponent=prog.lam_exponent,
+                        finish=prog.finish)
 
 
 def touching_parts_of(state) -> tuple[int, int]:

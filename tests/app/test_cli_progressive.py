@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from algorithms.deform import progressive
+from algorithms.deform.cubic import CubicParams
 from algorithms.mesh import read_mesh
 from app import cli
 from tests.conftest import shared_mesh
@@ -79,6 +80,37 @@ def test_automatic_choice_says_why(monkeypatch, capsys, tmp_path, threshold, exp
     assert "1,654 triangles" in d["progressive_reason"]
     assert f"{threshold:,}" in d["progressive_reason"]
     if expect:
-        assert d["progressive_reason"] in err and "faster" in err
+        assert d["progressive_reason"] in err and "finishing on every triangle" in err
+        assert d["progressive_finish"] is True and "--coarse-only" in err
     else:
         assert d["progressive_faces"] is None and "every triangle" in d["progressive_reason"]
+        assert d["progressive_finish"] is None
+
+
+
+def test_coarse_only_runs_the_copy_alone_and_says_so(capsys, tmp_path):
+    """--coarse-only (issue 37): progressive meshes without the finish, said in the last line
+    and in --json; it contradicts --no-progressive and the multigrid solver."""
+    from algorithms.deform.progressive import ProgressiveCubic
+
+    src = str(shared_mesh("spot_lowres.obj"))  # 1,654 triangles
+    out = tmp_path / "a.obj"
+    assert cli.main(["cubic", src, "-o", str(out), "--coarse-only", "--progressive-faces",
+                     "800", "--lambda", "0.4", "--quiet"]) == 0
+    line = capsys.readouterr().out
+    assert "800-triangle copy alone" in line and "not finished on every triangle" in line
+    got = read_mesh(str(out)).V
+    V, F = read_mesh(src).V, read_mesh(src).F
+    alone = ProgressiveCubic(V, F, target_faces=800).stylize(CubicParams(lam=0.4))
+    np.testing.assert_allclose(got, alone, atol=1e-5 * np.ptp(V, axis=0).max())
+    assert cli.main(["cubic", src, "-o", str(tmp_path / "b.obj"), "--progressive-faces", "800",
+                     "--lambda", "0.4", "--json"]) == 0
+    d, _ = _json(capsys)
+    assert d["progressive_finish"] is True and d["progressive_faces"] == 800
+    assert cli.main(["cubic", src, "-o", str(tmp_path / "c.obj"), "--progressive-faces", "800",
+                     "--lambda", "0.4", "--quiet"]) == 0
+    assert "then on every triangle from its result" in capsys.readouterr().out
+    for bad in (["--no-progressive"], ["--global-solver", "multigrid"]):
+        assert cli.main(["cubic", src, "-o", str(tmp_path / "d.obj"), "--coarse-only",
+                         *bad]) == 5
+        assert "--coarse-only" in capsys.readouterr().err

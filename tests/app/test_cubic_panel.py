@@ -138,6 +138,21 @@ def test_progressive_mode_runs_and_reuses_its_preprocessing(window, dialogs, qtb
     with qtbot.waitSignal(window.runner.finished, timeout=120000):
         panel.run_button.click()
     assert panel._recipe_cache["solver"] is solver  # λ changed: decimation reused
+    # finished on every triangle by default (issue 37); unticked: the copy alone, less cubic,
+    # and the decimation is still reused
+    finish = panel.progressive_form.editors["finish"]
+    assert finish.isChecked() and "λ values quickly" in panel.progressive_box.toolTip()
+    finished = window.document.V.copy()
+    assert solver._fine is not None
+    window.undo_stack.undo()
+    qtbot.mouseClick(finish, Qt.LeftButton, pos=QPoint(6, finish.height() // 2))
+    assert not finish.isChecked()
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.run_button.click()
+    assert panel._recipe_cache["solver"] is solver
+    alone = window.document.V
+    np.testing.assert_allclose(alone, solver.stylize(panel.form.params()), atol=1e-9)
+    assert l1_of_normals(alone, F) > l1_of_normals(finished, F)
 
 
 def test_frame_brush_paints_a_local_cube_frame(window, dialogs, qtbot):
