@@ -288,8 +288,8 @@ def _add_progressive_arguments(s: argparse.ArgumentParser) -> None:
     s.add_argument("--coarse-only", action="store_true",
                    help="progressive meshes without the finish: stylize the copy and put the "
                         "details back only (about a second per λ on a million triangles, for "
-                        "trying λ; on scans it came out 0.4-1.4x as cubic as the finished "
-                        "result)")
+                        "trying λ; on scans it came out 0.4-1.3x as cubic as working on "
+                        "every triangle from the start, and less than finished)")
 
 
 def add_parsers(sub) -> None:

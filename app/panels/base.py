@@ -670,7 +670,13 @@ class MethodPanel(QDockWidget):
         if self.window_.last_job_name != self.title:
             return
         seconds = f"{self.window_.runner.last_duration:.2f} s"
-        if self.counts_iterations and step.iteration > 0:
+        if self.counts_iterations and "fine_iterations" in step.metrics:
+            # progressive meshes finished on every triangle: say how the iterations split
+            coarse = int(step.metrics.get("coarse_iterations", 0))
+            fine = int(step.metrics["fine_iterations"])
+            text = (f"Done: {plural(coarse, 'iteration')} on the coarse copy, then "
+                    f"{plural(fine, 'iteration')} on every triangle, in {seconds}.")
+        elif self.counts_iterations and step.iteration > 0:
             text = f"Done: {plural(step.iteration, 'iteration')} in {seconds}."
         else:
             text = f"Done in {seconds}."

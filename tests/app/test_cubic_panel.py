@@ -144,6 +144,8 @@ def test_progressive_mode_runs_and_reuses_its_preprocessing(window, dialogs, qtb
     assert finish.isChecked() and "λ values quickly" in panel.progressive_box.toolTip()
     finished = window.document.V.copy()
     assert solver._fine is not None
+    assert "on the coarse copy, then" in panel.status_label.text()
+    assert "on every triangle" in panel.status_label.text()
     window.undo_stack.undo()
     qtbot.mouseClick(finish, Qt.LeftButton, pos=QPoint(6, finish.height() // 2))
     assert not finish.isChecked()
@@ -151,6 +153,7 @@ def test_progressive_mode_runs_and_reuses_its_preprocessing(window, dialogs, qtb
         panel.run_button.click()
     assert panel._recipe_cache["solver"] is solver
     alone = window.document.V
+    assert "coarse copy" not in panel.status_label.text()
     np.testing.assert_allclose(alone, solver.stylize(panel.form.params()), atol=1e-9)
     assert l1_of_normals(alone, F) > l1_of_normals(finished, F)
 
