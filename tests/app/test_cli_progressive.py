@@ -114,3 +114,24 @@ def test_coarse_only_runs_the_copy_alone_and_says_so(capsys, tmp_path):
         assert cli.main(["cubic", src, "-o", str(tmp_path / "d.obj"), "--coarse-only",
                          *bad]) == 5
         assert "--coarse-only" in capsys.readouterr().err
+
+
+def test_saved_progressive_options_without_finish_replay_the_copy_alone():
+    """A project or study log saved before ``finish`` existed ran the copy alone: its options
+    (a progressive dict without the key) replay that, bit for bit; new options finish."""
+    import app.recipes
+    from algorithms.deform.progressive import ProgressiveCubic
+
+    V, F = read_mesh(str(shared_mesh("spot_lowres.obj"))).V, read_mesh(
+        str(shared_mesh("spot_lowres.obj"))).F
+    old = {"target_faces": 800, "strategy": "qslim", "tikhonov": 1e-6, "lam_exponent": 0.0,
+           "preview_every": 0}
+    got = app.recipes.run("cubic", (V, F), {"lam": 0.4},
+                          {"plane_axis": 0, "progressive": old, "multigrid": False}).state.V
+    alone = ProgressiveCubic(V, F, target_faces=800).stylize(CubicParams(lam=0.4))
+    np.testing.assert_array_equal(got, alone)
+    new = app.recipes.run("cubic", (V, F), {"lam": 0.4},
+                          {"plane_axis": 0, "progressive": {**old, "finish": True},
+                           "multigrid": False})
+    assert new.last.metrics["fine_iterations"] >= 1 and new.outcome["fine_iterations"] >= 1
+    assert np.abs(new.state.V - alone).max() > 0
