@@ -287,6 +287,24 @@ def displacement_ratio(step: float, total: float, diag: float, floor: float = 1e
     return step / total if total > 0 else np.inf
 
 
+def _summed_blocks(cell, tail, head, w, d, n: int, n_cells: int):
+    """``K`` by 3x1 blocks (:meth:`ArapSystem._k_blocks`) from the per-term arrays: the terms
+    ``+w d`` at (cell, head) and ``-w d`` at (cell, tail), summed per (cell, vertex)."""
+    keys = np.concatenate([cell * n + head, cell * n + tail])
+    uniq, inv = np.unique(keys, return_inverse=True)
+    del keys
+    inv = inv.reshape(-1)
+    T = len(cell)
+    val = np.empty((len(uniq), 3))
+    for a in range(3):
+        wd = w * d[:, a]
+        val[:, a] = (np.bincount(inv[:T], weights=wd, minlength=len(uniq))
+                     - np.bincount(inv[T:], weights=wd, minlength=len(uniq)))
+    del inv
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(uniq // n, minlength=n_cells))])
+    return (ptr.astype(np.int64), (uniq % n).astype(np.int64), np.ascontiguousarray(val))
+
+
 def _as_index_array(x, n: int, what: str) -> np.ndarray:
     idx = np.asarray([] if x is None else x, dtype=np.int64).reshape(-1)
     if idx.size and (idx.min() < 0 or idx.max() >= n):
@@ -386,19 +404,20 @@ class ArapSystem:
         if not np.isfinite(w).all():
             raise InvalidMeshError("The mesh has degenerate (zero-area) triangles, so the "
                                    "cotangent weights are undefined. Run Clean first.")
-        self._cell, self._tail, self._head, self._w = cell, tail, head, w
         d = V[head] - V[tail]  # (T, 3) rest edges
-        self._rest_edges = d
 
         # K[3 i + alpha, v] = sum_{t in cell i} w_t d_t[alpha] (G_t v), G_t = e_head - e_tail,
-        # assembled from its 3x1 blocks (duplicates summed once per (cell, vertex)): building
-        # it from the T = 9 m spokes-and-rims terms directly held six arrays of 2 T entries at
-        # once (a 6 GB peak at 1.3M triangles)
+        # kept as its 3x1 blocks (duplicates summed once per (cell, vertex)), from which the
+        # compiled kernels work; the sparse matrix itself (:attr:`K`) is built on first use.
+        # The T = 9 m per-term arrays are not kept (the exact energy recomputes them): at 1.3M
+        # triangles they were 0.65 GB, K and its transpose 0.4 GB, and building K from the
+        # terms directly held six arrays of 2 T entries at once (a 6 GB peak).
         self._blocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._tblocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._crows: tuple[np.ndarray, np.ndarray, sp.csr_matrix] | None = None
-        self.K = self._k_from_blocks()
-        self._KT = self.K.T.tocsr()
+        self._K: sp.csr_matrix | None = None
+        self._KT_: sp.csr_matrix | None = None
+        self._blocks = _summed_blocks(cell, tail, head, w, d, n, nc)
 
         # C_i = sum_{t in cell i} w d d^T (accumulated per entry: no (T, 9) array)
         self.rest_covariance = np.column_stack(
@@ -410,7 +429,7 @@ class ArapSystem:
         # Q = G^T W G, from the weights summed per directed edge (tail, head)
         ekey, einv = np.unique(tail * n + head, return_inverse=True)
         ew = np.bincount(einv.reshape(-1), weights=w, minlength=len(ekey))
-        del einv
+        del einv, cell, tail, head, w, d
         et, eh = ekey // n, ekey % n
         qr = np.concatenate([et, eh, et, eh])
         qc = np.concatenate([et, eh, eh, et])
@@ -511,6 +530,26 @@ class ArapSystem:
         kern.block_covariances(ptr, col, val, np.ascontiguousarray(U).reshape(self.n, 3), S)
         return S
 
+    @property
+    def K(self) -> sp.csr_matrix:
+        """(3 n_cells, n) covariance operator, ``S = (K @ U).reshape(n_cells, 3, 3)`` (built
+        from the blocks on first use)."""
+        if self._K is None:
+            self._K = self._k_from_blocks()
+        return self._K
+
+    @property
+    def _KT(self) -> sp.csr_matrix:
+        if self._KT_ is None:
+            self._KT_ = self.K.T.tocsr()
+        return self._KT_
+
+    def _terms(self):
+        """``(cell, tail, head, w, d)``: the per-term arrays of the cells (recomputed)."""
+        cell, tail, head, w = (spokes_and_rims_cells(self.V, self.F)
+                               if self.cells == "spokes_and_rims" else face_cells(self.V, self.F))
+        return cell, tail, head, w, self.V[head] - self.V[tail]
+
     def _k_from_blocks(self) -> sp.csr_matrix:
         """``K`` as a CSR matrix (3 n_cells, n) built from :meth:`_k_blocks` (canonical: sorted
         column indices, no duplicates)."""
@@ -527,24 +566,9 @@ class ArapSystem:
 
     def _k_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``K`` stored by 3x1 blocks for the compiled kernels: for cell i, blocks
-        ``ptr[i]:ptr[i+1]`` hold ``K[3 i + a, col[k]] = val[k, a]`` (built on first use)."""
+        ``ptr[i]:ptr[i+1]`` hold ``K[3 i + a, col[k]] = val[k, a]``."""
         if self._blocks is None:
-            n = self.n
-            keys = np.concatenate([self._cell * n + self._head, self._cell * n + self._tail])
-            uniq, inv = np.unique(keys, return_inverse=True)
-            del keys
-            inv = inv.reshape(-1)
-            T = len(self._cell)
-            val = np.empty((len(uniq), 3))
-            for a in range(3):
-                wd = self._w * self._rest_edges[:, a]
-                val[:, a] = (np.bincount(inv[:T], weights=wd, minlength=len(uniq))
-                             - np.bincount(inv[T:], weights=wd, minlength=len(uniq)))
-            del inv
-            cell = uniq // n
-            ptr = np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=self.n_cells))])
-            self._blocks = (ptr.astype(np.int64), (uniq % n).astype(np.int64),
-                            np.ascontiguousarray(val))
+            self._blocks = _summed_blocks(*self._terms(), self.n, self.n_cells)
         return self._blocks
 
     def _kt_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -722,9 +746,10 @@ class ArapSystem:
                  - np.einsum("nij,nji->", R, S)
                  + quad_u)
             return float(e)
-        dt = U[self._head] - U[self._tail]
-        Rd = np.einsum("tab,tb->ta", R[self._cell], self._rest_edges)
-        return float(0.5 * (self._w * ((Rd - dt) ** 2).sum(axis=1)).sum())
+        cell, tail, head, w, d = self._terms()
+        dt = U[head] - U[tail]
+        Rd = np.einsum("tab,tb->ta", R[cell], d)
+        return float(0.5 * (w * ((Rd - dt) ** 2).sum(axis=1)).sum())
 
     def energy_after_solve(self, U: np.ndarray, R: np.ndarray, rhs: np.ndarray, *,
                            rotations: bool = False,

@@ -953,7 +953,8 @@ def progressive_cubic_iter(V, F, params: CubicParams = CubicParams(),
     ------
     Step: ``iteration = 0`` with the input positions once pre-processing is done, then
     full-resolution previews every ``progressive.preview_every`` coarse iterations, then the
-    final result (see :meth:`ProgressiveCubic.steps`).
+    copy's result put back, then (``progressive.finish``, the default) one Step per iteration
+    on every triangle (see :meth:`ProgressiveCubic.steps`).
     """
     validate_params(params)
     validate_params(progressive)
@@ -1004,7 +1005,8 @@ def progressive_analogy_iter(V, F, target_map, params=None,
     ------
     Step: ``iteration = 0`` with the input positions once pre-processing is done, then
     full-resolution previews every ``progressive.preview_every`` coarse iterations, then the
-    final result.
+    coarse result put back, then (``progressive.finish``, the default) one Step per iteration
+    of the analogy on every triangle, started from it (its set-up is part of pre-processing).
     """
     from .analogies import AnalogyParams, ShapeAnalogy
 
