@@ -109,6 +109,14 @@ def cmd_analogy(args: argparse.Namespace) -> int:
     state = input_state(args, data)
     auto = analogy_progressive(args, options, len(data.F))
     prog = options["progressive"]
+    finished, not_finished = False, ""
+    if prog is not None:
+        from algorithms.deform.progressive import ProgressiveParams
+        from algorithms.params import params_from_dict
+        from app.recipes.cubic import finish_of
+
+        finished, not_finished = finish_of(
+            params_from_dict(ProgressiveParams, {"finish": False, **prog}), len(data.F))
     before = _angles_to_targets(data.V, data.F, target_map)
     recipe = method_recipe("analogies", "Analogies")
     t0 = time.perf_counter()
@@ -129,7 +137,8 @@ def cmd_analogy(args: argparse.Namespace) -> int:
                     "iterations": last.iteration, "seconds": seconds,
                     "progressive_faces": None if prog is None else int(prog["target_faces"]),
                     "progressive_auto": auto,
-                    "progressive_finish": None if prog is None else bool(prog.get("finish")),
+                    "progressive_finish": None if prog is None else finished,
+                    "progressive_not_finished": not_finished or None,
                     "mean_angle_before": before[0], "max_angle_before": before[1],
                     "mean_angle_after": after[0], "max_angle_after": after[1]})
     else:
@@ -139,9 +148,10 @@ def cmd_analogy(args: argparse.Namespace) -> int:
         if prog is not None:
             faces = int(prog["target_faces"])
             print(f"Worked through a {faces:,}-triangle copy, then on every triangle from its "
-                  f"result." if prog.get("finish") else
-                  f"Worked through a {faces:,}-triangle copy alone (the details put back, not "
-                  f"finished on every triangle).")
+                  f"result." if finished else
+                  f"Worked through a {faces:,}-triangle copy alone (the details put back"
+                  + (f"; {not_finished})." if not_finished else
+                     ", not finished on every triangle)."))
     return 0
 
 

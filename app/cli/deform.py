@@ -100,9 +100,11 @@ def cubic_options(args: argparse.Namespace, n_faces: int) -> tuple[dict, bool, s
         if args.coarse_only and args.no_progressive:
             raise ParameterError("--coarse-only stylizes a coarse copy (progressive meshes) "
                                  "and --no-progressive refuses one; choose one.")
-        base = options.get("progressive") or params_to_dict(ProgressiveParams())
+        saved_prog = options.get("progressive")
+        base = saved_prog or params_to_dict(ProgressiveParams())
         faces = (args.progressive_faces if args.progressive_faces is not None
-                 else int(base["target_faces"]))
+                 else int(base["target_faces"]) if saved_prog
+                 else min(int(base["target_faces"]), n_faces // 2))
         options["progressive"] = {**base, "target_faces": faces}
         if args.coarse_only:
             options["progressive"]["finish"] = False
@@ -218,10 +220,17 @@ def cmd_cubic(args: argparse.Namespace) -> int:
                         "online_seconds": online,
                         "final_relative_displacement": last.metrics.get("displacement"),
                         "l1_normals_after": mean_l1_of_normals(V, data.F)})
-    finished = prog is not None and bool(prog.get("finish", False))
+    finished, not_finished = False, ""
+    if prog is not None:
+        from algorithms.deform.progressive import ProgressiveParams
+        from app.recipes.cubic import finish_of
+
+        finished, not_finished = finish_of(
+            params_from_dict(ProgressiveParams, {"finish": False, **prog}), len(data.F))
     common = {"input": args.mesh,
               "progressive_faces": None if prog is None else int(prog["target_faces"]),
               "progressive_finish": None if prog is None else finished,
+              "progressive_not_finished": not_finished or None,
               "progressive_auto": auto, "progressive_reason": reason,
               "preprocess_seconds": preprocess, "l1_normals_before": l1_before}
     if args.json:
@@ -252,7 +261,7 @@ def cmd_cubic(args: argparse.Namespace) -> int:
                   f"({r['iterations']} iterations); mean L1 norm of normals {l1_before:.4f} -> "
                   f"{r['l1_normals_after']:.4f}; wrote {r['output']}.")
         pre = "" if preprocess is None else f" (pre-processing {preprocess:.1f} s, once)"
-        print(f"Worked {how}{pre}: {reason}.")
+        print(f"Worked {how}{pre}: {reason}" + (f"; {not_finished}." if not_finished else "."))
     return 0
 
 

@@ -678,6 +678,10 @@ class MethodPanel(QDockWidget):
                     f"{plural(fine, 'iteration')} on every triangle, in {seconds}.")
         elif self.counts_iterations and step.iteration > 0:
             text = f"Done: {plural(step.iteration, 'iteration')} in {seconds}."
+            at = step.message.find("not finished on every triangle")
+            if step.metrics.get("finish_skipped") and at >= 0:
+                note = step.message[at:]
+                text += f" {note[0].upper()}{note[1:]}."
         else:
             text = f"Done in {seconds}."
         recipe = self.recipe()

@@ -245,11 +245,17 @@ class CubicPanel(MethodPanel):
             big = st is not None and len(st.F) > AUTO_PROGRESSIVE_FACES
             self.progressive_box.setChecked(big)
             if big:
+                from algorithms.deform.progressive import finish_allowed
+
+                ok, why = finish_allowed(len(st.F))
                 self.status_label.setText(
-                    f"This mesh has {len(st.F):,} triangles: progressive meshes are on (a "
-                    "coarse copy is stylized first, then every triangle is finished from it). "
-                    "To try λ values quickly, untick 'Finish on every triangle': about a "
-                    "second per λ, less cubic. " + self.parts_warning())
+                    (f"This mesh has {len(st.F):,} triangles: progressive meshes are on (a "
+                     "coarse copy is stylized first, then every triangle is finished from it). "
+                     "To try λ values quickly, untick 'Finish on every triangle': about a "
+                     "second per λ, less cubic. " if ok else
+                     f"This mesh has {len(st.F):,} triangles: progressive meshes are on. "
+                     f"{why[0].upper()}{why[1:]}. ".replace(" was stylized", " is stylized"))
+                    + self.parts_warning())
         if what == "fields" and self.is_shown():
             self._show_field(self.show_combo.currentIndex())
         elif what in ("mesh", "topology"):
@@ -318,5 +324,7 @@ class CubicPanel(MethodPanel):
         prog = options.get("progressive")
         self.progressive_box.setChecked(prog is not None)
         if prog is not None:
-            self.progressive_form.set_params(params_from_dict(ProgressiveParams, prog))
+            # options saved before "finish" existed ran the copy alone
+            self.progressive_form.set_params(params_from_dict(ProgressiveParams,
+                                                              {"finish": False, **prog}))
         self.multigrid_box.setChecked(bool(options.get("multigrid", False)) and prog is None)

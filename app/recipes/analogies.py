@@ -204,7 +204,13 @@ def analogy_steps(state, params, options: dict | None = None, cache: dict | None
     if prog is not None:
         # options saved before "finish" existed ran on the copy alone: replay them so
         prog = params_from_dict(ProgressiveParams, {"finish": False, **prog})
-        return progressive_analogy_iter(state.V, state.F, tmap, params, prog)
+        from dataclasses import replace
+
+        from app.recipes.cubic import finish_of, with_note
+
+        finish, why = finish_of(prog, len(state.F))
+        return with_note(progressive_analogy_iter(state.V, state.F, tmap, params,
+                                                  replace(prog, finish=finish)), why)
     return shape_analogy_of(state, cache).steps(params, target_map=tmap)
 
 

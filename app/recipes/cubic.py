@@ -90,7 +90,8 @@ def cubic_steps(state, params, options: dict | None = None, cache: dict | None =
                                   strategy=prog.strategy, tikhonov=prog.tikhonov,
                                   fixed=fixed, handles=handles, coord_constraints=plane,
                                   normalize=params.normalize,
-                                  pin_one_vertex=params.pin_one_vertex, finish=prog.finish)
+                                  pin_one_vertex=params.pin_one_vertex,
+                                  finish=finish_of(prog, len(state.F))[0])
     cache["key"], cache["solver"] = key, solver
     scale = state.fields.get(LAMBDA_FIELD)
     lam_v = None if scale is None else params.lam * np.asarray(scale)
@@ -102,9 +103,39 @@ def cubic_steps(state, params, options: dict | None = None, cache: dict | None =
     if frames is not None:
         raise ParameterError("Painted local cube frames do not work with progressive meshes "
                              "yet: switch progressive meshes off, or clear the frames.")
-    return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation,
-                        preview_every=prog.preview_every, lam_exponent=prog.lam_exponent,
-                        finish=prog.finish)
+    finish, why = finish_of(prog, len(state.F))
+    return with_note(solver.steps(params, lam_per_vertex=lam_v, rotation=rotation,
+                                  preview_every=prog.preview_every,
+                                  lam_exponent=prog.lam_exponent, finish=finish), why)
+
+
+def finish_of(prog, n_faces: int) -> tuple[bool, str]:
+    """Whether a progressive run (ProgressiveParams ``prog``) finishes on every triangle of a
+    mesh of ``n_faces`` triangles, and, when it was asked to but may not (above
+    :data:`~algorithms.deform.progressive.FINISH_MAX_FACES`), why."""
+    from algorithms.deform.progressive import finish_allowed
+
+    if not prog.finish:
+        return False, ""
+    return finish_allowed(n_faces)
+
+
+def with_note(steps: Iterator[Step], note: str) -> Iterator[Step]:
+    """``steps``, with ``note`` (if any) added to the last Step's message and
+    ``finish_skipped = 1`` to its metrics (the output line, --json, the panel and the batch
+    record say it)."""
+    if not note:
+        yield from steps
+        return
+    last = None
+    for st in steps:
+        if last is not None:
+            yield last
+        last = st
+    if last is not None:
+        last.message = f"{last.message}; {note}" if last.message else note
+        last.metrics = {**last.metrics, "finish_skipped": 1.0}
+        yield last
 
 
 def touching_parts_of(state) -> tuple[int, int]:

@@ -135,3 +135,38 @@ def test_saved_progressive_options_without_finish_replay_the_copy_alone():
                            "multigrid": False})
     assert new.last.metrics["fine_iterations"] >= 1 and new.outcome["fine_iterations"] >= 1
     assert np.abs(new.state.V - alone).max() > 0
+
+
+def test_above_the_finish_limit_the_copy_alone_runs_and_every_output_says_so(
+        monkeypatch, capsys, tmp_path):
+    """FINISH_MAX_FACES: a mesh too big to finish on every triangle (its factorization would
+    exhaust a desktop's memory) gets the copy alone, and the line, --json and the recipe's
+    last Step say so (crash-free: no run the system would kill)."""
+    import app.recipes
+    from algorithms.deform.progressive import ProgressiveCubic
+
+    monkeypatch.setattr(progressive, "FINISH_MAX_FACES", 1000)
+    src = str(shared_mesh("spot_lowres.obj"))  # 1,654 triangles
+    assert cli.main(["cubic", src, "-o", str(tmp_path / "a.obj"), "--progressive-faces", "800",
+                     "--lambda", "0.4", "--json"]) == 0
+    d, _ = _json(capsys)
+    assert d["progressive_finish"] is False
+    assert "not finished on every triangle" in d["progressive_not_finished"]
+    assert "1,654 triangles, more than 1,000" in d["progressive_not_finished"]
+    assert cli.main(["cubic", src, "-o", str(tmp_path / "b.obj"), "--progressive-faces", "800",
+                     "--lambda", "0.4", "--quiet"]) == 0
+    line = capsys.readouterr().out
+    assert "copy alone" in line and "not finished on every triangle: this mesh has" in line
+    V, F = read_mesh(src).V, read_mesh(src).F
+    run = app.recipes.run("cubic", (V, F), {"lam": 0.4},
+                          {"plane_axis": 0, "multigrid": False,
+                           "progressive": {"target_faces": 800, "finish": True,
+                                           "preview_every": 0}})
+    assert run.last.metrics["finish_skipped"] == 1.0 and "fine_iterations" not in run.last.metrics
+    assert "not finished on every triangle" in run.last.message
+    alone = ProgressiveCubic(V, F, target_faces=800).stylize(CubicParams(lam=0.4))
+    np.testing.assert_array_equal(run.state.V, alone)
+    assert cli.main(["analogy", src, "-o", str(tmp_path / "c.obj"), "--style", "cube",
+                     "--progressive-faces", "800", "--json"]) == 0
+    d, _ = _json(capsys)
+    assert d["progressive_finish"] is False and d["progressive_not_finished"]

@@ -346,3 +346,26 @@ def test_touching_separate_parts_are_announced_before_and_after_a_run(window, di
     dialogs.answers.append("Discard changes")
     assert window.open_path(SAMPLES / "blob.obj")
     assert panel.status_label.text() == "Ready."
+
+
+def test_a_mesh_above_the_finish_limit_says_it_gets_the_copy_alone(window, dialogs, qtbot,
+                                                                   monkeypatch):
+    """Opening a mesh above FINISH_MAX_FACES: progressive meshes turn on, the panel says the
+    copy alone will be stylized and why, and the finished run's message says it again."""
+    import app.panels.cubic as cubic_panel
+    from algorithms.deform import progressive
+
+    monkeypatch.setattr(cubic_panel, "AUTO_PROGRESSIVE_FACES", 1000)
+    monkeypatch.setattr(progressive, "FINISH_MAX_FACES", 2000)
+    panel = open_cubic(window)
+    n = len(window.document.F)
+    assert n > 2000 and panel.progressive_box.isChecked()
+    text = panel.status_label.text()
+    assert f"{n:,} triangles" in text and "Not finished on every triangle" in text
+    assert "GB of memory" in text
+    panel.progressive_form.editors["target_faces"].setValue(1000)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        panel.run_button.click()
+    done = panel.status_label.text()
+    assert done.startswith("Done:") and "Not finished on every triangle" in done
+    assert "coarse copy, then" not in done
