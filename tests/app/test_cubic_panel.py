@@ -361,8 +361,8 @@ def test_a_mesh_above_the_finish_limit_says_it_gets_the_copy_alone(window, dialo
     n = len(window.document.F)
     assert n > 2000 and panel.progressive_box.isChecked()
     text = panel.status_label.text()
-    assert f"{n:,} triangles" in text and "Not finished on every triangle" in text
-    assert "GB of memory" in text
+    assert f"{n:,} triangles" in text and "only the coarse copy will be stylized" in text
+    assert "GB of" in text and "2,000 triangles" in text
     panel.progressive_form.editors["target_faces"].setValue(1000)
     with qtbot.waitSignal(window.runner.finished, timeout=120000):
         panel.run_button.click()
