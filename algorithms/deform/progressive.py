@@ -603,10 +603,10 @@ def _constraint_vertices(n: int, fixed, handles, coord_constraints):
 #: every triangle from 42,752 triangles on (bob Loop x1: 1.6x wall) through 117k (5.0x) to
 #: 1.29M (2.9x CPU), but less cubic on scans (0.42-1.27 of the cubeness change). Finished
 #: (``benchmarks/progressive_vs_full.py``, issue 37): at 117k-124k triangles the first λ took
-#: 0.59-0.79x the time of working on every triangle from the start, at energies within 0.31 %;
-#: at 269k-1.07M triangles 0.52-1.12x, at energies 7.7 % lower to 0.9 % higher (lower on 10 of
-#: 16 runs); every further λ 0.07-0.3x. The threshold keeps the coarse copy at most a fifth of
-#: the mesh.
+#: 0.59-0.82x the time of working on every triangle from the start (bob Loop x2 at 171k:
+#: 0.75-0.95x), at energies 5.0 % lower to 0.31 % higher; at 269k-1.29M triangles 0.52-1.12x,
+#: at energies 7.7 % lower to 0.9 % higher (lower on 14 of all 20 runs); every further λ
+#: 0.07-0.4x. The threshold keeps the coarse copy at most a fifth of the mesh.
 PROGRESSIVE_FASTER_FROM = 42_752
 AUTO_PROGRESSIVE_FACES = 100_000
 
