@@ -245,22 +245,10 @@ class CubicPanel(MethodPanel):
             big = st is not None and len(st.F) > AUTO_PROGRESSIVE_FACES
             self.progressive_box.setChecked(big)
             if big:
-                from algorithms.deform.progressive import finish_allowed
+                from app.recipes.cubic import big_mesh_note
 
-                from algorithms.deform.progressive import FINISH_BYTES_PER_FACE, FINISH_MAX_FACES
-
-                ok, _why = finish_allowed(len(st.F))
-                self.status_label.setText(
-                    (f"This mesh has {len(st.F):,} triangles: progressive meshes are on (a "
-                     "coarse copy is stylized first, then every triangle is finished from it). "
-                     "To try λ values quickly, untick 'Finish on every triangle': about a "
-                     "second per λ, less cubic. " if ok else
-                     f"This mesh has {len(st.F):,} triangles: progressive meshes are on, and "
-                     f"only the coarse copy will be stylized: finishing on every triangle "
-                     f"would need about {FINISH_BYTES_PER_FACE * len(st.F) / 1e9:.0f} GB of "
-                     f"memory (above {FINISH_MAX_FACES:,} triangles). Raise λ for a stronger "
-                     f"effect, or simplify the mesh below {FINISH_MAX_FACES:,} triangles. ")
-                    + self.parts_warning())
+                self.status_label.setText(big_mesh_note(len(st.F)) + " "
+                                          + self.parts_warning())
         if what == "fields" and self.is_shown():
             self._show_field(self.show_combo.currentIndex())
         elif what in ("mesh", "topology"):

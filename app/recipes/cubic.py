@@ -120,6 +120,25 @@ def finish_of(prog, n_faces: int) -> tuple[bool, str]:
     return finish_allowed(n_faces)
 
 
+def big_mesh_note(n_faces: int) -> str:
+    """What the Cubic panel says on opening a mesh that goes through progressive meshes: how
+    it runs, and above :data:`~algorithms.deform.progressive.FINISH_MAX_FACES` that only the
+    copy will be stylized, and why."""
+    from algorithms.deform import progressive
+
+    if progressive.finish_allowed(n_faces)[0]:
+        return (f"This mesh has {n_faces:,} triangles: progressive meshes are on (a coarse "
+                "copy is stylized first, then every triangle is finished from it). To try λ "
+                "values quickly, untick 'Finish on every triangle': about a second per λ, "
+                "less cubic.")
+    need = progressive.FINISH_BYTES_PER_FACE * n_faces / 1e9
+    limit = progressive.FINISH_MAX_FACES
+    return (f"This mesh has {n_faces:,} triangles: progressive meshes are on, and only the "
+            f"coarse copy will be stylized: finishing on every triangle would need about "
+            f"{need:.0f} GB of memory (above {limit:,} triangles). Raise λ for a stronger "
+            f"effect, or simplify the mesh below {limit:,} triangles.")
+
+
 def with_note(steps: Iterator[Step], note: str) -> Iterator[Step]:
     """``steps``, with ``note`` (if any) added to the last Step's message and
     ``finish_skipped = 1`` to its metrics (the output line, --json, the panel and the batch

@@ -334,7 +334,8 @@ def test_finish_reaches_a_lower_full_resolution_energy_than_a_cold_start_at_the_
     # the Step before the first fine one is the copy's result put back (said in its message)
     k = steps.index(fine[0])
     assert "finishing on every triangle" in steps[k - 1].message
-    assert np.allclose(steps[k - 1].V, alone, atol=1e-12)
+    err = np.abs(steps[k - 1].V - alone).max()
+    assert err <= 1e-9 * np.ptp(V, axis=0).max(), err
 
 
 def test_finish_keeps_constraints_and_painted_lambda_and_equals_stylize():
