@@ -77,21 +77,10 @@ def main(argv=None) -> int:
                           "lam": a.lam, "shape": name, "change": c0 - mean_l1_of_normals(X, F),
                           **info}), flush=True)
 
-    import pyvista as pv
+    from _pictures import render_grid
 
-    faces = np.hstack([np.full((len(F), 1), 3), F]).ravel()
-    pl = pv.Plotter(off_screen=True, shape=(1, len(shapes)),
-                    window_size=(a.size * len(shapes), a.size + 40), border=False)
-    for j, (name, X, _) in enumerate(shapes):
-        pl.subplot(0, j)
-        pl.add_mesh(pv.PolyData(X, faces), color="#d9d4c7", smooth_shading=True,
-                    specular=0.2)
-        pl.add_text(name, font_size=10, color="black")
-        pl.set_background("white")
-        pl.camera_position = a.view
-        pl.reset_camera()
-        pl.camera.zoom(1.3)
-    pl.screenshot(a.out)
+    render_grid([[(name, X, F) for name, X, _ in shapes]], a.out, a.size, smooth=True,
+                view=a.view, zoom=1.3)
     print(f"wrote {a.out}")
     return 0
 

@@ -59,24 +59,11 @@ def main(argv=None) -> int:
             shapes.append((name, Vs, Fs, f"H {d['hausdorff']:.2f}  M {d['mean_distance']:.3f}"))
         rows.append((Path(path).name, shapes))
 
-    import pyvista as pv
+    from _pictures import render_grid
 
-    cols = len(rows[0][1])
-    pl = pv.Plotter(off_screen=True, shape=(len(rows), cols),
-                    window_size=(a.px * cols, a.px * len(rows)), border=False)
-    for i, (mesh, shapes) in enumerate(rows):
-        for j, (name, X, G, figures) in enumerate(shapes):
-            pl.subplot(i, j)
-            faces = np.hstack([np.full((len(G), 1), 3), G]).ravel()
-            pl.add_mesh(pv.PolyData(np.asarray(X), faces), color="#d9d4c7", smooth_shading=False,
-                        specular=0.1)
-            label = f"{mesh}: {name}" if j == 0 else name
-            pl.add_text(label + ("\n" + figures if figures else ""), font_size=8, color="black")
-            pl.set_background("white")
-            pl.camera_position = "iso"
-            pl.reset_camera()
-            pl.camera.zoom(1.05)
-    pl.screenshot(a.out)
+    render_grid([[((f"{mesh}: {name}" if j == 0 else name) + (f"\n{figures}" if figures else ""),
+                   X, G) for j, (name, X, G, figures) in enumerate(shapes)]
+                 for mesh, shapes in rows], a.out, a.px, smooth=False, zoom=1.05)
     print(f"wrote {a.out}")
     return 0
 
