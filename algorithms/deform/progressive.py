@@ -222,8 +222,9 @@ class ProgressiveParams:
         True, label="Finish on every triangle",
         tooltip="After the copy is stylized and the details are put back, go on stylizing "
                 "every triangle from there until it settles (the paper's stopping rule). "
-                "Reaches a lower energy than working on every triangle from the start, in a "
-                "fraction of its iterations. Off: only the copy is stylized, about a second "
+                "Its energy was lower than working on every triangle from the start on 14 of "
+                "20 runs measured on big meshes (at most 1 % higher on the others), in a "
+                "fraction of the iterations. Off: only the copy is stylized, about a second "
                 "per λ: a quick preview, which came out 0.4-1.3x as cubic as working on every "
                 "triangle from the start on scans, and less than finished.")
     preview_every: int = param(
@@ -639,17 +640,18 @@ def choose_progressive(n_faces: int, target_faces: int | None = None) -> tuple[b
 
     The rule (measured, see :data:`AUTO_PROGRESSIVE_FACES`): progressive meshes, finished on
     every triangle (``ProgressiveParams.finish``), above ``AUTO_PROGRESSIVE_FACES`` triangles,
-    where they reach a lower energy than working on every triangle from the start, in a
-    fraction of its iterations; below, every triangle from the start.
+    where they reached a lower energy than working on every triangle from the start on 14 of
+    20 runs measured (at most 0.9 % higher on the others), in a fraction of its iterations;
+    below, every triangle from the start.
     """
     m = ProgressiveParams().target_faces if target_faces is None else int(target_faces)
     if n_faces > AUTO_PROGRESSIVE_FACES:
         return True, (f"this mesh has {n_faces:,} triangles, more than "
                       f"{AUTO_PROGRESSIVE_FACES:,}: from there on, stylizing a {m:,}-triangle "
                       f"copy, putting the details back (affine progressive meshes) and then "
-                      f"finishing on every triangle from there gets closer to the shape asked "
-                      f"for than working on every triangle from the start, and in fewer "
-                      f"iterations")
+                      f"finishing on every triangle from there reached a lower energy than "
+                      f"working on every triangle from the start on 14 of 20 runs measured "
+                      f"on big meshes (at most 1 % higher on the others), in fewer iterations")
     return False, (f"this mesh has {n_faces:,} triangles, not more than "
                    f"{AUTO_PROGRESSIVE_FACES:,}: working on every triangle from the start "
                    f"converges well at this size")
