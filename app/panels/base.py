@@ -678,10 +678,9 @@ class MethodPanel(QDockWidget):
                     f"{plural(fine, 'iteration')} on every triangle, in {seconds}.")
         elif self.counts_iterations and step.iteration > 0:
             text = f"Done: {plural(step.iteration, 'iteration')} in {seconds}."
-            at = step.message.find("not finished on every triangle")
-            if step.metrics.get("finish_skipped") and at >= 0:
-                note = step.message[at:]
-                text += f" {note[0].upper()}{note[1:]}."
+            if step.metrics.get("finish_skipped") and step.message:
+                # progressive meshes not finished (too big): the recipe's note says why
+                text += f" {step.message[0].upper()}{step.message[1:]}."
         else:
             text = f"Done in {seconds}."
         recipe = self.recipe()

@@ -70,6 +70,7 @@ def cubic_steps(state, params, options: dict | None = None, cache: dict | None =
     prog = None if prog is None else params_from_dict(ProgressiveParams,
                                                       {"finish": False, **prog})
     multigrid = bool(options.get("multigrid", False)) and prog is None
+    finish, why = (False, "") if prog is None else finish_of(prog, len(state.F))
     fixed, handles, plane = constraints_of(state, plane_axis)
     key = (id(state.V), id(state.F), fixed.tobytes(),
            None if handles is None else (handles[0].tobytes(), handles[1].tobytes()),
@@ -90,8 +91,7 @@ def cubic_steps(state, params, options: dict | None = None, cache: dict | None =
                                   strategy=prog.strategy, tikhonov=prog.tikhonov,
                                   fixed=fixed, handles=handles, coord_constraints=plane,
                                   normalize=params.normalize,
-                                  pin_one_vertex=params.pin_one_vertex,
-                                  finish=finish_of(prog, len(state.F))[0])
+                                  pin_one_vertex=params.pin_one_vertex, finish=finish)
     cache["key"], cache["solver"] = key, solver
     scale = state.fields.get(LAMBDA_FIELD)
     lam_v = None if scale is None else params.lam * np.asarray(scale)
@@ -103,7 +103,6 @@ def cubic_steps(state, params, options: dict | None = None, cache: dict | None =
     if frames is not None:
         raise ParameterError("Painted local cube frames do not work with progressive meshes "
                              "yet: switch progressive meshes off, or clear the frames.")
-    finish, why = finish_of(prog, len(state.F))
     return with_note(solver.steps(params, lam_per_vertex=lam_v, rotation=rotation,
                                   preview_every=prog.preview_every,
                                   lam_exponent=prog.lam_exponent, finish=finish), why)
@@ -140,9 +139,9 @@ def big_mesh_note(n_faces: int) -> str:
 
 
 def with_note(steps: Iterator[Step], note: str) -> Iterator[Step]:
-    """``steps``, with ``note`` (if any) added to the last Step's message and
-    ``finish_skipped = 1`` to its metrics (the output line, --json, the panel and the batch
-    record say it)."""
+    """``steps``, with ``note`` (if any) as the last Step's message and ``finish_skipped = 1``
+    in its metrics (the panel's closing line and the batch record say it; the command line
+    says it from :func:`finish_of`)."""
     if not note:
         yield from steps
         return
@@ -152,7 +151,7 @@ def with_note(steps: Iterator[Step], note: str) -> Iterator[Step]:
             yield last
         last = st
     if last is not None:
-        last.message = f"{last.message}; {note}" if last.message else note
+        last.message = note
         last.metrics = {**last.metrics, "finish_skipped": 1.0}
         yield last
 

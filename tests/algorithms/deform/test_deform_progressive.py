@@ -334,6 +334,8 @@ def test_finish_reaches_a_lower_full_resolution_energy_than_a_cold_start_at_the_
     # the Step before the first fine one is the copy's result put back (said in its message)
     k = steps.index(fine[0])
     assert "finishing on every triangle" in steps[k - 1].message
+    # equal to round-off: an isolated run gives 0.0 exactly, but once, in a whole-suite run
+    # under load, atol 1e-12 failed (cause not found: a parallel reduction whose order varies?)
     err = np.abs(steps[k - 1].V - alone).max()
     assert err <= 1e-9 * np.ptp(V, axis=0).max(), err
 
