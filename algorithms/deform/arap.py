@@ -287,6 +287,10 @@ def displacement_ratio(step: float, total: float, diag: float, floor: float = 1e
     return step / total if total > 0 else np.inf
 
 
+#: triangles per chunk of :meth:`ArapSystem.energy` (exact)
+ENERGY_CHUNK = 65536
+
+
 def _summed_blocks(cell, tail, head, w, d, n: int, n_cells: int):
     """``K`` by 3x1 blocks (:meth:`ArapSystem._k_blocks`) from the per-term arrays: the terms
     ``+w d`` at (cell, head) and ``-w d`` at (cell, tail), summed per (cell, vertex)."""
@@ -303,6 +307,96 @@ def _summed_blocks(cell, tail, head, w, d, n: int, n_cells: int):
     del inv
     ptr = np.concatenate([[0], np.cumsum(np.bincount(uniq // n, minlength=n_cells))])
     return (ptr.astype(np.int64), (uniq % n).astype(np.int64), np.ascontiguousarray(val))
+
+
+def _spokes_and_rims_assembly(V: np.ndarray, F: np.ndarray, n: int):
+    """``(blocks, rest_covariance, Q)`` of the spokes-and-rims cells, assembled per triangle.
+
+    The same sums as :func:`_summed_blocks` and the per-term sums of :class:`ArapSystem` over the
+    ``T = 9 m`` terms of :func:`spokes_and_rims_cells`, without building those terms: in a
+    triangle every term of edge ``k`` is repeated for the cell of each of its three corners with
+    the same value, so
+
+    * the block of (cell of corner ``l``, vertex at corner ``j``) receives
+      ``c_j = w_{j+1} d_{j+1} - w_{j+2} d_{j+2}`` (corner ``j`` is the head of edge ``j+1`` and
+      the tail of edge ``j+2``), the same for every ``l``;
+    * each corner's rest covariance receives ``sum_k w_k d_k d_k^T``;
+    * each directed edge's weight in ``Q`` is ``3 w_k``.
+
+    The (cell, vertex) pairs are the vertex-adjacency pattern with its diagonal (sorted by
+    ``cell * n + vertex``, as :func:`_summed_blocks` orders them), so each sum is a
+    ``bincount`` into that pattern. Peak memory is a few arrays of ``m`` rows: the term arrays
+    (five of ``9 m`` rows, and ``np.unique`` over ``18 m`` keys) made the set-up's peak 2.75 GB
+    at 1.29M triangles (issue 37).
+    """
+    m = len(F)
+    P = V[F]                                            # (m, 3 corners, 3)
+    tail_c, head_c = [1, 2, 0], [2, 0, 1]               # edge k: corner k+1 -> corner k+2
+    a = P[:, tail_c] - P                                # corner k -> k+1
+    b = P[:, head_c] - P                                # corner k -> k+2
+    dot = np.einsum("fkc,fkc->fk", a, b)
+    crs = np.linalg.norm(np.cross(a, b), axis=2)
+    del a, b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = dot / crs                                   # (m, 3): cot at corner k (edge k)
+    del dot, crs
+    if not np.isfinite(w).all():
+        raise InvalidMeshError("The mesh has degenerate (zero-area) triangles, so the "
+                               "cotangent weights are undefined. Run Clean first.")
+    d = P[:, head_c] - P[:, tail_c]                     # (m, 3 edges, 3): rest edge vectors
+    del P
+    wd = w[:, :, None] * d
+    # the pattern: every (i, j) of one triangle, i.e. the diagonal and both edge directions
+    lo = np.minimum(F[:, tail_c], F[:, head_c]).ravel()
+    hi = np.maximum(F[:, tail_c], F[:, head_c]).ravel()
+    und = _sorted_unique(lo * n + hi)
+    del lo, hi
+    used = np.flatnonzero(np.bincount(F.ravel(), minlength=n))
+    pattern = _sorted_unique(np.concatenate([und, (und % n) * n + und // n, used * n + used]))
+    del und
+    npat = len(pattern)
+    diag_slot = np.zeros(n, dtype=np.int64)
+    diag_slot[used] = np.searchsorted(pattern, used * n + used)
+    # slot[l][j]: where (cell of corner l, vertex at corner j) of each triangle is summed
+    slot = [[diag_slot[F[:, l]] if l == j else np.searchsorted(pattern, F[:, l] * n + F[:, j])
+             for j in range(3)] for l in range(3)]
+    del diag_slot
+
+    val = np.zeros((npat, 3))
+    qv = np.zeros(npat)
+    for j in range(3):
+        c = wd[:, head_c.index(j)] - wd[:, tail_c.index(j)]   # corner j: head / tail of edge
+        for l in range(3):
+            for ax in range(3):
+                val[:, ax] += np.bincount(slot[l][j], weights=c[:, ax], minlength=npat)
+        del c
+    for k in range(3):
+        t, h, wk = tail_c[k], head_c[k], 3.0 * w[:, k]
+        for i, j, sgn in ((t, t, 1.0), (h, h, 1.0), (t, h, -1.0), (h, t, -1.0)):
+            qv += sgn * np.bincount(slot[i][j], weights=wk, minlength=npat)
+    del wd, slot
+    rows, cols = pattern // n, pattern % n
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))]).astype(np.int64)
+    Q = sp.csc_matrix((qv, cols, ptr), shape=(n, n))   # symmetric: the CSR arrays are its CSC
+    Q.has_sorted_indices = True
+    C = np.zeros((n, 3, 3))
+    for a_ in range(3):
+        for b_ in range(a_, 3):
+            s_ab = (w * d[:, :, a_] * d[:, :, b_]).sum(axis=1)   # sum_k w_k d_k d_k^T, per face
+            for l in range(3):
+                C[:, a_, b_] += np.bincount(F[:, l], weights=s_ab, minlength=n)
+            C[:, b_, a_] = C[:, a_, b_]
+    return (ptr, cols.astype(np.int64), val), C, Q
+
+
+def _sorted_unique(x: np.ndarray) -> np.ndarray:
+    """``np.unique(x)`` of an int64 array by sorting (several times faster here than
+    ``np.unique`` of NumPy 2, measured on 4.5M keys)."""
+    x = np.sort(x)
+    keep = np.empty(len(x), dtype=bool)
+    keep[:1] = True
+    np.not_equal(x[1:], x[:-1], out=keep[1:])
+    return x[keep]
 
 
 def _as_index_array(x, n: int, what: str) -> np.ndarray:
@@ -399,17 +493,10 @@ class ArapSystem:
         self.V, self.F, self.n = V, F, n
         self.cells = cells
         self.n_cells = nc = n if cells == "spokes_and_rims" else len(F)
-        cell, tail, head, w = (spokes_and_rims_cells(V, F) if cells == "spokes_and_rims"
-                               else face_cells(V, F))
-        if not np.isfinite(w).all():
-            raise InvalidMeshError("The mesh has degenerate (zero-area) triangles, so the "
-                                   "cotangent weights are undefined. Run Clean first.")
-        d = V[head] - V[tail]  # (T, 3) rest edges
-
         # K[3 i + alpha, v] = sum_{t in cell i} w_t d_t[alpha] (G_t v), G_t = e_head - e_tail,
         # kept as its 3x1 blocks (duplicates summed once per (cell, vertex)), from which the
         # compiled kernels work; the sparse matrix itself (:attr:`K`) is built on first use.
-        # The T = 9 m per-term arrays are not kept (the exact energy recomputes them): at 1.3M
+        # The T per-term arrays are not kept (the exact energy recomputes them): at 1.3M
         # triangles they were 0.65 GB, K and its transpose 0.4 GB, and building K from the
         # terms directly held six arrays of 2 T entries at once (a 6 GB peak).
         self._blocks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -417,26 +504,13 @@ class ArapSystem:
         self._crows: tuple[np.ndarray, np.ndarray, sp.csr_matrix] | None = None
         self._K: sp.csr_matrix | None = None
         self._KT_: sp.csr_matrix | None = None
-        self._blocks = _summed_blocks(cell, tail, head, w, d, n, nc)
-
-        # C_i = sum_{t in cell i} w d d^T (accumulated per entry: no (T, 9) array)
-        self.rest_covariance = np.column_stack(
-            [np.bincount(cell, weights=w * d[:, a] * d[:, b], minlength=nc)
-             for a in range(3) for b in range(3)]).reshape(nc, 3, 3)
+        if cells == "spokes_and_rims":
+            # per triangle, without the 9 m term arrays (the set-up's peak memory)
+            self._blocks, self.rest_covariance, self.Q = _spokes_and_rims_assembly(V, F, n)
+        else:
+            self._assemble_from_terms(*face_cells(V, F), n, nc)
         self._trace_rest_covariance = float(np.trace(self.rest_covariance, axis1=1,
                                                      axis2=2).sum())
-
-        # Q = G^T W G, from the weights summed per directed edge (tail, head)
-        ekey, einv = np.unique(tail * n + head, return_inverse=True)
-        ew = np.bincount(einv.reshape(-1), weights=w, minlength=len(ekey))
-        del einv, cell, tail, head, w, d
-        et, eh = ekey // n, ekey % n
-        qr = np.concatenate([et, eh, et, eh])
-        qc = np.concatenate([et, eh, eh, et])
-        qv = np.concatenate([ew, ew, -ew, -ew])
-        self.Q = sp.csc_matrix((qv, (qr, qc)), shape=(n, n))
-        self.Q.sum_duplicates()
-        del qr, qc, qv
 
         self.referenced = np.zeros(n, dtype=bool)
         self.referenced[F.ravel()] = True
@@ -493,6 +567,27 @@ class ArapSystem:
             self._groups.append((same, fx, solver))
         self.multigrid = multigrid
         self.backend = self._groups[0][2].backend
+
+    def _assemble_from_terms(self, cell, tail, head, w, n: int, nc: int) -> None:
+        """``_blocks``, ``rest_covariance`` and ``Q`` from per-term arrays (face cells)."""
+        if not np.isfinite(w).all():
+            raise InvalidMeshError("The mesh has degenerate (zero-area) triangles, so the "
+                                   "cotangent weights are undefined. Run Clean first.")
+        d = self.V[head] - self.V[tail]  # (T, 3) rest edges
+        self._blocks = _summed_blocks(cell, tail, head, w, d, n, nc)
+        # C_i = sum_{t in cell i} w d d^T (accumulated per entry: no (T, 9) array)
+        self.rest_covariance = np.column_stack(
+            [np.bincount(cell, weights=w * d[:, a] * d[:, b], minlength=nc)
+             for a in range(3) for b in range(3)]).reshape(nc, 3, 3)
+        # Q = G^T W G, from the weights summed per directed edge (tail, head)
+        ekey, einv = np.unique(tail * n + head, return_inverse=True)
+        ew = np.bincount(einv.reshape(-1), weights=w, minlength=len(ekey))
+        del einv
+        et, eh = ekey // n, ekey % n
+        self.Q = sp.csc_matrix((np.concatenate([ew, ew, -ew, -ew]),
+                                (np.concatenate([et, eh, et, eh]),
+                                 np.concatenate([et, eh, eh, et]))), shape=(n, n))
+        self.Q.sum_duplicates()
 
     def _check_definite(self) -> None:
         ncomp, lab = connected_components(self.F, self.n, over="vertices")
@@ -746,10 +841,19 @@ class ArapSystem:
                  - np.einsum("nij,nji->", R, S)
                  + quad_u)
             return float(e)
-        cell, tail, head, w, d = self._terms()
-        dt = U[head] - U[tail]
-        Rd = np.einsum("tab,tb->ta", R[cell], d)
-        return float(0.5 * (w * ((Rd - dt) ** 2).sum(axis=1)).sum())
+        # by chunks of triangles: the per-term arrays of a whole 1.3M-triangle mesh (R[cell]
+        # alone 0.8 GB) would double the memory the run itself needs
+        total = 0.0
+        cells_of = spokes_and_rims_cells if self.cells == "spokes_and_rims" else face_cells
+        for start in range(0, len(self.F), ENERGY_CHUNK):
+            cell, tail, head, w = cells_of(self.V, self.F[start:start + ENERGY_CHUNK])
+            if self.cells != "spokes_and_rims":
+                cell = cell + start          # face cells are numbered within the chunk
+            d = self.V[head] - self.V[tail]
+            dt = U[head] - U[tail]
+            Rd = np.einsum("tab,tb->ta", R[cell], d)
+            total += float(0.5 * (w * ((Rd - dt) ** 2).sum(axis=1)).sum())
+        return total
 
     def energy_after_solve(self, U: np.ndarray, R: np.ndarray, rhs: np.ndarray, *,
                            rotations: bool = False,

@@ -700,6 +700,7 @@ class AffineProgressiveMesh:
         self.splits = AffineSplits(dec, tikhonov)
         t2 = time.perf_counter()
         self.clusters = dec.clusters()
+        dec.drop_records()   # the splits replay from the rings alone (0.18 GB at 1.3M)
         area = barycentric_vertex_areas(V, F)
         self._cluster_area = np.bincount(self.clusters, weights=area, minlength=len(dec.V))
         self._area = area

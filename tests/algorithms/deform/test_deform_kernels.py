@@ -346,9 +346,11 @@ def test_full_run_on_spot_matches_the_numpy_path(numpy_path):
     residuals that are at round-off level once a vertex has converged, so a difference of
     1e-15 decides some comparisons differently after ~15 iterations, and the results then
     differ by ~1e-5 (the NumPy path alone moves as much when the input is scaled by 1 + 1e-15).
-    Vertices are therefore compared at 1e-8 over the steps before the first step whose inner
-    ADMM iteration counts differ, and the final shapes at a tolerance of the size of that
-    round-off sensitivity.
+    Vertices are therefore compared at 1e-8 over the first 20 steps, or up to the first step
+    whose inner ADMM iteration counts differ if that comes sooner (past step 20 the round-off
+    has grown to ~1e-8 even while the counts agree: how long they agree depends on the order
+    of sums in the set-up), and the final shapes at a tolerance of the size of that round-off
+    sensitivity.
     """
     m = read_mesh(shared_mesh("spot_lowres.obj"))
     ours = list(cubic_stylization_iter(m.V, m.F, CubicParams()))
@@ -356,7 +358,7 @@ def test_full_run_on_spot_matches_the_numpy_path(numpy_path):
         ref = list(cubic_stylization_iter(m.V, m.F, CubicParams()))
     assert len(ours) == len(ref)
     same = 0
-    for a, b in zip(ours, ref):
+    for a, b in zip(ours[:20], ref[:20]):
         if (a.metrics["admm_iterations"] != b.metrics["admm_iterations"]
                 or a.metrics["admm_iterations_max"] != b.metrics["admm_iterations_max"]):
             break
