@@ -390,3 +390,24 @@ def test_progressive_analogy_finishes_on_every_triangle():
     assert last.metrics["fine_iterations"] >= 1 and np.array_equal(last.V[fixed], V[fixed])
     cold = run_to_end(ShapeAnalogy(V, F, cube, fixed=fixed).steps(AnalogyParams(lam=1.0)))
     assert last.metrics["energy"] <= cold.metrics["energy"] * 1.01
+
+
+def test_a_progressive_mesh_frees_the_records_its_splits_do_not_need():
+    """Once the split weights are fitted, the per-collapse records that only a one-at-a-time
+    replay reads are freed (0.18 GB at 1.3M triangles); a replay then refuses plainly, and the
+    prolongation is the same as from a decimation that kept them."""
+    from algorithms.deform.progressive import AffineSplits
+    from algorithms.mesh.decimate import Decimation
+
+    V, F = load("spot_lowres.obj")
+    pc = ProgressiveCubic(V, F, target_faces=600)
+    dec = pc.decimation
+    assert all(getattr(dec, name) is None for name in Decimation.RECORD_ONLY)
+    with pytest.raises(ParameterError, match="freed"):
+        dec.record(0)
+    with pytest.raises(ParameterError, match="freed"):
+        dec.replay()
+    full = AffineSplits(decimate(V, F, 600))
+    Pc = dec.V + np.random.default_rng(0).normal(scale=1e-2, size=dec.V.shape)
+    np.testing.assert_array_equal(pc.splits.apply(Pc), full.apply(Pc))
+    assert np.abs(full.apply(Pc) - full.apply_sequential(Pc)).max() < 1e-12
