@@ -614,12 +614,13 @@ AUTO_PROGRESSIVE_FACES = 100_000
 
 #: Above this many triangles progressive meshes are not finished on every triangle, whatever
 #: ``ProgressiveParams.finish`` says (the copy alone, said in the output): the finish needs the
-#: full mesh's factorization, measured at 2.74 GB peak for 1,285,632 triangles (rocker-arm Loop
-#: x3, the whole process), about 2.1 kB per triangle, so 3M triangles need about 6.4 GB, and a
-#: bigger mesh could exhaust a desktop's memory (the system then kills the app: lost work).
+#: full mesh's factorization, measured at 1.87 GB peak for 1,285,632 triangles (rocker-arm Loop
+#: x3, the whole process; 2.74 GB before the ARAP set-up summed per triangle), about 1.5 kB
+#: per triangle, so 3M triangles need about 4.4 GB, and a bigger mesh could exhaust a
+#: desktop's memory (the system then kills the app: lost work).
 FINISH_MAX_FACES = 3_000_000
 #: Measured peak bytes per triangle of the finished path (see :data:`FINISH_MAX_FACES`).
-FINISH_BYTES_PER_FACE = 2_130
+FINISH_BYTES_PER_FACE = 1_460
 
 
 def finish_allowed(n_faces: int) -> tuple[bool, str]:
