@@ -673,6 +673,8 @@ def main() -> int:
                          "2-manifold) as `stylize3d paparazzi FILE --clean` does, unsubdivided")
     ap.add_argument("--max-faces", type=int, default=0,
                     help="with --corpus: only meshes of at most this many triangles")
+    ap.add_argument("--from-index", type=int, default=0,
+                    help="with --corpus: start at this mesh of the list sorted by size")
     ap.add_argument("--time-limit", type=float, default=None,
                     help="seconds per run; a run stopped there is 'over time', not a result")
     ap.add_argument("--json", default="", help="append one JSON line per row to this file")
@@ -707,6 +709,7 @@ def main() -> int:
         if a.json and Path(a.json).exists():   # the same --json again resumes: meshes with
             import json                        # rows there are not run again
             done = {json.loads(line)["mesh"] for line in open(a.json) if line.strip()}
+        files = files[a.from_index:]           # a second worker can start mid-list
         a.meshes = [str(p) for p in files if p.name not in done]
     global SCOPE, NOISE
     SCOPE = a.remesh_scope
