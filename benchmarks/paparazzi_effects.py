@@ -364,13 +364,40 @@ def _record(a, **rec):
             fh.write(json.dumps(rec) + "\n")
 
 
-def summary(path) -> int:
-    """Per filter, from a ``--json`` file: on how many meshes the run's own energy fell, and on
+def summary(paths, markdown: bool = False) -> int:
+    """Per filter, from ``--json`` files: on how many meshes the run's own energy fell, and on
     how many it also ended below remeshing alone's output (the issue-38 target: >= 90 % of
-    the meshes the filter accepts)."""
+    the meshes the filter accepts); with ``markdown`` also one table row per mesh."""
     import json
 
-    recs = [json.loads(line) for line in open(path) if line.strip()]
+    recs = [json.loads(line) for path in paths for line in open(path) if line.strip()]
+    if markdown:
+        names = [f for f in ("guided", "quantize", "slic", "l0", "neural-style")
+                 if any(r["filter"] == f for r in recs)]
+        print("| mesh | vertices | " + " | ".join(names) + " |")
+        print("|---|---:|" + "---|" * len(names))
+        meshes = sorted({r["mesh"] for r in recs},
+                        key=lambda m: min(r.get("vertices", 0) for r in recs if r["mesh"] == m))
+        for mesh in meshes:
+            rows = {r["filter"]: r for r in recs if r["mesh"] == mesh}
+            if "all" in rows:
+                print(f"| {mesh} | | {rows['all']['why']} |" + " |" * (len(names) - 1))
+                continue
+            cells = []
+            for f in names:
+                r = rows.get(f)
+                if r is None:
+                    cells.append("not run")
+                elif r["kind"] != "result":
+                    cells.append(f"{r['kind']} ({r.get('why', '')})")
+                else:
+                    ok = "yes" if r["falls"] and r["beats_control"] else (
+                        "**rises**" if not r["falls"] else "**not below control**")
+                    cells.append(f"{r['e16_before']:.3g} → {r['e16_after']:.3g} "
+                                 f"(control {r['e16_control']:.3g}) {ok}, {r['seconds']:.0f} s")
+            verts = max(r.get("vertices", 0) for r in rows.values())
+            print(f"| {mesh} | {verts:,} | " + " | ".join(cells) + " |")
+        print()
     refused = sorted({r["mesh"] for r in recs if r["filter"] == "all"})
     print(f"{len(refused)} meshes refused by every filter: {', '.join(refused) or '-'}")
     for name in sorted({r["filter"] for r in recs} - {"all"}):
@@ -678,8 +705,10 @@ def main() -> int:
     ap.add_argument("--time-limit", type=float, default=None,
                     help="seconds per run; a run stopped there is 'over time', not a result")
     ap.add_argument("--json", default="", help="append one JSON line per row to this file")
-    ap.add_argument("--summary", default=None,
-                    help="only print the per-filter summary of a --json file")
+    ap.add_argument("--summary", nargs="+", default=None,
+                    help="only print the per-filter summary of --json files")
+    ap.add_argument("--markdown", action="store_true",
+                    help="with --summary: also a table, one row per mesh")
     ap.add_argument("--suspects", action="store_true")
     ap.add_argument("--barrier", action="store_true",
                     help="each filter's energy from the noisy scans to the clean meshes, and "
@@ -690,7 +719,7 @@ def main() -> int:
                     help="window colour variance of noise and creases (fandisk)")
     a = ap.parse_args()
     if a.summary:
-        return summary(a.summary)
+        return summary(a.summary, a.markdown)
     if a.corpus:
         from algorithms.mesh import read_mesh
 
