@@ -64,6 +64,7 @@ import numpy as np
 from ..errors import Stylize3DError
 from ..params import param
 from ..render import LambertianShading, Shading
+from ..torch_threads import one_torch_thread
 from .filters import FilterContext, ImageReadError, register_filter
 
 __all__ = ["NeuralStyleParams", "NeuralStyleUnavailable", "StyleNetwork", "neural_style_shading",
@@ -403,7 +404,7 @@ def style_grams(target: np.ndarray) -> list:
     import torch
 
     clf, blocks = _gram_network()
-    with torch.no_grad():
+    with torch.no_grad(), one_torch_thread():
         _, xt = _prep(target, False)
         return [g for g, _ in _grams(xt, clf.model, blocks)]
 
@@ -420,7 +421,9 @@ def gram_style_loss(image: np.ndarray, target, *, gradient: bool = False, target
 
     clf, blocks = _gram_network()
     Gs = style_grams(target) if target_grams is None else target_grams
-    with torch.enable_grad() if gradient else torch.no_grad():
+    # one thread: with two, the input gradient at 32 x 32 pixels differed from call to call
+    # (by 3e-4), so a run did not repeat bit for bit (algorithms.torch_threads)
+    with torch.enable_grad() if gradient else torch.no_grad(), one_torch_thread():
         t, xi = _prep(image, gradient)
         loss = sum(((g - gs) ** 2).sum() / (4.0 * N * N)
                    for (g, N), gs in zip(_grams(xi, clf.model, blocks), Gs))

@@ -38,7 +38,6 @@ and under load it was up to 20x slower), restored between epochs.
 from __future__ import annotations
 
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Iterator, Sequence
 
@@ -47,6 +46,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..params import param, validate_params
 from ..steps import Step
+from ..torch_threads import one_torch_thread
 from .data import CoarseSample
 from .model import MeshLevels, SubdivisionNet
 
@@ -187,7 +187,7 @@ class Trainer:
         """Mean over the validation meshes (all of them in one batch) of their loss."""
         import torch
 
-        with _one_thread(), torch.no_grad():
+        with one_torch_thread(), torch.no_grad():
             return float(self._loss(self._val_batch))
 
     def steps(self, epochs: int | None = None) -> Iterator[Step]:
@@ -212,7 +212,7 @@ class Trainer:
                 lr = self.learning_rate(ep, total)
                 for group in self.opt.param_groups:
                     group["lr"] = lr
-                with _one_thread():
+                with one_torch_thread():
                     for t in self._rng.permutation(len(self.train_set)):
                         ta = clock()
                         self.opt.zero_grad()
@@ -271,7 +271,7 @@ class Trainer:
         import torch
 
         V0, ml, _ = (self.val_set or self.train_set)[0]
-        with _one_thread(), torch.no_grad():
+        with one_torch_thread(), torch.no_grad():
             return self.net.forward(V0, ml)[-1].double().numpy().copy()
 
 
@@ -286,16 +286,6 @@ def _adam(torch, parameters, lr):
         return torch.optim.Adam(parameters, lr=lr)
 
 
-@contextmanager
-def _one_thread():
-    import torch
-
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 def training_data(shapes, data_params, params: TrainParams = TrainParams(), *,

@@ -180,18 +180,15 @@ def _one_thread(steps):
     gradients round differently with other thread counts, and an image must not depend on
     whether it was made here or in a worker process (one thread each), nor on ``--workers``
     (the same seed gives the same images, bit for bit)."""
-    import torch
+    from algorithms.torch_threads import one_torch_thread
 
     it = iter(steps)
     while True:
-        before = torch.get_num_threads()
-        torch.set_num_threads(1)
-        try:
-            step = next(it)
-        except StopIteration:
-            return
-        finally:
-            torch.set_num_threads(before)
+        with one_torch_thread():
+            try:
+                step = next(it)
+            except StopIteration:
+                return
         yield step
 
 
