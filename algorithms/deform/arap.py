@@ -511,6 +511,8 @@ class ArapSystem:
             self._assemble_from_terms(*face_cells(V, F), n, nc)
         self._trace_rest_covariance = float(np.trace(self.rest_covariance, axis1=1,
                                                      axis2=2).sum())
+        if compiled_kernels() is not None:
+            self._kt_blocks()  # with the set-up, so the first run pays no more than the next
 
         self.referenced = np.zeros(n, dtype=bool)
         self.referenced[F.ravel()] = True
@@ -673,10 +675,18 @@ class ArapSystem:
         so the gather reads them sequentially)."""
         if self._tblocks is None:
             ptr, col, val = self._k_blocks()
-            tk = np.argsort(col, kind="stable").astype(np.int64)
-            tptr = np.concatenate([[0], np.cumsum(np.bincount(col, minlength=self.n))])
-            kcell = np.repeat(np.arange(self.n_cells, dtype=np.int64), np.diff(ptr))
-            self._tblocks = (tptr.astype(np.int64), np.ascontiguousarray(kcell[tk]),
+            # The block pattern as a (cells x vertices) CSR matrix whose values are the block
+            # indices; SciPy's CSR -> CSC conversion is a linear-time counting sort that keeps
+            # the order of the rows within each column (the stable sort by column: at 1.3M
+            # triangles 0.15 s instead of 1.2 s for argsort and repeat).
+            nb = len(col)
+            idx_t = np.int64 if max(nb, self.n, self.n_cells) >= 2**31 - 1 else np.int32
+            pattern = sp.csr_matrix((np.arange(nb, dtype=np.int64), col.astype(idx_t, copy=False),
+                                     ptr.astype(idx_t, copy=False)),
+                                    shape=(self.n_cells, self.n))
+            t = pattern.tocsc()
+            tk = np.asarray(t.data, dtype=np.int64)
+            self._tblocks = (t.indptr.astype(np.int64), t.indices.astype(np.int64),
                              np.ascontiguousarray(val[tk]))
         return self._tblocks
 

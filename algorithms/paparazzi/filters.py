@@ -610,6 +610,15 @@ def l0_smooth(image: np.ndarray, lam: float = 0.01, kappa: float = 2.0,
     denorm2 = np.abs(fft.rfft2(fx)) ** 2 + np.abs(fft.rfft2(fy)) ** 2
     normin1 = fft.rfft2(S)
     beta = 2.0 * lam
+    kernels = _KERNELS.get()
+    if kernels is not None:
+        normin2 = np.empty_like(S)
+        while beta < beta_max:
+            kernels.l0_gradient_step(S, lam / beta, normin2)
+            FS = (normin1 + beta * fft.rfft2(normin2)) / (1.0 + beta * denorm2)
+            S = fft.irfft2(FS, s=(H, W))
+            beta *= kappa
+        return np.moveaxis(S, 0, -1)
     while beta < beta_max:
         h = np.roll(S, -1, axis=2) - S
         v = np.roll(S, -1, axis=1) - S
