@@ -13,7 +13,9 @@ with a time limit, and sorts each run into one class:
                 (area below 1e-12 of the diagonal squared where the input's was not), more
                 than 0.1 % of its triangles folded over (a triangle whose normal points away
                 from the triangles around it, where the input's did not; same triangles),
-                self-intersections the input did not have, or spikes (a vertex
+                self-intersections the input did not have (of a subdivided result: the
+                intersecting pairs whose parent triangles did not intersect in the input, as
+                each input crossing comes back split many times), or spikes (a vertex
                 moved more than the mean of its neighbours' moves by over twice the length of
                 its edges and over 1 % of the diagonal)
   substitution  exit 0, and the command's --json says another method ran (``fallback``);
@@ -185,11 +187,17 @@ def _measure(mesh: Path, out: Path, clean: bool, moves: bool) -> dict:
         dist, _ = cKDTree(V0).query(V)
         m["moved"] = float(dist.max() / diag)  # to the nearest input vertex (an upper bound)
     if len(F) <= SLOW_FACES and len(F0) <= SLOW_FACES:
-        from algorithms.paparazzi.optimize import count_self_intersections
+        from algorithms.mesh.intersections import (crossings_not_in_parents,
+                                                   intersecting_pairs_here)
 
         try:
-            m["intersections_in"] = count_self_intersections(V0, F0)
-            m["intersections_out"] = count_self_intersections(V, F)
+            P0, P = intersecting_pairs_here(V0, F0), intersecting_pairs_here(V, F)
+            m["intersections_in"], m["intersections_out"] = len(P0), len(P)
+            k = int(round(np.log(max(len(F), 1) / len(F0)) / np.log(4))) if len(F0) else 0
+            if k >= 1 and len(F) == len(F0) * 4 ** k:
+                # a subdivided result: its triangles split the input's, so the input's own
+                # crossings come back many times; count those whose parents did not cross
+                m["intersections_made"] = crossings_not_in_parents(P, k, P0)
         except Exception as e:  # noqa: BLE001 - a measurement that fails is reported, not fatal
             m["intersections_error"] = str(e)[:120]
     m["moves"] = moves
@@ -219,8 +227,10 @@ def _classify(rc: int | None, seconds: float, stderr: str, record: dict, m: dict
         why.append(f"{m['degenerate_made']} degenerate triangles made")
     if m.get("folds_made", 0) > FOLDS * m.get("faces_out", 0):
         why.append(f"{m['folds_made']} triangles folded over")
-    if m.get("intersections_out", 0) > m.get("intersections_in", 0):
-        why.append(f"{m['intersections_out'] - m['intersections_in']} self-intersections made")
+    made = m.get("intersections_made",
+                 m.get("intersections_out", 0) - m.get("intersections_in", 0))
+    if made > 0:
+        why.append(f"{made} self-intersections made")
     if m.get("spike", 0.0) > SPIKE:
         why.append(f"spike {100 * m['spike']:.1f} % of the diagonal")
     if why:

@@ -135,6 +135,8 @@ import numpy as np
 
 from .. import offload
 from ..errors import InvalidMeshError, ParameterError, Stylize3DError
+from ..mesh.intersections import count_self_intersections
+from ..mesh.intersections import intersecting_pairs as _intersecting_pairs
 from ..params import param, validate_params
 from ..render import image_vjp, render
 from ..steps import Step
@@ -322,31 +324,6 @@ class PaparazziStep(Step):
     image: np.ndarray | None = None
     filtered: np.ndarray | None = None
     seconds: dict = field(default_factory=dict)
-
-
-def count_self_intersections(V, F) -> int:
-    """Number of intersecting face pairs (libigl, exact predicates)."""
-    import igl.predicates
-
-    found, IF, _ = igl.predicates.find_self_intersections(
-        np.ascontiguousarray(V, dtype=np.float64), np.ascontiguousarray(F, dtype=np.int64), False)
-    return int(len(IF)) if found else 0
-
-
-def _intersecting_pairs_here(V, F) -> np.ndarray:
-    import igl.predicates
-
-    found, IF, _ = igl.predicates.find_self_intersections(
-        np.ascontiguousarray(V, dtype=np.float64), np.ascontiguousarray(F, dtype=np.int64), False)
-    return np.asarray(IF, np.int64).reshape(-1, 2) if found else np.zeros((0, 2), np.int64)
-
-
-def _intersecting_pairs(V, F) -> np.ndarray:
-    """(k, 2) intersecting face pairs. libigl keeps Python's lock for the whole test (36 ms on
-    a 14.6k-vertex mesh): in the desktop app it runs in the helper process
-    (:mod:`algorithms.offload`)."""
-    return offload.call(_intersecting_pairs_here, np.ascontiguousarray(V, np.float64),
-                        np.ascontiguousarray(F, np.int64))
 
 
 def _remesh_core(V, F, iterations: int, h: float, n_fixed: int, creases) -> tuple:

@@ -111,8 +111,10 @@ def test_subdivide_runs_without_torch(tmp_path):
 def test_subdivide_with_the_authors_network_reproduces_its_output(tmp_path):
     src = REF / "cartoon_elephant_10" / "subd0" / "005.obj"
     out = tmp_path / "e.obj"
+    # as the author's code runs it: no guard (by default the guard finds that level 2 crosses
+    # itself in 4 places where Loop's does not, and Loop makes level 2)
     r = stylize3d("subdivide", src, "-o", out, "--weights",
-                  REF / "author_network" / "netparams.dat", "--json")
+                  REF / "author_network" / "netparams.dat", "--json", "--dense-input", "off")
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["note"] == ""
     ours = read_mesh(out)

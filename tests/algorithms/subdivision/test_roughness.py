@@ -177,3 +177,73 @@ def test_the_guard_does_not_run_the_network_on_a_big_dense_mesh(monkeypatch):
     monkeypatch.setattr(inference, "GUARD_MAX_TRIANGLES", 4 * len(m.F))
     last = list(inference.neural_subdivision_iter(m.V, m.F, 1, net, dense="guard"))[-1]
     assert "over the" not in last.note
+
+
+ENGINE_BRACKET = ROOT / "tests" / "data" / "engine_bracket.obj"
+
+
+def _children_stay_in_their_parents(F_parent: np.ndarray, F_child: np.ndarray, n: int) -> None:
+    """Every child face 4 f .. 4 f + 3 uses, of the old vertices (ids < n), only f's corners."""
+    kids = F_child.reshape(len(F_parent), 4, 3)
+    for c in range(4):
+        old = kids[:, c, :] < n
+        inside = (kids[:, c, :, None] == F_parent[:, None, :]).any(-1)
+        assert (inside | ~old).all()
+    assert (kids < n).sum() == 3 * len(F_parent)      # each corner in exactly one child
+
+
+def test_children_of_face_f_are_4f_to_4f_plus_3_for_loop_and_the_network():
+    """The crossing check maps a triangle of a k-level result to its input triangle as
+    f // 4**k: true of Loop's numbering and of the network's (refine)."""
+    from algorithms.mesh.subdivision import loop_subdivide
+    from algorithms.subdivision.topology import refine
+
+    m = read_mesh(ENGINE_BRACKET)
+    V1, F1 = loop_subdivide(m.V, m.F, 1)
+    _children_stay_in_their_parents(m.F, F1, len(m.V))
+    _, F2 = loop_subdivide(V1, F1, 1)
+    _children_stay_in_their_parents(F1, F2, len(V1))
+    np.testing.assert_array_equal(loop_subdivide(m.V, m.F, 2)[1], F2)
+    R1 = refine(m.F, len(m.V))
+    _children_stay_in_their_parents(m.F, R1, len(m.V))
+
+
+def test_crossings_not_in_parents_counts_only_new_ones():
+    from algorithms.mesh.intersections import crossings_not_in_parents
+
+    inherited = np.array([[3, 9]])
+    # level 1: children 12-15 of 3 and 36-39 of 9 are inherited; 0 x 20 (faces 0 and 5) is new
+    pairs = np.array([[12, 37], [39, 15], [0, 20], [1, 2]])
+    assert crossings_not_in_parents(pairs, 1, inherited) == 2
+    assert crossings_not_in_parents(pairs, 1, np.zeros((0, 2))) == 4
+    assert crossings_not_in_parents(np.zeros((0, 2)), 1, inherited) == 0
+    # level 2: 16 children per face
+    assert crossings_not_in_parents(np.array([[48, 150], [0, 160]]), 2, inherited) == 1
+
+
+def test_the_guard_uses_loop_where_the_network_crosses_itself_and_loop_does_not():
+    """A CAD bracket with thin ribs close to each other (closed, genus 6): the network's level
+    1 crosses itself where the input does not (its ribs pushed through each other); Loop's
+    does not. The guard uses Loop for every level and says why; the same input forced through
+    the network keeps the crossings."""
+    from algorithms.mesh.intersections import (count_self_intersections,
+                                               crossings_not_in_parents,
+                                               intersecting_pairs_here)
+    from algorithms.subdivision.inference import neural_subdivision_iter
+
+    m = read_mesh(ENGINE_BRACKET)
+    assert count_self_intersections(m.V, m.F) == 0
+    net = load_network(None)
+    forced = list(neural_subdivision_iter(m.V, m.F, 1, net, dense="scale"))[-1]
+    made = crossings_not_in_parents(intersecting_pairs_here(forced.V, forced.F), 1,
+                                    np.zeros((0, 2)))
+    assert made > 0
+    VL, FL = subdivide_baseline(m.V, m.F, 1, "loop")
+    assert count_self_intersections(VL, FL) == 0
+    guarded = list(neural_subdivision_iter(m.V, m.F, 2, net, dense="guard"))[-1]
+    assert guarded.fallback and guarded.levels_used == ("loop", "loop")
+    assert f"crossed itself in {made} places where the input does not" in guarded.note
+    assert "Loop subdivision's: 0" in guarded.note
+    VL2, FL2 = subdivide_baseline(m.V, m.F, 2, "loop")
+    np.testing.assert_array_equal(guarded.V, VL2)
+    np.testing.assert_array_equal(guarded.F, FL2)
