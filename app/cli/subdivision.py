@@ -108,7 +108,9 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
            "method_used": method_used, "fallback": fallback, "levels_used": levels_used,
            "levels": params.levels, "coarsen_first": params.coarsen_first,
            "vertices_in": int(len(data.V)), "faces_in": int(len(data.F)),
-           "vertices": int(len(V)), "faces": int(len(F)), "seconds": dt, "note": note}
+           "vertices": int(len(V)), "faces": int(len(F)), "seconds": dt, "note": note,
+           # vertices where the guard blended Loop's positions in (the network crossed itself)
+           "loop_blended_vertices": int((last.metrics or {}).get("loop_blended_vertices", 0))}
     if args.json:
         print_json(out)
     else:

@@ -192,6 +192,7 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
     note = ""
     method_used, fallback = params.method, False
     levels_used = (params.method,) * levels
+    metrics: dict = {}
     if params.method == "neural":
         from algorithms.subdivision.inference import SubdividedStep, neural_subdivision_iter
 
@@ -204,6 +205,7 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
                 step.V = state.V
                 yield step
         V, F, note = last.V, last.F, last.note
+        metrics = dict(last.metrics)   # the guard's (bending_vs_butterfly, loop_blended_vertices)
         fallback = bool(getattr(last, "fallback", False))
         levels_used = tuple(last.levels_used) or (("loop" if fallback else "neural"),) * levels
         method_used = "+".join(dict.fromkeys(levels_used))   # neural, loop or neural+loop
@@ -217,7 +219,7 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
                        f"Level {k + 1} of {levels}: {name} subdivision")
             V, F = subdivide_baseline(V, F, 1, params.method)
     message = f"{len(F):,} triangles" + (f". {note}" if note else "")
-    yield MeshStep(1, 1, np.asarray(V, dtype=np.float64), {}, message,
+    yield MeshStep(1, 1, np.asarray(V, dtype=np.float64), metrics, message,
                    F=np.asarray(F, dtype=np.int64), note=note, method_used=method_used,
                    fallback=fallback, levels_used=levels_used)
 
@@ -259,6 +261,9 @@ def _subdivision_outcome(last: Step) -> dict:
         out["fallback"] = bool(last.fallback)
         if getattr(last, "levels_used", ()):
             out["levels_used"] = list(last.levels_used)
+    blended = int((last.metrics or {}).get("loop_blended_vertices", 0))
+    if blended:   # the guard's local repair of crossings (said in the note too)
+        out["loop_blended_vertices"] = blended
     return out
 
 

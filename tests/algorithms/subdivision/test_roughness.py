@@ -182,6 +182,15 @@ def test_the_guard_does_not_run_the_network_on_a_big_dense_mesh(monkeypatch):
 ENGINE_BRACKET = ROOT / "tests" / "data" / "engine_bracket.obj"
 
 
+def _bracket():
+    """The bracket as `--clean` gives it (the file's triangles face inwards: flipped)."""
+    from algorithms.mesh.validate import clean_mesh
+
+    m = read_mesh(ENGINE_BRACKET)
+    c = clean_mesh(m.V, m.F)
+    return c.V, c.F
+
+
 def _children_stay_in_their_parents(F_parent: np.ndarray, F_child: np.ndarray, n: int) -> None:
     """Every child face 4 f .. 4 f + 3 uses, of the old vertices (ids < n), only f's corners."""
     kids = F_child.reshape(len(F_parent), 4, 3)
@@ -198,14 +207,14 @@ def test_children_of_face_f_are_4f_to_4f_plus_3_for_loop_and_the_network():
     from algorithms.mesh.subdivision import loop_subdivide
     from algorithms.subdivision.topology import refine
 
-    m = read_mesh(ENGINE_BRACKET)
-    V1, F1 = loop_subdivide(m.V, m.F, 1)
-    _children_stay_in_their_parents(m.F, F1, len(m.V))
+    V, F = _bracket()
+    V1, F1 = loop_subdivide(V, F, 1)
+    _children_stay_in_their_parents(F, F1, len(V))
     _, F2 = loop_subdivide(V1, F1, 1)
     _children_stay_in_their_parents(F1, F2, len(V1))
-    np.testing.assert_array_equal(loop_subdivide(m.V, m.F, 2)[1], F2)
-    R1 = refine(m.F, len(m.V))
-    _children_stay_in_their_parents(m.F, R1, len(m.V))
+    np.testing.assert_array_equal(loop_subdivide(V, F, 2)[1], F2)
+    R1 = refine(F, len(V))
+    _children_stay_in_their_parents(F, R1, len(V))
 
 
 def test_crossings_not_in_parents_counts_only_new_ones():
@@ -221,29 +230,56 @@ def test_crossings_not_in_parents_counts_only_new_ones():
     assert crossings_not_in_parents(np.array([[48, 150], [0, 160]]), 2, inherited) == 1
 
 
-def test_the_guard_uses_loop_where_the_network_crosses_itself_and_loop_does_not():
+def test_loop_in_refine_numbering_is_loops_mesh_vertex_for_vertex():
+    from algorithms.subdivision.inference import loop_in_refine_numbering
+    from algorithms.subdivision.topology import refine
+
+    V, F = _bracket()
+    VL, FL = subdivide_baseline(V, F, 1, "loop")
+    W = loop_in_refine_numbering(V, F)
+    FR = refine(F, len(V))
+    assert W.shape == VL.shape
+    # the same triangles: each corner of refine's triangle is Loop's vertex at that place
+    tri = lambda X: np.sort(np.round(X.reshape(-1, 3, 3), 12).tolist(), axis=1)  # noqa: E731
+    assert sorted(map(tuple, tri(W[FR]).reshape(-1, 9).tolist())) == \
+        sorted(map(tuple, tri(VL[FL]).reshape(-1, 9).tolist()))
+    assert not np.array_equal(W, VL)    # (the numbering does differ)
+
+
+def test_the_guard_blends_loop_in_where_the_network_crosses_itself():
     """A CAD bracket with thin ribs close to each other (closed, genus 6): the network's level
     1 crosses itself where the input does not (its ribs pushed through each other); Loop's
-    does not. The guard uses Loop for every level and says why; the same input forced through
-    the network keeps the crossings."""
+    does not. The guard keeps the network's result and blends Loop's positions in around the
+    crossing triangles only, said in the note; the result crosses itself nowhere new, and away
+    from there it is the network's, bit for bit."""
     from algorithms.mesh.intersections import (count_self_intersections,
                                                crossings_not_in_parents,
                                                intersecting_pairs_here)
-    from algorithms.subdivision.inference import neural_subdivision_iter
+    from algorithms.subdivision.inference import (loop_in_refine_numbering,
+                                                  neural_subdivision_iter)
 
-    m = read_mesh(ENGINE_BRACKET)
-    assert count_self_intersections(m.V, m.F) == 0
+    V, F = _bracket()
+    assert count_self_intersections(V, F) == 0
     net = load_network(None)
-    forced = list(neural_subdivision_iter(m.V, m.F, 1, net, dense="scale"))[-1]
+    forced = list(neural_subdivision_iter(V, F, 1, net, dense="scale"))[-1]
     made = crossings_not_in_parents(intersecting_pairs_here(forced.V, forced.F), 1,
                                     np.zeros((0, 2)))
     assert made > 0
-    VL, FL = subdivide_baseline(m.V, m.F, 1, "loop")
+    VL, FL = subdivide_baseline(V, F, 1, "loop")
     assert count_self_intersections(VL, FL) == 0
-    guarded = list(neural_subdivision_iter(m.V, m.F, 2, net, dense="guard"))[-1]
-    assert guarded.fallback and guarded.levels_used == ("loop", "loop")
+    guarded = list(neural_subdivision_iter(V, F, 1, net, dense="guard"))[-1]
+    assert not guarded.fallback and guarded.levels_used == ("neural",)
+    np.testing.assert_array_equal(guarded.F, forced.F)
+    assert count_self_intersections(guarded.V, guarded.F) == 0
+    changed = np.flatnonzero((guarded.V != forced.V).any(axis=1))
+    n = int(guarded.metrics["loop_blended_vertices"])
+    assert 0 < len(changed) <= n < 0.05 * len(guarded.V)
     assert f"crossed itself in {made} places where the input does not" in guarded.note
-    assert "Loop subdivision's: 0" in guarded.note
-    VL2, FL2 = subdivide_baseline(m.V, m.F, 2, "loop")
-    np.testing.assert_array_equal(guarded.V, VL2)
-    np.testing.assert_array_equal(guarded.F, FL2)
+    assert f"Loop subdivision's positions were blended in ({n} vertices, level 1)" in guarded.note
+    # where the weight is 1 the vertex is Loop's
+    W = loop_in_refine_numbering(V, F)
+    assert np.isclose(guarded.V[changed], W[changed]).all(axis=1).any()
+    # two levels: level 2 goes on from the repaired level 1, and crosses nowhere new either
+    two = list(neural_subdivision_iter(V, F, 2, net, dense="guard"))[-1]
+    assert two.levels_used == ("neural", "neural") and not two.fallback
+    assert count_self_intersections(two.V, two.F) == 0
