@@ -33,6 +33,8 @@ and the commit) and one contact sheet per method, docs/images/corpus_<method>.pn
 result, or the input with the class when there is no result).
 
 The corpus is not in the repository: give its folder with --corpus or STYLIZE3D_CORPUS.
+docs/results/corpus_records.json holds the records of the page's last run: rerun one method
+after a change with ``--methods NAME --merge docs/results/corpus_records.json --json FILE``.
 
 Usage: .venv/bin/python benchmarks/corpus.py --corpus DIR [--extra DIR] [--methods a,b]
        [--meshes name,name] [--jobs 2] [--timeout 300] [--no-pictures] [--out FILE.md]

@@ -283,3 +283,19 @@ def test_the_guard_blends_loop_in_where_the_network_crosses_itself():
     two = list(neural_subdivision_iter(V, F, 2, net, dense="guard"))[-1]
     assert two.levels_used == ("neural", "neural") and not two.fallback
     assert count_self_intersections(two.V, two.F) == 0
+
+
+def test_the_blend_note_says_what_was_changed_and_what_is_left():
+    from algorithms.subdivision.inference import _Guard
+
+    V, F = _bracket()
+    g = _Guard(V, F)
+    assert g.blend_note() == ""
+    g.blended, g.blended_levels, g.crossings_seen = 38, [1], 5
+    assert g.blend_note().endswith("blended in (38 vertices, level 1).")
+    g.blended, g.blended_levels, g.crossings_seen = 1200, [1, 2], 900
+    g.crossings_left = (40, 12)
+    assert g.blend_note() == (
+        "The network's result crossed itself in 900 places where the input does not; there "
+        "Loop subdivision's positions were blended in (1,200 vertices, levels 1, 2); 40 "
+        "crossings are left (Loop subdivision's: 12).")
