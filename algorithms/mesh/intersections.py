@@ -13,7 +13,7 @@ import numpy as np
 from .. import offload
 
 __all__ = ["count_self_intersections", "intersecting_pairs", "intersecting_pairs_here",
-           "crossings_not_in_parents"]
+           "crossings_not_in_parents", "new_crossing_pairs"]
 
 
 def intersecting_pairs_here(V, F) -> np.ndarray:
@@ -37,17 +37,22 @@ def count_self_intersections(V, F) -> int:
     return int(len(intersecting_pairs_here(V, F)))
 
 
-def crossings_not_in_parents(pairs: np.ndarray, levels: int, parent_pairs: np.ndarray) -> int:
-    """How many intersecting face pairs of a mesh subdivided ``levels`` times (children of face
-    ``f`` numbered ``4 f .. 4 f + 3`` at each level, as Loop, the network and butterfly number
-    them) are not inherited: their two parent faces of the unsubdivided mesh were not an
+def new_crossing_pairs(pairs: np.ndarray, levels: int, parent_pairs: np.ndarray) -> np.ndarray:
+    """The intersecting face pairs of a mesh subdivided ``levels`` times (children of face ``f``
+    numbered ``4 f .. 4 f + 3`` at each level, as Loop, the network and butterfly number them)
+    that are not inherited: their two parent faces of the unsubdivided mesh were not an
     intersecting pair there (``parent_pairs``)."""
     pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
     if not len(pairs):
-        return 0
+        return pairs
     par = np.sort(pairs // 4 ** int(levels), axis=1)
     known = np.sort(np.asarray(parent_pairs, np.int64).reshape(-1, 2), axis=1)
     if not len(known):
-        return int(len(par))
+        return pairs
     base = int(max(par.max(), known.max())) + 1
-    return int((~np.isin(par[:, 0] * base + par[:, 1], known[:, 0] * base + known[:, 1])).sum())
+    return pairs[~np.isin(par[:, 0] * base + par[:, 1], known[:, 0] * base + known[:, 1])]
+
+
+def crossings_not_in_parents(pairs: np.ndarray, levels: int, parent_pairs: np.ndarray) -> int:
+    """How many of ``pairs`` are new (:func:`new_crossing_pairs`)."""
+    return int(len(new_crossing_pairs(pairs, levels, parent_pairs)))

@@ -891,8 +891,6 @@ class _Guard:
         self.planar = None
         self.Vl, self.Fl, self.loop_level = V, F, 0   # Loop, level by level, when needed
         self.input_pairs = None     # the input's intersecting triangle pairs, when needed
-        #: (the network's, Loop's) crossings at the last level where the network crossed itself
-        self.crossings: tuple[int, int] | None = None
         #: vertices of the result where Loop's positions were blended in, and at which levels
         self.blended = 0
         self.blended_levels: list[int] = []
@@ -932,7 +930,6 @@ class _Guard:
         self.Vl, self.Fl = subdivide_baseline(self.Vl, self.Fl, k - self.loop_level, "loop")
         self.loop_level = k
         loop_crossed = self._crossings(self.Vl, self.Fl, k)
-        self.crossings = (crossed, loop_crossed)
         if crossed <= loop_crossed:
             return "", None
         blended, changed, left = _blend_loop_where_crossed(
@@ -948,17 +945,14 @@ class _Guard:
 
     def _new_pairs(self, V, F, k: int) -> np.ndarray:
         """The intersecting pairs of a ``k``-level result whose parents did not intersect."""
-        from ..mesh.intersections import intersecting_pairs
+        from ..mesh.intersections import intersecting_pairs, new_crossing_pairs
 
         pairs = intersecting_pairs(V, F)
         if not len(pairs):
             return pairs
         if self.input_pairs is None:
             self.input_pairs = intersecting_pairs(self.V0, self.F0)
-        known = np.sort(self.input_pairs, axis=1)
-        par = np.sort(pairs // 4 ** k, axis=1)
-        base = len(self.F0) + 1
-        return pairs[~np.isin(par[:, 0] * base + par[:, 1], known[:, 0] * base + known[:, 1])]
+        return new_crossing_pairs(pairs, k, self.input_pairs)
 
     def _check(self, k: int, V_net, F_net) -> str:
         from .baselines import subdivide_baseline
@@ -998,17 +992,17 @@ class _Guard:
 BLEND_ROUNDS = 3
 
 
-def loop_in_refine_numbering(V_prev, F_prev) -> np.ndarray:
+def loop_in_refine_numbering(V_prev, F_prev, F_net=None) -> np.ndarray:
     """One level of Loop subdivision of ``(V_prev, F_prev)`` with its vertices numbered as
-    :func:`~.topology.refine` numbers the network's (old vertices first, then edge ``e``'s
-    vertex at ``n + e``), so that they pair with the network's result vertex for vertex.
+    the network's result ``F_net`` (default: :func:`~.topology.refine` of ``F_prev``: old
+    vertices first, then edge ``e``'s vertex at ``n + e``), so that they pair vertex for vertex.
     Loop's triangle 4 f + 2 and refine's 4 f + 3 are both (ab, bc, ca) of triangle f."""
     from .baselines import subdivide_baseline
     from .topology import refine
 
     n = len(V_prev)
     VL, FL = subdivide_baseline(V_prev, F_prev, 1, "loop")
-    FR = refine(np.asarray(F_prev, np.int64), n)
+    FR = refine(np.asarray(F_prev, np.int64), n) if F_net is None else np.asarray(F_net)
     perm = np.arange(len(VL), dtype=np.int64)
     perm[FR.reshape(-1, 4, 3)[:, 3].ravel()] = FL.reshape(-1, 4, 3)[:, 2].ravel()
     return np.asarray(VL, np.float64)[perm]
@@ -1025,7 +1019,7 @@ def _blend_loop_where_crossed(V_net, F_net, V_prev, F_prev, new_pairs, allowed: 
     import scipy.sparse as sp
 
     n = len(V_net)
-    VL = loop_in_refine_numbering(V_prev, F_prev)
+    VL = loop_in_refine_numbering(V_prev, F_prev, F_net)
     E = np.concatenate([F_net[:, [0, 1]], F_net[:, [1, 2]], F_net[:, [2, 0]]])
     A = sp.csr_matrix((np.ones(2 * len(E)), (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
                       shape=(n, n))
@@ -1071,6 +1065,9 @@ def _guard_fallback(V, F, lv: int, li: int, kept, why: str, guard: _Guard, plan:
         said += (f" 'Coarsen first' to about {plan.advice} vertices lets the network rebuild "
                  f"the detail.")
     metrics = {"bending_vs_butterfly": guard.ratio} if np.isfinite(guard.ratio) else {}
+    if guard.blended:   # earlier levels the network kept, repaired where they crossed
+        metrics["loop_blended_vertices"] = float(guard.blended)
+        said = f"{said} {guard.blend_note()}"
     yield SubdividedStep(1000, 1000, np.asarray(Vl, dtype=np.float64), metrics,
                          f"{len(Fl):,} triangles", F=np.asarray(Fl, dtype=np.int64),
                          note=said if li == 0 else " ".join(x for x in (note, said) if x),
