@@ -7,7 +7,9 @@ with a time limit, and sorts each run into one class:
                 the largest move is at least 0.2 % of the bounding-box diagonal)
   refused       exit 2-6 with a message (the message is kept)
   advice works  refused, and the advice in the message works: the message names Clean and the
-                same command with --clean gives a result (then classified like any result)
+                same command with --clean gives a result, or it names a setting with a value
+                ("ask for fewer: --m 140") and the command with that setting gives one (then
+                classified like any result)
   no effect     exit 0, but a method that deforms moved no vertex by 0.2 % of the diagonal
   artefact      exit 0, but the result has NaN coordinates, triangles it made degenerate
                 (area below 1e-12 of the diagonal squared where the input's was not), more
@@ -46,6 +48,7 @@ import argparse
 import json
 import os
 import platform
+import re
 import subprocess
 import sys
 import time
@@ -89,14 +92,24 @@ SLOW_FACES = 100_000
 
 
 # ---------------------------------------------------------------------------- one run (child)
-def _command(method: str, mesh: Path, out: Path, clean: bool) -> list[str]:
+def _command(method: str, mesh: Path, out: Path, clean: bool, extra=()) -> list[str]:
     argv, suffix, _ = METHODS[method]
     cmd = [sys.executable, "-m", "app", *argv, str(mesh), "--json"]
     if suffix is not None:
         cmd += ["-o", str(out), "--overwrite"]
     if clean:
         cmd.append("--clean")
-    return cmd
+    return cmd + list(extra)
+
+
+#: a setting with its value named in a refusal ("ask for fewer: --m 140")
+ADVICE_FLAG = re.compile(r"(--[a-z][a-z-]*)[ =](\d+(?:\.\d+)?)")
+
+
+def advised_setting(message: str) -> list[str]:
+    """``[flag, value]`` of the first setting a refusal's message names with a value, or []."""
+    hit = ADVICE_FLAG.search(message or "")
+    return [hit.group(1), hit.group(2)] if hit else []
 
 
 def _last_json(text: str) -> dict:
@@ -276,20 +289,29 @@ def run_one(method: str, mesh: Path, work: Path, timeout: float) -> dict:
     rec: dict = {"mesh": mesh.name, "method": method, "faces": faces}
     env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1")
     clean = False
-    for attempt in (0, 1):
+    extra: list[str] = []
+    for attempt in (0, 1, 2):
         t0 = time.perf_counter()
         try:
-            p = subprocess.run(_command(method, mesh, out, clean), cwd=ROOT, env=env,
+            p = subprocess.run(_command(method, mesh, out, clean, extra), cwd=ROOT, env=env,
                                capture_output=True, text=True, timeout=timeout)
             rc, stdout, stderr = p.returncode, p.stdout, p.stderr
         except subprocess.TimeoutExpired:
             rc, stdout, stderr = None, "", ""
         seconds = time.perf_counter() - t0
         record = _last_json(stdout)
-        if attempt == 0 and rc is not None and 2 <= rc <= 6 and "clean" in (
-                stderr + json.dumps(record)).lower():
+        refused = rc is not None and 2 <= rc <= 6
+        said = str(record.get("error") or "") + "\n" + stderr
+        if attempt == 0 and refused and "clean" in (stderr + json.dumps(record)).lower():
             rec["refusal"] = str(record.get("error") or stderr.strip().splitlines()[-1:])[:200]
             clean = True
+            continue
+        if attempt < 2 and refused and not extra and advised_setting(said):
+            # the advice names a setting and its value ("ask for fewer: --m 140"): follow it
+            extra = advised_setting(said)
+            rec.setdefault("refusal", said.strip().splitlines()[-1][:200] if said.strip()
+                           else "")
+            rec["advice"] = " ".join(extra)
             continue
         break
     m = None
@@ -299,10 +321,11 @@ def run_one(method: str, mesh: Path, work: Path, timeout: float) -> dict:
         except Exception as e:  # noqa: BLE001 - reported in the cell
             m = {"measure_error": f"{type(e).__name__}: {e}"[:160]}
     kind, why = _classify(rc, seconds, stderr, record, m, moves, faces, timeout)
-    if clean and kind == "result":
+    followed = " ".join((["--clean"] if clean else []) + extra)
+    if followed and kind == "result":
         kind = "advice works"
-    elif clean and kind == "refused":
-        why = f"refused, and with --clean: {why}"
+    elif followed and kind == "refused":
+        why = f"refused, and with {followed}: {why}"
     rec.update(kind=kind, why=why, seconds=round(seconds, 2), exit=rc, clean=clean,
                measure=m)
     png = work / f"{mesh.stem}__{method}.png"
@@ -369,7 +392,8 @@ def _page(records: list[dict], methods: list[str], meshes: list[Path], args, sec
         f"runs; this invocation {seconds / 60:.1f} min). "
         f"{len(meshes)} meshes x {len(methods)} methods. The classes are defined in the "
         "script's docstring: ok = a visible, artefact-free result; ok* = after the advice of "
-        "the refusal (Clean) was followed; R = refused with a message; - = no visible effect; "
+        "the refusal (Clean, or the setting and value it named) was followed; R = refused with "
+        "a message (also after its advice); - = no visible effect; "
         "X = artefact; S = another method ran (said in the output); T = over time; "
         "C! = crash or traceback." + (
             " Part of the table comes from an earlier run of the same script (--merge): the "

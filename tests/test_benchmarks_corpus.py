@@ -49,6 +49,14 @@ def test_classes(corpus):
     assert c(0, 1, "", {}, ok, True, 10, 300)[0] == "result"
 
 
+def test_the_setting_a_refusal_names_is_read(corpus):
+    msg = ("This mesh has 280 vertices, and the coarse operator was to have 500 (--m, which "
+           "must be fewer): ask for fewer: --m 140.")
+    assert corpus.advised_setting(msg) == ["--m", "140"]
+    assert corpus.advised_setting("use --step-size=0.001 instead") == ["--step-size", "0.001"]
+    assert corpus.advised_setting("Run Clean first (stylize3d clean).") == []
+
+
 def test_folds_and_json_reading(corpus):
     V, F = icosphere(2)
     assert not corpus._folds(V, F).any()
@@ -73,17 +81,29 @@ def test_a_small_folder_end_to_end(tmp_path):
     W = V + 0.03 * rng.standard_normal(V.shape)
     write_mesh(folder / "ball.obj", W, F)
     write_mesh(folder / "loose.obj", np.vstack([W, [[4.0, 4.0, 4.0]]]), F)  # an unused vertex
+    write_mesh(folder / "small.obj", *icosphere(2))   # 162 vertices: coarsen asks for fewer
     out = tmp_path / "corpus.md"
     records = tmp_path / "records.json"
     p = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "corpus.py"), "--corpus",
-                        str(folder), "--methods", "smooth", "--jobs", "2", "--no-pictures",
+                        str(folder), "--methods", "smooth,coarsen", "--jobs", "2",
+                        "--no-pictures",
                         "--out", str(out), "--json", str(records), "--work",
                         str(tmp_path / "work")], cwd=ROOT, capture_output=True, text=True,
                        timeout=600)
     assert p.returncode == 0, p.stderr[-2000:]
-    recs = {r["mesh"]: r for r in json.loads(records.read_text())}
-    assert recs["ball.obj"]["kind"] == "result" and recs["ball.obj"]["exit"] == 0
-    assert recs["loose.obj"]["kind"] == "advice works" and recs["loose.obj"]["clean"]
+    recs = {(r["mesh"], r["method"]): r for r in json.loads(records.read_text())}
+    ball, loose = recs["ball.obj", "smooth"], recs["loose.obj", "smooth"]
+    assert ball["kind"] == "result" and ball["exit"] == 0
+    assert loose["kind"] == "advice works" and loose["clean"]
+    # coarsen's default (500 coarse nodes) on 162 vertices is refused with the value to use,
+    # and that value works
+    small = recs["small.obj", "coarsen"]
+    assert small["kind"] == "advice works" and small["advice"] == "--m 81", small
+    assert "--m 81" in small["refusal"] and not small["clean"]
+    assert recs["ball.obj", "coarsen"]["kind"] == "result"
     page = out.read_text()
-    assert "| ball.obj | 1,280 | ok |" in page and "| loose.obj | 1,280 | ok* |" in page
-    assert "| smooth | 1 | 1 | 0 |" in page and str(tmp_path) not in page
+    assert "| ball.obj | 1,280 | ok | ok |" in page
+    # (the smooth ball is already smooth: no visible effect)
+    assert "| loose.obj | 1,280 | ok* |" in page and "| small.obj | 320 | - | ok* |" in page
+    assert "| smooth | 1 | 1 | 0 | 1 |" in page and "| coarsen | 1 | 2 | 0 | 0 |" in page
+    assert str(tmp_path) not in page
