@@ -678,7 +678,7 @@ class ArapSystem:
             # The block pattern as a (cells x vertices) CSR matrix whose values are the block
             # indices; SciPy's CSR -> CSC conversion is a linear-time counting sort that keeps
             # the order of the rows within each column (the stable sort by column: at 1.3M
-            # triangles 0.15 s instead of 1.2 s for argsort and repeat).
+            # triangles 0.33 s instead of 0.58 s for argsort and repeat).
             nb = len(col)
             idx_t = np.int64 if max(nb, self.n, self.n_cells) >= 2**31 - 1 else np.int32
             pattern = sp.csr_matrix((np.arange(nb, dtype=np.int64), col.astype(idx_t, copy=False),

@@ -148,7 +148,7 @@ def l0_gradient_step(S, thresh, out):
     H), set to zero at the pixels where ``sum_c h^2 + v^2 < thresh``, then their divergence
     ``(h[j-1] - h[j]) + (v[i-1] - v[i])``. The same arithmetic in the same order as the NumPy
     code of :func:`algorithms.paparazzi.filters.l0_smooth` (so the same bits; tested), in a few
-    passes over rows (0.6 ms at 3 x 256 x 256 against 4 ms for the NumPy array operations)."""
+    passes over rows (0.6 ms at 3 x 256 x 256; the filter as a whole 85 ms against 160 ms)."""
     C, H, W = S.shape
     h = np.empty((C, H, W))
     v = np.empty((C, H, W))

@@ -909,11 +909,6 @@ class _Guard:
                 + (f"; {self.crossings_left[0]:,} crossings are left (Loop subdivision's: "
                    f"{self.crossings_left[1]:,})." if self.crossings_left else "."))
 
-    def _crossings(self, V, F, k: int) -> int:
-        """Intersecting triangle pairs of a ``k``-level result whose parents did not intersect
-        in the input (the children of triangle f are 4 f .. 4 f + 3 at every level)."""
-        return int(len(self._new_pairs(V, F, k)))
-
     def check(self, k: int, V_net, F_net, prev=None) -> tuple[str, np.ndarray | None]:
         """``(why, blended)``: ``why`` is '' when the network's result after ``k`` levels
         passes, else why it fails; ``blended`` is None, or the result with Loop's positions
@@ -922,18 +917,19 @@ class _Guard:
         why = self._check(k, V_net, F_net)
         if why or prev is None:
             return why, None
-        crossed = self._crossings(V_net, F_net, k)
+        net_pairs = self._new_pairs(V_net, F_net, k)
+        crossed = len(net_pairs)
         if not crossed:
             return "", None
         from .baselines import subdivide_baseline
 
         self.Vl, self.Fl = subdivide_baseline(self.Vl, self.Fl, k - self.loop_level, "loop")
         self.loop_level = k
-        loop_crossed = self._crossings(self.Vl, self.Fl, k)
+        loop_crossed = len(self._new_pairs(self.Vl, self.Fl, k))
         if crossed <= loop_crossed:
             return "", None
         blended, changed, left = _blend_loop_where_crossed(
-            V_net, F_net, prev[0], prev[1], lambda X: self._new_pairs(X, F_net, k),
+            V_net, F_net, prev[0], prev[1], net_pairs, lambda X: self._new_pairs(X, F_net, k),
             loop_crossed)
         self.blended += changed
         self.blended_levels.append(k)
@@ -944,7 +940,8 @@ class _Guard:
         return "", blended
 
     def _new_pairs(self, V, F, k: int) -> np.ndarray:
-        """The intersecting pairs of a ``k``-level result whose parents did not intersect."""
+        """The intersecting pairs of a ``k``-level result whose parents did not intersect in
+        the input (the children of triangle f are 4 f .. 4 f + 3 at every level)."""
         from ..mesh.intersections import intersecting_pairs, new_crossing_pairs
 
         pairs = intersecting_pairs(V, F)
@@ -1008,24 +1005,22 @@ def loop_in_refine_numbering(V_prev, F_prev, F_net=None) -> np.ndarray:
     return np.asarray(VL, np.float64)[perm]
 
 
-def _blend_loop_where_crossed(V_net, F_net, V_prev, F_prev, new_pairs, allowed: int
+def _blend_loop_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs, allowed: int
                               ) -> tuple[np.ndarray, int, int]:
     """The network's level with Loop's positions blended in around the triangles that cross
     each other where the input's did not: weight 1 on their corners and the ring around them,
     1/2 on the next ring, ``V = (1 - w) V_net + w V_loop`` (Loop of the same coarser level, so
     the two share every vertex), widened up to :data:`BLEND_ROUNDS` times while the crossings
-    are more than ``allowed`` (Loop's own). Returns (positions, vertices changed, crossings
-    left)."""
-    import scipy.sparse as sp
+    are more than ``allowed`` (Loop's own). ``pairs``: the new crossing pairs of ``V_net``;
+    ``new_pairs(V)``: those of other positions on ``F_net``. Returns (positions, vertices
+    changed, crossings left)."""
+    from ..mesh.topology import vertex_adjacency
 
     n = len(V_net)
     VL = loop_in_refine_numbering(V_prev, F_prev, F_net)
-    E = np.concatenate([F_net[:, [0, 1]], F_net[:, [1, 2]], F_net[:, [2, 0]]])
-    A = sp.csr_matrix((np.ones(2 * len(E)), (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
-                      shape=(n, n))
+    A = vertex_adjacency(F_net, n)
     w = np.zeros(n)
     V = np.asarray(V_net, np.float64)
-    pairs = new_pairs(V)
     for _ in range(BLEND_ROUNDS):
         if len(pairs) <= allowed:
             break

@@ -86,9 +86,10 @@ class SubdivideParams:
                                      "vertices) and can leave dimples on denser ones. guard: "
                                      "run it (scaled to its training edge length) and, level by "
                                      "level, keep its result unless it is more than twice as "
-                                     "bent as modified butterfly's (1.25x on a denser mesh), "
-                                     "bends flat sides, or crosses itself where Loop's result "
-                                     "does not; from there Loop subdivision makes the "
+                                     "bent as modified butterfly's (1.25x on a denser mesh) or "
+                                     "bends flat sides (where it crosses itself more than "
+                                     "Loop's result, Loop's positions are blended in there); "
+                                     "from there Loop subdivision makes the "
                                      "levels (a message says so); loop: Loop whenever the mesh "
                                      "is denser than trained; "
                                      "scale: always the network, scaled; off: as is.")

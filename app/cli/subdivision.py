@@ -302,9 +302,10 @@ def add_parsers(sub) -> None:
     s.add_argument("--dense-input", choices=("guard", "loop", "scale", "off"),
                    help="neural: guard (the network, scaled to its training edge length on a "
                         "denser mesh; level by level its result is kept unless it is more than "
-                        "twice as bent as modified butterfly's, 1.25x on a denser mesh, bends "
-                        "flat sides, or crosses itself where Loop's result does not; from there "
-                        "Loop subdivision makes the levels, said on "
+                        "twice as bent as modified butterfly's, 1.25x on a denser mesh, or bends "
+                        "flat sides; from there Loop subdivision makes the levels; where it "
+                        "crosses itself more than Loop's result, Loop's positions are blended "
+                        "in there; all said on "
                         "stderr and in --json levels_used), loop "
                         "(Loop on any mesh denser than the training meshes), scale (always the "
                         "network, scaled), off (as is). Default: guard.")

@@ -53,6 +53,17 @@ def test_guided_filter_matches_an_independent_implementation_away_from_the_borde
     assert np.abs(np.diff(q, axis=0)).mean() < 0.7 * np.abs(np.diff(I, axis=0)).mean()
 
 
+def _on_the_numpy_path(fn, *args):
+    """``fn(*args)`` with the filters' compiled kernels switched off (the NumPy reference)."""
+    from algorithms.paparazzi import filters as flt
+
+    previous = flt._KERNELS.set(False)
+    try:
+        return fn(*args)
+    finally:
+        flt._KERNELS.set(previous)
+
+
 def test_compiled_guided_filter_matches_the_numpy_one():
     from algorithms.mesh import icosphere
     from algorithms.paparazzi import Paparazzi, PaparazziParams
@@ -69,11 +80,7 @@ def test_compiled_guided_filter_matches_the_numpy_one():
     for img in images:
         for r, eps, sub in ((15, 1e-8, 4), (4, 0.02, 1), (3, 0.05, 3)):
             fast = flt.guided_filter(img, img, r, eps, sub)
-            previous = flt._KERNELS.set(False)
-            try:
-                ref = flt.guided_filter(img, img, r, eps, sub)
-            finally:
-                flt._KERNELS.set(previous)
+            ref = _on_the_numpy_path(flt.guided_filter, img, img, r, eps, sub)
             assert fast.shape == ref.shape
             # LU of nearly singular 3x3 windows (eps 1e-8): equal to ~1e-10
             np.testing.assert_allclose(fast, ref, atol=1e-9)
@@ -100,11 +107,7 @@ def test_compiled_l0_smoothing_gives_the_numpy_ones_bits():
     for img in images:
         for lam, kappa in ((0.01, 2.0), (0.05, 1.5)):
             fast = flt.l0_smooth(img, lam, kappa)
-            previous = flt._KERNELS.set(False)
-            try:
-                ref = flt.l0_smooth(img, lam, kappa)
-            finally:
-                flt._KERNELS.set(previous)
+            ref = _on_the_numpy_path(flt.l0_smooth, img, lam, kappa)
             assert fast.shape == ref.shape == img.shape
             assert np.array_equal(fast, ref)
             assert np.abs(fast - img).max() > 1e-3      # and it did smooth
