@@ -13,11 +13,15 @@ with a time limit, and sorts each run into one class:
   no effect     exit 0, but a method that deforms moved no vertex by 0.2 % of the diagonal
   artefact      exit 0, but the result has NaN coordinates, triangles it made degenerate
                 (area below 1e-12 of the diagonal squared where the input's was not), more
-                than 0.1 % of its triangles folded over (a triangle whose normal points away
-                from the triangles around it, where the input's did not; same triangles),
-                self-intersections the input did not have (of a subdivided result: the
-                intersecting pairs whose parent triangles did not intersect in the input, as
-                each input crossing comes back split many times), or spikes (a vertex
+                than 0.1 % of its triangles folded over (turned back against at least two
+                neighbours: their normals more than 120 degrees apart, 60 more than in the
+                input; same triangles),
+                self-intersections the input did not have (of a result with the input's
+                triangles: the intersecting pairs that did not intersect in the input, except
+                pairs both within two vertex rings of the input's own crossings, where a move
+                shifts the crossing line onto neighbouring triangles; of a subdivided result:
+                the intersecting pairs whose parent triangles did not intersect in the input,
+                as each input crossing comes back split many times), or spikes (a vertex
                 moved more than the mean of its neighbours' moves by over twice the length of
                 its edges and over 1 % of the diagonal)
   substitution  exit 0, and the command's --json says another method ran (``fallback``);
@@ -87,6 +91,8 @@ SHORT = {"result": "ok", "advice works": "ok*", "refused": "R", "no effect": "-"
 VISIBLE = 2e-3       # of the diagonal
 SPIKE = 1e-2         # of the diagonal
 FOLDS = 1e-3         # share of triangles
+FOLD_ANGLE = 120.0   # degrees between a triangle's normal and a neighbour's: folded back
+FOLD_TURN = 60.0     # ... and that angle grew by at least this much
 SLOW_S = 60.0        # seconds, meshes of at most SLOW_FACES triangles
 SLOW_FACES = 100_000
 
@@ -138,17 +144,39 @@ def _fallback(record) -> bool:
     return bool(record.get("fallback")) or any(_fallback(v) for v in record.values())
 
 
-def _folds(V, F) -> np.ndarray:
-    """(m,) bool: triangles turned against their neighbourhood (their normal points away from
-    the area-weighted normal of the triangles around their three corners): a local fold."""
-    from algorithms.mesh.operators import face_areas, face_normals
+def _folds_made(V0, V, F) -> np.ndarray:
+    """(m,) bool: triangles the method folded over (same triangles ``F`` before and after).
 
-    N = face_normals(V, F) * face_areas(V, F)[:, None]
-    Nv = np.zeros((len(V), 3))
-    for k in range(3):
-        np.add.at(Nv, F[:, k], N)
-    around = Nv[F[:, 0]] + Nv[F[:, 1]] + Nv[F[:, 2]]
-    return (N * around).sum(axis=1) < 0
+    A triangle is folded over when, across at least two of its edges (across all of them if it
+    has fewer neighbours), the angle between its normal and the neighbour's is above
+    FOLD_ANGLE and grew by at least FOLD_TURN: it was turned back against the surface around
+    it, as a flipped triangle is. Triangles of (nearly) zero area before or after have no
+    normal to judge and are left to the degenerate count.
+
+    The comparison is edge by edge, with each angle measured against the same edge's angle in
+    the input, so a sharp edge the input already had (a CAD part's 90-degree rims, a thin
+    plate's knife edge) is no fold, and a triangle that hardly turned is never one.
+    """
+    import scipy.sparse as sp
+
+    from algorithms.mesh.operators import face_areas, face_normals
+    from algorithms.mesh.topology import face_adjacency
+
+    A = sp.triu(face_adjacency(F), k=1).tocoo()
+    f, g = A.row, A.col
+    N0, N = face_normals(V0, F), face_normals(V, F)
+    diag = float(np.linalg.norm(np.ptp(V0, axis=0))) or 1.0
+    tiny = 1e-12 * diag * diag
+    ok = (face_areas(V0, F) > tiny) & (face_areas(V, F) > tiny)
+    use = ok[f] & ok[g]
+    f, g = f[use], g[use]
+    before = np.degrees(np.arccos(np.clip((N0[f] * N0[g]).sum(axis=1), -1.0, 1.0)))
+    after = np.degrees(np.arccos(np.clip((N[f] * N[g]).sum(axis=1), -1.0, 1.0)))
+    back = (after > FOLD_ANGLE) & (after - before >= FOLD_TURN)
+    m = len(F)
+    n_nb = np.bincount(f, minlength=m) + np.bincount(g, minlength=m)
+    n_back = np.bincount(f[back], minlength=m) + np.bincount(g[back], minlength=m)
+    return ok & (n_nb > 0) & (n_back >= np.minimum(n_nb, 2))
 
 
 def _measure(mesh: Path, out: Path, clean: bool, moves: bool) -> dict:
@@ -177,7 +205,7 @@ def _measure(mesh: Path, out: Path, clean: bool, moves: bool) -> dict:
         m["degenerate_made"] = int(((a <= tiny) & (a0 > tiny)).sum())
         d = np.linalg.norm(V - V0, axis=1)
         m["moved"] = float(d.max() / diag)
-        m["folds_made"] = int((_folds(V, F) & ~_folds(V0, F0)).sum())
+        m["folds_made"] = int(_folds_made(V0, V, F).sum())
         # spikes: a vertex's move against the mean move of its neighbours
         import scipy.sparse as sp
 
@@ -202,7 +230,8 @@ def _measure(mesh: Path, out: Path, clean: bool, moves: bool) -> dict:
         dist, _ = cKDTree(V0).query(V)
         m["moved"] = float(dist.max() / diag)  # to the nearest input vertex (an upper bound)
     if len(F) <= SLOW_FACES and len(F0) <= SLOW_FACES:
-        from algorithms.mesh.intersections import (crossings_not_in_parents,
+        from algorithms.mesh.intersections import (crossings_away_from,
+                                                   crossings_not_in_parents,
                                                    intersecting_pairs_here)
 
         try:
@@ -213,6 +242,10 @@ def _measure(mesh: Path, out: Path, clean: bool, moves: bool) -> dict:
                 # a subdivided result: its triangles split the input's, so the input's own
                 # crossings come back many times; count those whose parents did not cross
                 m["intersections_made"] = crossings_not_in_parents(P, k, P0)
+            elif same:
+                # the same triangles moved: where the input already crossed itself, the
+                # crossing line shifts onto neighbouring triangles; count the others
+                m["intersections_made"] = crossings_away_from(P, F, P0)
         except Exception as e:  # noqa: BLE001 - a measurement that fails is reported, not fatal
             m["intersections_error"] = str(e)[:120]
     m["moves"] = moves

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from algorithms.mesh import icosphere, write_mesh
+from algorithms.mesh import cube, icosphere, write_mesh
 from tests.conftest import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,15 +59,31 @@ def test_the_setting_a_refusal_names_is_read(corpus):
 
 def test_folds_and_json_reading(corpus):
     V, F = icosphere(2)
-    assert not corpus._folds(V, F).any()
+    assert not corpus._folds_made(V, V, F).any()
     ring = np.unique(F[(F == 0).any(axis=1)])
     ring = ring[ring != 0]
     W = V.copy()
     W[0] += 2.0 * (V[ring[0]] - V[0])  # dragged past a neighbour: the far triangles fold over
-    assert corpus._folds(W, F).sum() == 2
+    folded = np.flatnonzero(corpus._folds_made(V, W, F))
+    assert folded.size == 2 and (F[folded] == 0).any(axis=1).all()
     W = V.copy()
     W[0] *= 0.5  # a deep pit is not a fold
-    assert not corpus._folds(W, F).any()
+    assert not corpus._folds_made(V, W, F).any()
+    # a thin plate (a CAD part's wall): its rims' neighbourhoods face both ways, and a jitter
+    # of a tenth of its thickness turns no triangle back (the first definition, "the normal
+    # points away from the area-weighted normal of the triangles around its corners", called
+    # about a fifth of its triangles folded here, and 18 of a tray's that turned by < 0.2 deg)
+    P, G = cube(2)
+    P = P * np.array([1.0, 1.0, 0.002])
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        assert not corpus._folds_made(P, P + rng.normal(scale=2e-4, size=P.shape), G).any()
+    Q = P.copy()
+    top = np.flatnonzero(P[:, 2] > 0)
+    inner = top[(np.abs(P[top, 0]) < 0.9) & (np.abs(P[top, 1]) < 0.9)]
+    Q[inner[0], 0] += 1.0  # dragged past its neighbour in the plane: triangles turn over
+    folded = corpus._folds_made(P, Q, G)
+    assert folded.any() and (G[folded] == inner[0]).any(axis=1).all()
     text = "progress\n{\n  \"a\": 1,\n  \"fallback\": true\n}\n"
     assert corpus._last_json(text) == {"a": 1, "fallback": True}
     assert corpus._last_json('x\n{"b": 2}\n') == {"b": 2} and corpus._last_json("none") == {}

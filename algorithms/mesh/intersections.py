@@ -12,8 +12,8 @@ import numpy as np
 
 from .. import offload
 
-__all__ = ["count_self_intersections", "intersecting_pairs", "intersecting_pairs_here",
-           "crossings_not_in_parents", "new_crossing_pairs"]
+__all__ = ["count_self_intersections", "crossings_away_from", "crossings_not_in_parents",
+           "intersecting_pairs", "intersecting_pairs_here", "new_crossing_pairs"]
 
 
 def intersecting_pairs_here(V, F) -> np.ndarray:
@@ -56,3 +56,34 @@ def new_crossing_pairs(pairs: np.ndarray, levels: int, parent_pairs: np.ndarray)
 def crossings_not_in_parents(pairs: np.ndarray, levels: int, parent_pairs: np.ndarray) -> int:
     """How many of ``pairs`` are new (:func:`new_crossing_pairs`)."""
     return int(len(new_crossing_pairs(pairs, levels, parent_pairs)))
+
+
+def crossings_away_from(pairs: np.ndarray, F, known_pairs: np.ndarray, rings: int = 2) -> int:
+    """How many of ``pairs`` (intersecting face pairs of a deformed mesh with the triangles
+    ``F``) are new crossings away from the crossings the mesh already had (``known_pairs``,
+    of the same triangles before the deformation).
+
+    A pair counts unless it is one of ``known_pairs`` or both its faces lie within ``rings``
+    vertex rings of faces that crossed before: where two sheets already passed through each
+    other, any move shifts the crossing line onto neighbouring triangles, which is not a
+    crossing the deformation made.
+    """
+    pairs = np.sort(np.asarray(pairs, np.int64).reshape(-1, 2), axis=1)
+    known = np.sort(np.asarray(known_pairs, np.int64).reshape(-1, 2), axis=1)
+    if not len(pairs):
+        return 0
+    if not len(known):
+        return int(len(pairs))
+    from .topology import vertex_face_adjacency
+
+    F = np.asarray(F, np.int64)
+    m = len(F)
+    base = m + 1
+    fresh = pairs[~np.isin(pairs[:, 0] * base + pairs[:, 1], known[:, 0] * base + known[:, 1])]
+    VF = vertex_face_adjacency(F).tocsr()
+    near = np.zeros(m, bool)
+    near[known.ravel()] = True
+    for _ in range(int(rings)):
+        verts = np.unique(F[near].ravel())
+        near[VF[verts].indices] = True
+    return int((~(near[fresh[:, 0]] & near[fresh[:, 1]])).sum())
