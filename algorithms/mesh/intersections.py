@@ -13,7 +13,8 @@ import numpy as np
 from .. import offload
 
 __all__ = ["count_self_intersections", "crossings_away_from", "crossings_not_in_parents",
-           "intersecting_pairs", "intersecting_pairs_here", "new_crossing_pairs"]
+           "intersecting_pairs", "intersecting_pairs_here", "new_crossing_pairs",
+           "new_crossings_away_from"]
 
 
 def intersecting_pairs_here(V, F) -> np.ndarray:
@@ -58,10 +59,11 @@ def crossings_not_in_parents(pairs: np.ndarray, levels: int, parent_pairs: np.nd
     return int(len(new_crossing_pairs(pairs, levels, parent_pairs)))
 
 
-def crossings_away_from(pairs: np.ndarray, F, known_pairs: np.ndarray, rings: int = 2) -> int:
-    """How many of ``pairs`` (intersecting face pairs of a deformed mesh with the triangles
-    ``F``) are new crossings away from the crossings the mesh already had (``known_pairs``,
-    of the same triangles before the deformation).
+def new_crossings_away_from(pairs: np.ndarray, F, known_pairs: np.ndarray,
+                            rings: int = 2) -> np.ndarray:
+    """The intersecting face pairs of a deformed mesh with the triangles ``F`` (``pairs``) that
+    are new crossings away from the crossings the mesh already had (``known_pairs``, of the
+    same triangles before the deformation), as a (k, 2) array (each pair sorted).
 
     A pair counts unless it is one of ``known_pairs`` or both its faces lie within ``rings``
     vertex rings of faces that crossed before: where two sheets already passed through each
@@ -70,10 +72,8 @@ def crossings_away_from(pairs: np.ndarray, F, known_pairs: np.ndarray, rings: in
     """
     pairs = np.sort(np.asarray(pairs, np.int64).reshape(-1, 2), axis=1)
     known = np.sort(np.asarray(known_pairs, np.int64).reshape(-1, 2), axis=1)
-    if not len(pairs):
-        return 0
-    if not len(known):
-        return int(len(pairs))
+    if not len(pairs) or not len(known):
+        return pairs
     from .topology import vertex_face_adjacency
 
     F = np.asarray(F, np.int64)
@@ -86,4 +86,10 @@ def crossings_away_from(pairs: np.ndarray, F, known_pairs: np.ndarray, rings: in
     for _ in range(int(rings)):
         verts = np.unique(F[near].ravel())
         near[VF[verts].indices] = True
-    return int((~(near[fresh[:, 0]] & near[fresh[:, 1]])).sum())
+    return fresh[~(near[fresh[:, 0]] & near[fresh[:, 1]])]
+
+
+def crossings_away_from(pairs: np.ndarray, F, known_pairs: np.ndarray, rings: int = 2) -> int:
+    """How many of ``pairs`` are new crossings away from ``known_pairs``
+    (:func:`new_crossings_away_from`)."""
+    return int(len(new_crossings_away_from(pairs, F, known_pairs, rings)))

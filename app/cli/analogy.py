@@ -20,7 +20,8 @@ from algorithms.errors import ParameterError
 from app.cli.common import (MESH_HELP, add_params_arguments, add_params_file_argument,
                             check_output, input_state, method_params, method_recipe,
                             params_to_dict, print_json, read_input, saved_panel)
-from app.cli.deform import _add_progressive_arguments, _progressive_choice, user_paths
+from app.cli.deform import (_add_progressive_arguments, _progressive_choice, crossings_sentence_of,
+                             user_paths)
 
 COMMANDS = ("analogy",)
 
@@ -96,6 +97,7 @@ def _angles_to_targets(V, F, target_map) -> tuple[float, float]:
 
 def cmd_analogy(args: argparse.Namespace) -> int:
     from algorithms.deform.analogies import AnalogyParams
+    from algorithms.deform.collisions import crossings_of
     from app.cli.attributes import write_result
     from app.recipes.analogies import style_target_map
 
@@ -140,11 +142,15 @@ def cmd_analogy(args: argparse.Namespace) -> int:
                     "progressive_finish": None if prog is None else finished,
                     "progressive_not_finished": not_finished or None,
                     "mean_angle_before": before[0], "max_angle_before": before[1],
-                    "mean_angle_after": after[0], "max_angle_after": after[1]})
+                    "mean_angle_after": after[0], "max_angle_after": after[1],
+                    "crossings": crossings_of(last.metrics)})
     else:
         print(f"Stylized {args.mesh} after {what} in {seconds:.2f} s ({last.iteration} "
               f"iterations); mean angle to the target normals {before[0]:.1f}° -> "
               f"{after[0]:.1f}°; wrote {args.output}.")
+        said = crossings_sentence_of(crossings_of(last.metrics))
+        if said:
+            print(said)
         if prog is not None:
             faces = int(prog["target_faces"])
             print(f"Worked through a {faces:,}-triangle copy, then on every triangle from its "

@@ -173,7 +173,22 @@ def output_for_lambda(output: str, lam: float, several: bool) -> str:
     return str(p.with_name(f"{p.stem}_lambda{text}{p.suffix}"))
 
 
+def crossings_sentence_of(crossings: dict | None) -> str:
+    """The sentence of :func:`algorithms.deform.collisions.crossings_sentence` for the report
+    ``crossings`` (from :func:`~algorithms.deform.collisions.crossings_of`)."""
+    from algorithms.deform.collisions import crossings_sentence
+
+    if crossings is None:
+        return ""
+    if not crossings["checked"]:
+        return crossings_sentence({"crossings_checked": 0.0})
+    return crossings_sentence({"crossings_checked": 1.0, "crossings_made": crossings["made"],
+                               "held_vertices": crossings["held_vertices"],
+                               "crossings_left": crossings["left"]})
+
+
 def cmd_cubic(args: argparse.Namespace) -> int:
+    from algorithms.deform.collisions import crossings_of
     from algorithms.deform.cubic import mean_l1_of_normals
     from app.cli.attributes import write_result
 
@@ -219,7 +234,8 @@ def cmd_cubic(args: argparse.Namespace) -> int:
                         "iterations": last.iteration, "seconds": seconds,
                         "online_seconds": online,
                         "final_relative_displacement": last.metrics.get("displacement"),
-                        "l1_normals_after": mean_l1_of_normals(V, data.F)})
+                        "l1_normals_after": mean_l1_of_normals(V, data.F),
+                        "crossings": crossings_of(last.metrics)})
     finished, not_finished = False, ""
     if prog is not None:
         from algorithms.deform.progressive import ProgressiveParams
@@ -241,14 +257,15 @@ def cmd_cubic(args: argparse.Namespace) -> int:
                         "seconds": r["seconds"], "online_seconds": r["online_seconds"],
                         "final_relative_displacement": r["final_relative_displacement"],
                         **{k: v for k, v in common.items() if k != "input"},
-                        "l1_normals_after": r["l1_normals_after"]})
+                        "l1_normals_after": r["l1_normals_after"], "crossings": r["crossings"]})
         else:
             print_json({**common, "runs": [
                 {"lambda": r["lam"], "output": r["output"], "params": params_to_dict(r["params"]),
                  "iterations": r["iterations"], "seconds": r["seconds"],
                  "online_seconds": r["online_seconds"],
                  "final_relative_displacement": r["final_relative_displacement"],
-                 "l1_normals_after": r["l1_normals_after"]} for r in results]})
+                 "l1_normals_after": r["l1_normals_after"], "crossings": r["crossings"]}
+                for r in results]})
     else:
         how = ("on every triangle" if prog is None else
                f"through a {int(prog['target_faces']):,}-triangle copy, then on every triangle "
@@ -260,6 +277,9 @@ def cmd_cubic(args: argparse.Namespace) -> int:
             print(f"Stylized {args.mesh} (λ {r['lam']:g}) in {r['seconds']:.2f} s "
                   f"({r['iterations']} iterations); mean L1 norm of normals {l1_before:.4f} -> "
                   f"{r['l1_normals_after']:.4f}; wrote {r['output']}.")
+            said = crossings_sentence_of(r["crossings"])
+            if said:
+                print(said)
         pre = "" if preprocess is None else f" (pre-processing {preprocess:.1f} s, once)"
         print(f"Worked {how}{pre}: {reason}" + (f"; {not_finished}." if not_finished else "."))
     return 0

@@ -194,6 +194,8 @@ def shape_analogy_of(state, cache: dict | None = None):
 def analogy_steps(state, params, options: dict | None = None, cache: dict | None = None
                   ) -> Iterator[Step]:
     """The Analogies panel's run (options: module docstring)."""
+    from algorithms.deform.analogies import ShapeAnalogy
+    from algorithms.deform.collisions import hold_where_crossed
     from algorithms.deform.progressive import ProgressiveParams, progressive_analogy_iter
     from algorithms.params import params_from_dict
 
@@ -201,6 +203,13 @@ def analogy_steps(state, params, options: dict | None = None, cache: dict | None
     cache = {} if cache is None else cache
     tmap, _what = style_target_map(options, cache)
     prog = options.get("progressive")
+
+    def rerun(ids, targets, V_start):
+        """The same run with the vertices ``ids`` held at ``targets``, from ``V_start``
+        (algorithms.deform.collisions)."""
+        held = ShapeAnalogy(state.V, state.F, tmap, handles=(ids, targets))
+        return held.steps(params, target_map=tmap, initial=V_start)
+
     if prog is not None:
         # options saved before "finish" existed ran on the copy alone: replay them so
         prog = params_from_dict(ProgressiveParams, {"finish": False, **prog})
@@ -209,9 +218,14 @@ def analogy_steps(state, params, options: dict | None = None, cache: dict | None
         from app.recipes.cubic import finish_of, with_note
 
         finish, why = finish_of(prog, len(state.F))
-        return with_note(progressive_analogy_iter(state.V, state.F, tmap, params,
-                                                  replace(prog, finish=finish)), why)
-    return shape_analogy_of(state, cache).steps(params, target_map=tmap)
+        steps = progressive_analogy_iter(state.V, state.F, tmap, params,
+                                         replace(prog, finish=finish))
+        if params.hold_crossings and finish:
+            steps = hold_where_crossed(steps, state.V, state.F, rerun)
+        return with_note(steps, why)
+
+    steps = shape_analogy_of(state, cache).steps(params, target_map=tmap)
+    return hold_where_crossed(steps, state.V, state.F, rerun) if params.hold_crossings else steps
 
 
 def _analogy_params():

@@ -57,6 +57,7 @@ def cubic_steps(state, params, options: dict | None = None, cache: dict | None =
                 ) -> Iterator[Step]:
     """The Cubic panel's run. ``options``: ``plane_axis`` (0-2), ``progressive`` (a
     ProgressiveParams dict or None), ``multigrid`` (bool)."""
+    from algorithms.deform.collisions import hold_where_crossed
     from algorithms.deform.cubic import CubicStylizer, rotation_from_degrees
     from algorithms.deform.progressive import ProgressiveCubic, ProgressiveParams
     from algorithms.errors import ParameterError
@@ -98,14 +99,48 @@ def cubic_steps(state, params, options: dict | None = None, cache: dict | None =
     rotation = rotation_from_degrees(params.rot_x, params.rot_y, params.rot_z)
     frames = frames_of(state, rotation)
     extra = {} if frames is None else {"frames": frames}
-    if prog is None:
-        return solver.steps(params, lam_per_vertex=lam_v, rotation=rotation, **extra)
-    if frames is not None:
+    if prog is not None and frames is not None:
         raise ParameterError("Painted local cube frames do not work with progressive meshes "
                              "yet: switch progressive meshes off, or clear the frames.")
-    return with_note(solver.steps(params, lam_per_vertex=lam_v, rotation=rotation,
-                                  preview_every=prog.preview_every,
-                                  lam_exponent=prog.lam_exponent, finish=finish), why)
+
+    def rerun(ids, targets, V_start):
+        """The same run with the vertices ``ids`` held at ``targets`` too, from ``V_start``
+        (algorithms.deform.collisions)."""
+        # the parts' pinned vertices stay where they are (they are at their input positions),
+        # so the mesh does not shift as a whole when held vertices take the pins' place
+        pins = first.pinned[~np.isin(first.pinned, ids)]
+        ids = np.concatenate([ids, pins])
+        targets = np.concatenate([targets, V_start[pins]])
+        h = (ids, targets) if handles is None else (np.concatenate([handles[0], ids]),
+                                                    np.concatenate([handles[1], targets]))
+        held = CubicStylizer(state.V, state.F, fixed=fixed, handles=h, coord_constraints=plane,
+                             normalize=params.normalize, pin_one_vertex=params.pin_one_vertex,
+                             backend="multigrid" if multigrid else "auto")
+        return held.steps(params, lam_per_vertex=lam_v, rotation=rotation, initial=V_start,
+                          **extra)
+
+    first = solver if prog is None else solver.fine_stylizer() if finish else None
+    if prog is None:
+        steps = solver.steps(params, lam_per_vertex=lam_v, rotation=rotation, **extra)
+    else:
+        steps = solver.steps(params, lam_per_vertex=lam_v, rotation=rotation,
+                             preview_every=prog.preview_every, lam_exponent=prog.lam_exponent,
+                             finish=finish)
+    if params.hold_crossings and (prog is None or finish):
+        held = constrained_vertices(len(state.V), fixed, handles, plane)
+        held[first.pinned] = True
+        steps = hold_where_crossed(steps, state.V, state.F, rerun, constrained=held)
+    return steps if prog is None else with_note(steps, why)
+
+
+def constrained_vertices(n: int, fixed, handles, plane) -> np.ndarray:
+    """(n,) bool: the vertices a constraint of the user's holds (fixed, handles, planes)."""
+    out = np.zeros(n, bool)
+    for ids in (fixed, None if handles is None else handles[0],
+                None if plane is None else plane[0]):
+        if ids is not None and len(ids):
+            out[np.asarray(ids, np.int64)] = True
+    return out
 
 
 def finish_of(prog, n_faces: int) -> tuple[bool, str]:
