@@ -17,7 +17,11 @@ new self-intersections on 13.
    input first) at which no new crossing touched them, found by bisection;
 3. the deformation runs again from its result with those vertices as hard constraints (the
    same energy, one more factorization), so the rest of the surface settles around them;
-4. this repeats, holding more, up to :data:`ROUNDS` times; what is left is said.
+4. while crossings are left, up to :data:`ROUNDS` times: the held set grows by the new
+   crossings' vertices, and all of it is put back at one iterate (constraints taken from
+   different iterates can disagree and tear the surface); a round that does not lower the
+   count ends the rounds, and the result with the fewest crossings is kept. What is left is
+   said.
 
 This is not El Topo's continuous collision handling: held regions stop where they were before
 they first crossed (less styled there), the rest is the method's own optimum with those
@@ -126,22 +130,24 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
     held = np.zeros(n, bool)
     targets = np.zeros((n, 3))
     VF = vertex_face_adjacency(F, n).tocsr() if made else None
+    # the bisection runs over the deformation's own iterates, its result last
+    checkpoints.append(np.array(last.V, dtype=np.float64, copy=True))
+    best = (len(bad), last, 0)  # (crossings, Step, vertices held): the result kept
     k_round = 0
     while len(bad) and k_round < rounds:
         k_round += 1
-        region = np.zeros(n, bool)
-        region[F[np.unique(bad.ravel())].ravel()] = True
-        region[F[VF[np.flatnonzero(region)].indices].ravel()] = True  # and one ring
-        region &= ~fixed
-        faces = np.zeros(len(F), bool)
-        faces[VF[np.flatnonzero(region)].indices] = True
-        checkpoints.append(np.array(last.V, dtype=np.float64, copy=True))
-        k = _latest_clear(checkpoints, F, known, faces)
-        newly = region & ~held
-        targets[newly] = checkpoints[k][newly]
-        held |= region
-        if not held.any():
+        grown = held.copy()
+        grown[F[np.unique(bad.ravel())].ravel()] = True
+        grown[F[VF[np.flatnonzero(grown)].indices].ravel()] = True  # and one ring
+        grown &= ~fixed
+        if np.array_equal(grown, held):
             break
+        held = grown
+        faces = np.zeros(len(F), bool)
+        faces[VF[np.flatnonzero(held)].indices] = True
+        # every held vertex from one iterate, so that the constraints agree with each other
+        k = _latest_clear(checkpoints, F, known, faces)
+        targets[held] = checkpoints[k][held]
         ids = np.flatnonzero(held)
         start = last
         yield Step(iteration=start.iteration, total=None, V=start.V, metrics=dict(start.metrics),
@@ -154,11 +160,16 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
             last = Step(iteration=base + st.iteration, total=None, V=st.V,
                         metrics=dict(st.metrics), message=f"held where crossed, {st.message}")
         bad = new_crossings_away_from(intersecting_pairs_here(last.V, F), F, known)
-    left = len(bad)
-    metrics = {**last.metrics, "crossings_checked": 1.0, "crossings_made": float(made),
-               "crossings_left": float(left), "held_vertices": float(held.sum())}
-    yield Step(iteration=last.iteration, total=last.total, V=last.V, metrics=metrics,
-               message=crossings_sentence(metrics) or last.message)
+        if len(bad) < best[0]:
+            best = (len(bad), last, len(ids))
+        else:
+            break  # holding more did not help: the result is the best one so far
+    left, kept, n_held = best
+    metrics = {**kept.metrics, "crossings_checked": 1.0, "crossings_made": float(made),
+               "crossings_left": float(left), "held_vertices": float(n_held)}
+    # numbered after every iteration that ran; the positions are the kept result's
+    yield Step(iteration=last.iteration, total=last.total, V=kept.V, metrics=metrics,
+               message=crossings_sentence(metrics) or kept.message)
 
 
 def crossings_of(metrics: dict) -> dict | None:
@@ -185,6 +196,9 @@ def crossings_sentence(metrics: dict) -> str:
         return ""
     left = ("none is left" if not c["left"] else
             f"{c['left']} crossing(s) are left: lower λ, or move the parts apart")
+    if not c["held_vertices"]:
+        return (f"The style pushed the surface through itself in {c['made']} place(s); "
+                f"holding those points back did not reduce them, so {left}.")
     return (f"The style pushed the surface through itself in {c['made']} place(s): "
             f"{c['held_vertices']:,} vertices were held where they were before they crossed; "
             f"{left}.")

@@ -683,6 +683,11 @@ class MethodPanel(QDockWidget):
                 text += f" {step.message[0].upper()}{step.message[1:]}."
         else:
             text = f"Done in {seconds}."
+        from algorithms.deform.collisions import crossings_sentence
+
+        said = crossings_sentence(step.metrics)  # what was held where it crossed itself
+        if said:
+            text += f" {said}"
         recipe = self.recipe()
         from app.recipes import unchanged_result
 

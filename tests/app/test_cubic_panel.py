@@ -369,3 +369,24 @@ def test_a_mesh_above_the_finish_limit_says_it_gets_the_copy_alone(window, dialo
     done = panel.status_label.text()
     assert done.startswith("Done:") and "Not finished on every triangle" in done
     assert "coarse copy, then" not in done
+
+
+def test_a_run_that_would_cross_itself_says_what_it_held(window, dialogs, qtbot, tmp_path):
+    """camelhead's lips: the closing line says where the surface would have passed through
+    itself and that the held points leave no crossing (algorithms.deform.collisions); the
+    setting is a plain checkbox with its tooltip."""
+    from tests.conftest import shared_mesh
+
+    assert window.open_path(shared_mesh("camelhead.off"))
+    V0 = window.document.V.copy()
+    panel = window.panels["Cubic"]
+    panel.live_box.setChecked(False)
+    box = panel.form.editors["hold_crossings"]
+    assert box.isChecked() and "through itself" in box.toolTip()
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    text = panel.status_label.text()
+    assert "through itself" in text and "none is left" in text, text
+    assert not np.array_equal(window.document.V, V0)
+    window.undo_stack.undo()  # the held run is one undo step, like any run
+    assert np.array_equal(window.document.V, V0)

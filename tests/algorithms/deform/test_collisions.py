@@ -132,3 +132,25 @@ def test_at_its_defaults_camelheads_lips_no_longer_cross_and_the_style_stays(met
     if method == "Cubic":  # the pinned vertex stays: the mesh does not shift as a whole
         pin = np.flatnonzero(np.all(plain.V == m.V, axis=1))
         assert pin.size and np.array_equal(held.V[pin], m.V[pin])
+
+
+def test_a_round_that_does_not_help_ends_the_rounds_and_the_best_result_is_kept():
+    V0, F, top = _sheets()
+    deep = _dent(V0, top, 0.6)
+
+    def steps():
+        for i, d in enumerate((0.2, 0.6), 1):
+            yield Step(iteration=i, total=None, V=_dent(V0, top, d), metrics={}, message="")
+
+    calls = []
+
+    def rerun(ids, targets, V_start):  # a "deformation" that pushes the dent deeper
+        calls.append(len(ids))
+        yield Step(iteration=1, total=None, V=_dent(V0, top, 0.9), metrics={}, message="")
+
+    out = list(hold_where_crossed(steps(), V0, F, rerun))
+    last = out[-1]
+    c = crossings_of(last.metrics)
+    assert len(calls) == 1 and c["held_vertices"] == 0 and c["left"] == c["made"] > 0
+    assert np.array_equal(last.V, deep) and last.iteration == 3  # every iteration counted
+    assert "did not reduce them" in last.message
