@@ -683,13 +683,12 @@ class MethodPanel(QDockWidget):
                 text += f" {step.message[0].upper()}{step.message[1:]}."
         else:
             text = f"Done in {seconds}."
-        from algorithms.deform.collisions import crossings_sentence
+        from app.recipes import held_crossings_note, unchanged_result
 
-        said = crossings_sentence(step.metrics)  # what was held where it crossed itself
+        said = held_crossings_note(step.metrics)  # what was held where it crossed itself
         if said:
             text += f" {said}"
         recipe = self.recipe()
-        from app.recipes import unchanged_result
 
         if recipe is None or recipe.result is not unchanged_result:
             text += " Undo with Ctrl+Z."

@@ -70,6 +70,15 @@ def positions_result(before, last: Step, options: dict | None = None):
     return MeshState.make(V, F)
 
 
+def held_crossings_note(metrics: dict) -> str:
+    """What a deformation's hold on self-intersections did, from its last Step's metrics, as one
+    sentence for a panel's closing line ("" when there is nothing to say;
+    :func:`algorithms.deform.collisions.crossings_sentence`)."""
+    from algorithms.deform.collisions import crossings_sentence
+
+    return crossings_sentence(metrics)
+
+
 def unchanged_result(before, last: Step, options: dict | None = None):
     """``Recipe.result`` of an analysis: the document does not change."""
     return before
