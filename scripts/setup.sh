@@ -3,8 +3,7 @@
 # the package with its test extra), then either opens the app or runs the whole test suite headless.
 #
 #   bash scripts/setup.sh app [MESH]   install, then open the app (default: the bundled sample mesh)
-#   bash scripts/setup.sh test [ARGS]  install, then run the whole test suite headless (with ARGS:
-#                                      pytest ARGS instead)
+#   bash scripts/setup.sh test [ARGS]  install, then run the whole test suite headless (pytest ARGS)
 #
 # Idempotent: a second run re-installs only when pyproject.toml changed.
 set -euo pipefail
@@ -74,13 +73,5 @@ else
   # pytest-xvfb starts a virtual X server for the viewport tests; without Xvfb they skip, saying why.
   unset DISPLAY WAYLAND_DISPLAY
   export QT_QPA_PLATFORM=xcb PYVISTA_OFF_SCREEN=false
-  if [ $# -gt 0 ]; then
-    exec .venv/bin/python -m pytest -q -p no:cacheprovider "$@"
-  fi
-  # The whole suite: the tests without a window in two processes (pytest-xdist), then the app's
-  # tests in one (its OpenGL viewports crashed Mesa when two processes drew at once).
-  rc=0
-  .venv/bin/python -m pytest -q -p no:cacheprovider -n 2 tests/algorithms tests/test_*.py || rc=$?
-  .venv/bin/python -m pytest -q -p no:cacheprovider tests/app || rc=$?
-  exit "$rc"
+  exec .venv/bin/python -m pytest -q -p no:cacheprovider "$@"
 fi

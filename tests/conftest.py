@@ -73,6 +73,20 @@ def shared_mesh(name: str) -> Path:
     return p
 
 
+def unit_square_grid(n: int):
+    """An n x n grid of the unit square in the plane z = 0: (V (k, 3), F (m, 3))."""
+    from algorithms.mesh import grid
+
+    V, F = grid(n, n)
+    V = np.asarray(V, float)
+    if V.shape[1] == 2:
+        V = np.c_[V, np.zeros(len(V))]
+    lo, hi = V.min(0), V.max(0)
+    V = (V - lo) / np.where(hi - lo > 0, hi - lo, 1.0)
+    V[:, 2] = 0.0
+    return V, np.asarray(F, np.int64)
+
+
 def mobius_strip(n: int = 16):
     """An open Moebius strip (one-sided, non-orientable) of n quads: (V (2n, 3), F (2n, 3))."""
     t = np.linspace(0, 2 * np.pi, n, endpoint=False)

@@ -116,6 +116,7 @@ from ..mesh.topology import connected_components, vertex_adjacency
 from ..params import param, validate_params
 from ..steps import Step, run_to_end
 from .arap import ArapSystem, procrustes_rotations, relative_displacement
+from .collisions import HOLD_CROSSINGS_TOOLTIP
 from .targets import ClosestNormals, TargetMap, unit_rows
 
 __all__ = [
@@ -188,12 +189,8 @@ class AnalogyParams:
         True, label="ACAP keeps area", advanced=True,
         tooltip="With the acap regularizer, rescale each part that nothing holds so its surface "
                 "area stays the input's (otherwise the whole shape can slowly shrink).")
-    hold_crossings: bool = param(
-        True, label="Keep from crossing itself",
-        tooltip="Where the style pushes the surface through itself (thin walls, parts that "
-                "nearly touch), hold those vertices where they were before they crossed and "
-                "let the rest settle around them (algorithms/deform/collisions.py). Meshes of "
-                "up to 200,000 triangles. Off: the thesis's method as it is.")
+    hold_crossings: bool = param(True, label="Keep from crossing itself",
+                                 tooltip=HOLD_CROSSINGS_TOOLTIP)
 
 
 # ------------------------------------------------------------------------------ helpers

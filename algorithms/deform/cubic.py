@@ -136,6 +136,7 @@ from .arap import (
     procrustes_rotations,
     relative_displacement,
 )
+from .collisions import HOLD_CROSSINGS_TOOLTIP
 
 __all__ = [
     "STYLE_PRESETS",
@@ -257,12 +258,8 @@ class CubicParams:
         True, label="Pin one vertex",
         tooltip="Remove the free translation by holding one vertex (per part with no other "
                 "constraint). Off: keep each part's centre where it was instead.")
-    hold_crossings: bool = param(
-        True, label="Keep from crossing itself",
-        tooltip="Where the style pushes the surface through itself (thin walls, parts that "
-                "nearly touch), hold those vertices where they were before they crossed and "
-                "let the rest settle around them (algorithms/deform/collisions.py). Meshes of "
-                "up to 200,000 triangles. Off: the thesis's method as it is.")
+    hold_crossings: bool = param(True, label="Keep from crossing itself",
+                                 tooltip=HOLD_CROSSINGS_TOOLTIP)
 
 
 def mean_l1_of_normals(V, F) -> float:

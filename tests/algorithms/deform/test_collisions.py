@@ -10,21 +10,15 @@ import pytest
 from algorithms.deform import collisions
 from algorithms.deform.collisions import crossings_of, crossings_sentence, hold_where_crossed
 from algorithms.deform.cubic import mean_l1_of_normals
-from algorithms.mesh import grid, read_mesh
+from algorithms.mesh import read_mesh
 from algorithms.mesh.intersections import crossings_away_from, intersecting_pairs_here
 from algorithms.steps import Step
-from tests.conftest import shared_mesh
+from tests.conftest import shared_mesh, unit_square_grid
 
 
 def _sheets():
     """Two parallel 6 x 6 grids, z = 0 and z = 0.3: (V, F, top vertex ids)."""
-    V, F = grid(6, 6)
-    V = np.asarray(V, float)
-    if V.shape[1] == 2:
-        V = np.c_[V, np.zeros(len(V))]
-    lo, hi = V.min(0), V.max(0)
-    V = (V - lo) / np.where(hi - lo > 0, hi - lo, 1.0)
-    V[:, 2] = 0.0
+    V, F = unit_square_grid(6)
     W = V.copy()
     W[:, 2] = 0.3
     n = len(V)

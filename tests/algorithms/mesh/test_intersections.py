@@ -2,21 +2,15 @@
 
 import numpy as np
 
-from algorithms.mesh import grid
 from algorithms.mesh.intersections import crossings_away_from, intersecting_pairs_here
+from tests.conftest import unit_square_grid
 
 
 def _two_sheets(shift_x: float = 0.0, through: bool = False):
     """A horizontal 8 x 8 grid (z = 0) and a vertical one (x = 0.5 + shift_x) through it, plus
     a small upright square far from the vertical sheet, above the floor or (``through``)
     through it."""
-    V, F = grid(8, 8)
-    V = np.asarray(V, float)
-    if V.shape[1] == 2:
-        V = np.c_[V, np.zeros(len(V))]
-    lo, hi = V.min(0), V.max(0)
-    V = (V - lo) / np.where(hi - lo > 0, hi - lo, 1.0)
-    V[:, 2] = 0.0
+    V, F = unit_square_grid(8)
     W = V[:, [2, 0, 1]].copy()  # the vertical sheet: x = 0, spans y and z in [0, 1]
     W[:, 0] = 0.5 + shift_x
     W[:, 2] -= 0.5
