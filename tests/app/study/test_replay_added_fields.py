@@ -25,7 +25,7 @@ def test_a_log_older_than_remesh_scope_replays_with_the_whole_surface_remeshed()
     del old["remesh_scope"], old["lowest_fallback"]   # what a log written before them holds
     assert logged_params("Paparazzi", old)["remesh_scope"] == "all"
     assert logged_params("Paparazzi", {**old, "remesh_scope": "bad"})["remesh_scope"] == "bad"
-    assert logged_params("Cubic", {"lam": 0.2}) == {"lam": 0.2}
+    assert logged_params("Smooth", {"lam": 0.2}) == {"lam": 0.2}
     # and it matters: on a slightly bumpy sphere the two scopes give different meshes
     V, F = icosphere(2)
     V = V * (1 + 0.05 * np.random.default_rng(0).random((len(V), 1)))
@@ -117,3 +117,19 @@ def test_a_neural_style_log_older_than_its_energy_replays_with_the_network():
                          ("gram", {"energy": "gram"}))}
     np.testing.assert_array_equal(out["old"], out["network"])
     assert out["gram"].shape != out["old"].shape or not np.array_equal(out["gram"], out["old"])
+
+
+def test_a_cubic_or_analogy_log_older_than_hold_crossings_replays_without_holding():
+    # before issue 38's collision handling a run kept whatever crossings the style made; the
+    # two give different results where the style crosses (tests/algorithms/deform/
+    # test_collisions.py, camelhead)
+    from algorithms.deform.analogies import AnalogyParams
+    from algorithms.deform.cubic import CubicParams
+
+    for name, cls in (("Cubic", CubicParams), ("Analogies", AnalogyParams)):
+        assert ADDED_FIELDS[name] == {"hold_crossings": False}
+        old = params_to_dict(cls())
+        assert old["hold_crossings"] is True   # today's default
+        del old["hold_crossings"]              # what a log written before the field holds
+        assert logged_params(name, old) == {**old, "hold_crossings": False}
+        assert logged_params(name, {**old, "hold_crossings": True})["hold_crossings"] is True
