@@ -139,6 +139,7 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
     VF = vertex_face_adjacency(F, n).tocsr() if made else None
     # the bisection runs over the deformation's own iterates, its result last
     checkpoints.append(np.array(last.V, dtype=np.float64, copy=True))
+    first = last
     best = (len(bad), last, 0)  # (crossings, Step, vertices held): the result kept
     k_round = 0
     while len(bad) and k_round < rounds:
@@ -172,8 +173,14 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
         else:
             break  # holding more did not help: the result is the best one so far
     left, kept, n_held = best
-    metrics = {**kept.metrics, "crossings_checked": 1.0, "crossings_made": float(made),
-               "crossings_left": float(left), "held_vertices": float(n_held)}
+    # the deformation's own figures (e.g. a progressive run's coarse and fine iteration counts,
+    # the held rounds' iterations counted as fine ones), then the kept result's
+    metrics = {**first.metrics, **kept.metrics}
+    if "fine_iterations" in first.metrics:
+        metrics["fine_iterations"] = float(first.metrics["fine_iterations"]
+                                           + last.iteration - first.iteration)
+    metrics.update(crossings_checked=1.0, crossings_made=float(made),
+                   crossings_left=float(left), held_vertices=float(n_held))
     # numbered after every iteration that ran; the positions are the kept result's
     yield Step(iteration=last.iteration, total=last.total, V=kept.V, metrics=metrics,
                message=crossings_sentence(metrics) or kept.message)
