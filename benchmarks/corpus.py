@@ -21,7 +21,8 @@ with a time limit, and sorts each run into one class:
                 pairs both within two vertex rings of the input's own crossings, where a move
                 shifts the crossing line onto neighbouring triangles; of a subdivided result:
                 the intersecting pairs whose parent triangles did not intersect in the input,
-                as each input crossing comes back split many times), or spikes (a vertex
+                as each input crossing comes back split many times; measured where input and
+                result have at most 300,000 triangles), or spikes (a vertex
                 moved more than the mean of its neighbours' moves by over twice the length of
                 its edges and over 1 % of the diagonal)
   substitution  exit 0, and the command's --json says another method ran (``fallback``);
@@ -95,6 +96,9 @@ FOLD_ANGLE = 120.0   # degrees between a triangle's normal and a neighbour's: fo
 FOLD_TURN = 60.0     # ... and that angle grew by at least this much
 SLOW_S = 60.0        # seconds, meshes of at most SLOW_FACES triangles
 SLOW_FACES = 100_000
+#: self-intersections are measured on results and inputs of at most this many triangles (a
+#: result with the input's triangles at 124k, ogre's, hid 89 crossings under the old 100k cap)
+CROSSING_FACES = 300_000
 
 
 # ---------------------------------------------------------------------------- one run (child)
@@ -229,7 +233,7 @@ def _measure(mesh: Path, out: Path, clean: bool, moves: bool) -> dict:
         m["degenerate_made"] = max(int((a <= tiny).sum()) - int((a0 <= tiny).sum()), 0)
         dist, _ = cKDTree(V0).query(V)
         m["moved"] = float(dist.max() / diag)  # to the nearest input vertex (an upper bound)
-    if len(F) <= SLOW_FACES and len(F0) <= SLOW_FACES:
+    if len(F) <= CROSSING_FACES and len(F0) <= CROSSING_FACES:
         from algorithms.mesh.intersections import (crossings_away_from,
                                                    crossings_not_in_parents,
                                                    intersecting_pairs_here)

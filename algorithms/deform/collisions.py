@@ -26,9 +26,10 @@ new self-intersections on 13.
 This is not El Topo's continuous collision handling: held regions stop where they were before
 they first crossed (less styled there), the rest is the method's own optimum with those
 constraints. Measured on the corpus (docs/results/corpus.md, every method at its defaults):
-cubic stylization made new crossings on 13 of 52 meshes and now leaves some on 5, analogies on
-17 and 7; camelhead's lips 136 -> 0 (cubic) in one round, keeping 97 % of the change of the L1
-norm of the normals; the runs took up to 2.2x as long (nefertiti, 100k triangles: 7.3 -> 13 s).
+cubic stylization made new crossings on 14 of 52 meshes and now leaves some on 6, analogies on
+18 and 8; camelhead's lips 136 -> 0 (cubic) in one round, keeping 97 % of the change of the L1
+norm of the normals; the runs took up to 2.7x as long (nefertiti's analogy, 100k triangles:
+4.4 -> 11.9 s).
 """
 
 from __future__ import annotations
@@ -39,8 +40,8 @@ import numpy as np
 
 from ..steps import Step
 
-__all__ = ["CHECK_MAX_FACES", "CHECKPOINT_EVERY", "HOLD_CROSSINGS_TOOLTIP", "ROUNDS", "crossings_of", "crossings_sentence",
-           "hold_where_crossed"]
+__all__ = ["CHECK_MAX_FACES", "CHECKPOINT_EVERY", "HOLD_CROSSINGS_TOOLTIP", "ROUNDS",
+           "crossings_of", "crossings_sentence", "hold_where_crossed"]
 
 #: The tooltip of the setting (``hold_crossings`` of the cubic and analogy parameters).
 HOLD_CROSSINGS_TOOLTIP = (
