@@ -40,8 +40,8 @@ import numpy as np
 
 from ..steps import Step
 
-__all__ = ["CHECK_MAX_FACES", "CHECKPOINT_EVERY", "HOLD_CROSSINGS_TOOLTIP", "ROUNDS",
-           "crossings_of", "crossings_sentence", "hold_where_crossed"]
+__all__ = ["CHECK_MAX_FACES", "CHECKPOINT_EVERY", "HOLD_CROSSINGS_TOOLTIP", "ROUNDS", "WORDING",
+           "crossings_of", "crossings_sentence", "grow_held", "hold_where_crossed"]
 
 #: The tooltip of the setting (``hold_crossings`` of the cubic and analogy parameters).
 HOLD_CROSSINGS_TOOLTIP = (
@@ -58,6 +58,18 @@ CHECKPOINT_EVERY = 5
 MAX_CHECKPOINTS = 48
 #: Rounds of holding and running again.
 ROUNDS = 3
+
+
+def grow_held(held: np.ndarray, bad: np.ndarray, F: np.ndarray, VF, fixed: np.ndarray
+              ) -> np.ndarray:
+    """(n,) bool: ``held`` and the corners of the crossing triangle pairs ``bad`` (k, 2) with
+    one ring of vertices around them, less ``fixed`` (vertices held otherwise). ``VF``: the
+    vertex-face adjacency (csr) of ``F``."""
+    grown = held.copy()
+    grown[F[np.unique(bad.ravel())].ravel()] = True
+    grown[F[VF[np.flatnonzero(grown)].indices].ravel()] = True  # and one ring
+    grown &= ~fixed
+    return grown
 
 
 def _latest_clear(checkpoints: list[np.ndarray], F, known, faces: np.ndarray) -> int:
@@ -81,7 +93,8 @@ def _latest_clear(checkpoints: list[np.ndarray], F, known, faces: np.ndarray) ->
 
 def hold_where_crossed(steps: Iterator[Step], V0, F,
                        rerun: Callable[[np.ndarray, np.ndarray, np.ndarray], Iterator[Step]], *,
-                       constrained=None, rounds: int = ROUNDS) -> Iterator[Step]:
+                       constrained=None, rounds: int = ROUNDS,
+                       wording: str = "style") -> Iterator[Step]:
     """``steps`` (a deformation of the mesh ``V0``, ``F`` from its input positions, one Step
     per iteration), then the rounds of the module docstring.
 
@@ -94,6 +107,7 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
         ``V_start``.
     constrained : (n,) bool, optional, vertices the caller already constrains (never held).
     rounds : int, at most this many rounds.
+    wording : a key of :data:`WORDING`, for the last Step's sentence.
 
     Yields
     ------
@@ -145,10 +159,7 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
     k_round = 0
     while len(bad) and k_round < rounds:
         k_round += 1
-        grown = held.copy()
-        grown[F[np.unique(bad.ravel())].ravel()] = True
-        grown[F[VF[np.flatnonzero(grown)].indices].ravel()] = True  # and one ring
-        grown &= ~fixed
+        grown = grow_held(held, bad, F, VF, fixed)
         if np.array_equal(grown, held):
             break
         held = grown
@@ -184,7 +195,7 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
                    crossings_left=float(left), held_vertices=float(n_held))
     # numbered after every iteration that ran; the positions are the kept result's
     yield Step(iteration=last.iteration, total=last.total, V=kept.V, metrics=metrics,
-               message=crossings_sentence(metrics) or kept.message)
+               message=crossings_sentence(metrics, wording) or kept.message)
 
 
 def crossings_of(metrics: dict) -> dict | None:
@@ -198,9 +209,17 @@ def crossings_of(metrics: dict) -> dict | None:
             "held_vertices": int(metrics["held_vertices"]), "left": int(metrics["crossings_left"])}
 
 
-def crossings_sentence(metrics: dict) -> str:
+#: What moved the surface, and what to do about crossings that are left, per kind of method.
+WORDING = {"style": ("The style pushed", "lower λ, or move the parts apart"),
+           "smoothing": ("Its steps would have pushed",
+                         "lower Step size or Iterations, or move the parts apart")}
+
+
+def crossings_sentence(metrics: dict, wording: str = "style") -> str:
     """One sentence on what :func:`hold_where_crossed` did ("" when there is nothing to say:
-    it did not run, or the deformation made no crossing)."""
+    it did not run, or the deformation made no crossing); ``wording``: a key of
+    :data:`WORDING`."""
+    who, advice = WORDING[wording]
     c = crossings_of(metrics)
     if c is None:
         return ""
@@ -210,10 +229,10 @@ def crossings_sentence(metrics: dict) -> str:
     if not c["made"]:
         return ""
     left = ("none is left" if not c["left"] else
-            f"{c['left']} crossing(s) are left: lower λ, or move the parts apart")
+            f"{c['left']} crossing(s) are left: {advice}")
     if not c["held_vertices"]:
-        return (f"The style pushed the surface through itself in {c['made']} place(s); "
+        return (f"{who} the surface through itself in {c['made']} place(s); "
                 f"holding those points back did not reduce them, so {left}.")
-    return (f"The style pushed the surface through itself in {c['made']} place(s): "
+    return (f"{who} the surface through itself in {c['made']} place(s): "
             f"{c['held_vertices']:,} vertices were held where they were before they crossed; "
             f"{left}.")

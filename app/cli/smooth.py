@@ -40,6 +40,7 @@ def _data_smoothing_requested(args: argparse.Namespace) -> bool:
 
 
 def cmd_smooth(args: argparse.Namespace) -> int:
+    from algorithms.deform.collisions import crossings_of, crossings_sentence
     from algorithms.smoothing import SmoothParams
 
     names = _smooth_names()
@@ -61,13 +62,17 @@ def cmd_smooth(args: argparse.Namespace) -> int:
                   file=sys.stderr)
     seconds = time.perf_counter() - t0
     write_result(args, args.output, last.V, data.F, data)
+    crossings = crossings_of(last.metrics)
     if args.json:
         print_json({"input": args.mesh, "output": args.output, "params": params_to_dict(params),
                     "iterations": last.iteration, "seconds": seconds,
                     "bending_energy": [h["bending_energy"] for h in history],
-                    "displacement": [h["displacement"] for h in history]})
+                    "displacement": [h["displacement"] for h in history],
+                    "crossings": crossings})
     else:
-        print(f"Smoothed {args.mesh} in {seconds:.2f} s ({last.iteration} steps); wrote {args.output}.")
+        said = crossings_sentence(last.metrics, "smoothing")
+        print(f"Smoothed {args.mesh} in {seconds:.2f} s ({last.iteration} steps); wrote "
+              f"{args.output}." + (f" {said}" if said else ""))
     return 0
 
 

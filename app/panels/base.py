@@ -685,7 +685,7 @@ class MethodPanel(QDockWidget):
             text = f"Done in {seconds}."
         from app.recipes import held_crossings_note, unchanged_result
 
-        said = held_crossings_note(step.metrics)  # what was held where it crossed itself
+        said = held_crossings_note(step.metrics, self.title)  # held where it crossed itself
         if said:
             text += f" {said}"
         recipe = self.recipe()

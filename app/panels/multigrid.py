@@ -352,6 +352,11 @@ class MultigridPanel(MethodPanel):
         return lambda: recipe.steps(state, params, options, cache)
 
     def _on_finished(self, step) -> None:
+        if self.window_.last_job_name == FLOW_JOB:
+            # what the flow held where it would cross itself, said when it is applied
+            from app.recipes import held_crossings_note
+
+            self._flow_note = held_crossings_note(step.metrics, FLOW)
         if self.window_.last_job_name != self.title:
             return
         info = getattr(step, "info", None)
@@ -385,7 +390,10 @@ class MultigridPanel(MethodPanel):
         super()._on_committed(name, after)
         if name == FLOW_JOB:
             self._show_hierarchy_info()
-            self.status_label.setText("Flow applied. Undo with Ctrl+Z.")
+            note = getattr(self, "_flow_note", "")
+            self._flow_note = ""
+            self.status_label.setText("Flow applied." + (f" {note}" if note else "")
+                                      + " Undo with Ctrl+Z.")
         if name == self.title:
             if self.signal != "positions" and self.view_combo.currentIndex() == 1:
                 self.view_combo.setCurrentIndex(0)

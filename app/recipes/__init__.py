@@ -70,13 +70,17 @@ def positions_result(before, last: Step, options: dict | None = None):
     return MeshState.make(V, F)
 
 
-def held_crossings_note(metrics: dict) -> str:
+#: Recipes whose hold on self-intersections is a flow's (the sentence's wording), by title.
+FLOW_RECIPES = ("Smooth", "Multigrid smoothing: mean curvature flow")
+
+
+def held_crossings_note(metrics: dict, title: str = "") -> str:
     """What a deformation's hold on self-intersections did, from its last Step's metrics, as one
     sentence for a panel's closing line ("" when there is nothing to say;
-    :func:`algorithms.deform.collisions.crossings_sentence`)."""
+    :func:`algorithms.deform.collisions.crossings_sentence`); ``title``: the recipe's."""
     from algorithms.deform.collisions import crossings_sentence
 
-    return crossings_sentence(metrics)
+    return crossings_sentence(metrics, "smoothing" if title in FLOW_RECIPES else "style")
 
 
 def unchanged_result(before, last: Step, options: dict | None = None):

@@ -83,12 +83,15 @@ class ReplayReport:
 #: ``rough_step`` and ``plateau_step`` (fifth pass): before them the step on "auto" was the
 #: filter's own on any surface and was never halved when the energy climbed (False, False);
 #: its ``lowest_fallback`` (sixth pass): before it a run returned its last shape whatever its
-#: energy (False). Cubic's and Analogies' ``hold_crossings`` (issue 38): before it a run kept
-#: whatever crossings the style made (False).
+#: energy (False). Cubic's, Analogies', Smooth's and the multigrid flow's ``hold_crossings``
+#: (issue 38): before it a run kept whatever crossings the style or the flow made (False).
 ADDED_FIELDS: dict[str, dict] = {"Paparazzi": {"remesh_scope": "all", "rough_step": False,
                                                "plateau_step": False, "lowest_fallback": False},
                                  "Cubic": {"hold_crossings": False},
-                                 "Analogies": {"hold_crossings": False}}
+                                 "Analogies": {"hold_crossings": False},
+                                 "Smooth": {"hold_crossings": False},
+                                 "Multigrid smoothing: mean curvature flow": {
+                                     "hold_crossings": False}}
 
 
 #: the same for a Paparazzi filter's Params (``options["filter_params"]``): neural-style's

@@ -239,3 +239,60 @@ def test_open_borders_stay_by_default_and_their_triangles_do_not_collapse():
     Vc, Fc = noisy_sphere(4)
     np.testing.assert_array_equal(smooth(Vc, Fc, SmoothParams()),
                                   smooth(Vc, Fc, SmoothParams(fix_boundary=False)))
+
+
+# --- hold_crossings (issue 38) ----------------------------------------------------------------
+def _new_crossings(V0, V, F) -> int:
+    from algorithms.mesh.intersections import intersecting_pairs_here, new_crossings_away_from
+
+    return len(new_crossings_away_from(intersecting_pairs_here(V, F), F,
+                                       intersecting_pairs_here(V0, F)))
+
+
+@pytest.mark.parametrize("flow,step", [("cmcf", 1e-4), ("laplacian", 3e-4), ("mcf", 1e-4)])
+def test_steps_that_would_cross_the_surface_are_held_and_the_rest_still_smooths(flow, step):
+    """fertility's arms pull through each other at a strong step (measured: cMCF 57 new
+    crossing pairs, the fixed-operator flow 21, MCF 3,366); held, none is left, the rest still
+    moves and the result is no rougher than the flow's own (at this step the arms pinch: the
+    bending energy rises with or without the hold)."""
+    m = read_mesh(shared_mesh("fertility.off"))
+    V, F = m.V, m.F
+    *_, free = smooth_iter(V, F, SmoothParams(flow=flow, step_size=step, hold_crossings=False))
+    assert _new_crossings(V, free.V, F) >= 20  # the case this test is about
+    assert "crossings_checked" not in free.metrics
+    steps = list(smooth_iter(V, F, SmoothParams(flow=flow, step_size=step)))
+    last = steps[-1]
+    assert _new_crossings(V, last.V, F) == 0  # counted independently of the metrics
+    met = last.metrics
+    assert met["crossings_checked"] == 1.0 and met["crossings_left"] == 0.0
+    assert met["crossings_made"] >= 1 and 0 < met["held_vertices"] < 0.2 * len(V)
+    assert [s.metrics["held_vertices"] for s in steps] == sorted(
+        s.metrics["held_vertices"] for s in steps)  # once held, held to the end
+    assert last.message.startswith("Its steps would have pushed the surface through itself in "
+                                   f"{int(met['crossings_made'])} place(s): ")
+    assert last.message.endswith("none is left.")
+    e_free, e_held = bending_energy(free.V, F), bending_energy(last.V, F)
+    assert np.isfinite(e_held)  # MCF's own result has collapsed triangles there (NaN)
+    assert not np.isfinite(e_free) or e_held <= e_free
+    assert last.metrics["moved"] > 0.5 * free.metrics["moved"]
+
+
+def test_a_flow_that_crosses_nothing_is_unchanged_by_the_hold():
+    V, F = noisy_sphere()
+    p = SmoothParams(step_size=1e-4, iterations=5)
+    held = list(smooth_iter(V, F, p))
+    free = list(smooth_iter(V, F, SmoothParams(step_size=1e-4, iterations=5,
+                                                hold_crossings=False)))
+    np.testing.assert_array_equal(held[-1].V, free[-1].V)
+    assert held[-1].metrics["crossings_made"] == 0 and held[-1].metrics["held_vertices"] == 0
+    assert held[-1].message == "step 5/5"
+
+
+def test_above_the_size_limit_crossings_are_not_checked_and_that_is_said(monkeypatch):
+    import algorithms.deform.collisions as collisions
+
+    V, F = noisy_sphere()
+    monkeypatch.setattr(collisions, "CHECK_MAX_FACES", len(F) - 1)
+    last = list(smooth_iter(V, F, SmoothParams(iterations=2)))[-1]
+    assert last.metrics["crossings_checked"] == 0.0
+    assert "not checked" in last.message

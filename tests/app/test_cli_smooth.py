@@ -76,3 +76,34 @@ def test_multigrid_converges_on_a_scan_with_holes_and_thin_triangles(tmp_path, c
         res = _json(capsys.readouterr().out)
         assert rc == 0 and res["converged"] and res["fallback"] is None, res
         assert res["cycles"] <= 30 and res["relative_residual"] <= 1e-5
+
+
+def test_the_flow_says_where_it_held_the_surface_from_crossing_itself(tmp_path, capsys):
+    """fertility at a strong step: the arms would pull through each other (issue 38). The line
+    and --json say what was held; --no-hold-crossings runs the flow as it is, and says nothing."""
+    from algorithms.mesh.intersections import intersecting_pairs_here, new_crossings_away_from
+    from tests.conftest import shared_mesh
+
+    src = shared_mesh("fertility.off")
+    m = read_mesh(src)
+    known = intersecting_pairs_here(m.V, m.F)
+
+    def made(path) -> int:
+        return len(new_crossings_away_from(intersecting_pairs_here(read_mesh(path).V, m.F), m.F,
+                                           known))
+
+    out = tmp_path / "held.obj"
+    assert main(["smooth", str(src), "-o", str(out), "--step-size", "1e-4"]) == 0
+    line = capsys.readouterr().out
+    assert "Its steps would have pushed the surface through itself in " in line
+    assert "none is left" in line and made(out) == 0
+    assert main(["smooth", str(src), "-o", str(out), "--overwrite", "--step-size", "1e-4",
+                 "--json"]) == 0
+    c = _json(capsys.readouterr().out)["crossings"]
+    assert c["checked"] and c["made"] >= 1 and c["left"] == 0 and c["held_vertices"] > 0
+    free = tmp_path / "free.obj"
+    assert main(["smooth", str(src), "-o", str(free), "--step-size", "1e-4",
+                 "--no-hold-crossings", "--json"]) == 0
+    res = _json(capsys.readouterr().out)
+    assert res["crossings"] is None and res["params"]["hold_crossings"] is False
+    assert made(free) >= 20

@@ -57,6 +57,25 @@ def test_smooth_streams_finishes_and_is_undoable(window, dialogs, qtbot):
     np.testing.assert_array_equal(window.viewport.points, V1)
 
 
+def test_smoothing_that_would_cross_itself_says_what_it_held(window, dialogs, qtbot):
+    """fertility at a strong step: its arms would pull through each other; the closing line
+    says what was held (issue 38), the setting is a checkbox with its tooltip, one undo step."""
+    assert window.open_path(shared_mesh("fertility.off"))
+    V0 = window.document.V.copy()
+    panel = window.panels["Smooth"]
+    box = panel.form.editors["hold_crossings"]
+    assert box.isChecked() and "through itself" in box.toolTip()
+    panel.form.editors["step_size"].setValue(1e-4)
+    with qtbot.waitSignal(window.runner.finished, timeout=60000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    text = panel.status_label.text()
+    assert "Its steps would have pushed the surface through itself in " in text, text
+    assert "none is left" in text and "Undo with Ctrl+Z" in text, text
+    assert window.undo_stack.count() == 1
+    window.undo_stack.undo()
+    np.testing.assert_array_equal(window.document.V, V0)
+
+
 def test_cancel_mid_run_restores_mesh(window, dialogs, qtbot):
     assert window.open_path(SAMPLE)
     V0 = window.document.V.copy()

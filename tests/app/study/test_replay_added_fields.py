@@ -25,7 +25,10 @@ def test_a_log_older_than_remesh_scope_replays_with_the_whole_surface_remeshed()
     del old["remesh_scope"], old["lowest_fallback"]   # what a log written before them holds
     assert logged_params("Paparazzi", old)["remesh_scope"] == "all"
     assert logged_params("Paparazzi", {**old, "remesh_scope": "bad"})["remesh_scope"] == "bad"
-    assert logged_params("Smooth", {"lam": 0.2}) == {"lam": 0.2}
+    assert logged_params("Spectral coarsening", {"lam": 0.2}) == {"lam": 0.2}
+    # a Smooth run logged before the flow held its crossings ran without holding
+    assert logged_params("Smooth", {"step_size": 1e-5}) == {"step_size": 1e-5,
+                                                             "hold_crossings": False}
     # and it matters: on a slightly bumpy sphere the two scopes give different meshes
     V, F = icosphere(2)
     V = V * (1 + 0.05 * np.random.default_rng(0).random((len(V), 1)))
