@@ -40,13 +40,15 @@ Choices written down here (the thesis gives no smoothing method for the foundati
   cotangent weights infinite: they are refused with a message that points to Clean.
 * ``hold_crossings`` (default on, issue 38): after every step, the self-intersections that the
   input did not have are found (away from the input's own crossings:
-  :func:`~algorithms.mesh.intersections.new_crossings_away_from`); the corners of the crossing
-  triangles and one ring around them are then held where they were before the step (Dirichlet
-  rows, like fixed boundary vertices) and the step is solved again, up to
-  :data:`HOLD_ROUNDS` times while crossings are left; held vertices stay held for the rest of
-  the run. Without it, smoothing at its defaults made new crossings on 7 of the 52 meshes of the
-  corpus (docs/results/corpus.md: thin walls and parts that nearly touch pulled through each
-  other; counter, a CAD part, 7,466 crossing pairs). A per-step hold, not the after-the-fact
+  :func:`~algorithms.mesh.intersections.new_crossings_away_from`), and the triangles the step
+  folded over or collapsed (:mod:`algorithms.mesh.damage`); the corners of those triangles and
+  one ring around them are then held where they were before the step (Dirichlet rows, like
+  fixed boundary vertices) and the step is solved again, up to :data:`HOLD_ROUNDS` times while
+  any is left; held vertices stay held for the rest of the run. Without it, smoothing at its
+  defaults damaged 7 of the 52 meshes of the corpus (docs/results/corpus.md): thin walls and
+  parts that nearly touch pulled through each other (counter, a CAD part, 7,466 crossing
+  pairs), thin parts collapsed (beast: 912 triangles of zero area once the crossings were
+  held) and tiny CAD triangles turned over (block: 16). A per-step hold, not the after-the-fact
   hold of cubic stylization (:func:`~algorithms.deform.collisions.hold_where_crossed`): a flow
   has no optimum to settle at, and vertices held only at the end let their neighbours flow on
   through them (fertility at step 1e-4: 57 crossings, 200 with the end-of-run hold). Meshes of
@@ -59,7 +61,8 @@ Choices written down here (the thesis gives no smoothing method for the foundati
   the largest move since the input (same unit: what a user can see; the app says so when a run
   changed little); with ``hold_crossings``, ``crossings_checked`` (0: too big to check),
   ``crossings_made`` (the distinct crossing pairs the steps would have made, each counted once,
-  at the step that first made it), ``crossings_left`` (after this step) and ``held_vertices``,
+  at the step that first made it), ``crossings_left`` (after this step), ``folded_made`` and
+  ``folded_left`` (the same for triangles folded over or collapsed) and ``held_vertices``,
   read by :func:`algorithms.deform.collisions.crossings_of`.
 """
 
@@ -114,8 +117,9 @@ class SmoothParams:
     hold_crossings: bool = param(
         True, label="Keep from crossing itself",
         tooltip="Where a step would push the surface through itself (thin walls, parts that "
-                "nearly touch), hold those vertices where they were and smooth the rest. "
-                "Meshes of up to 200,000 triangles. Off: the flow as it is.")
+                "nearly touch) or fold triangles over or collapse them, hold those vertices "
+                "where they were and smooth the rest. Meshes of up to 200,000 triangles. Off: "
+                "the flow as it is.")
 
 
 def _centroid_and_area(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, float]:
@@ -258,18 +262,19 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
 
 
 class _Hold:
-    """The vertices a flow holds where it would cross the surface through itself (module
-    docstring, ``hold_crossings``)."""
+    """The vertices a flow holds where a step would cross the surface through itself, fold
+    triangles over or collapse them (module docstring, ``hold_crossings``)."""
 
     def __init__(self, V0: np.ndarray, F: np.ndarray, fixed: np.ndarray):
         from .deform.collisions import CHECK_MAX_FACES
         from .mesh.topology import vertex_face_adjacency
 
-        self.F, self.fixed = F, fixed
+        self.V0, self.F, self.fixed = V0, F, fixed
         self.held = np.zeros(len(V0), dtype=bool)
         self.check = len(F) <= CHECK_MAX_FACES
-        self.seen: set[tuple[int, int]] = set()
-        self.left = 0
+        self.seen: set[tuple[int, int]] = set()  # crossing pairs found
+        self.seen_folded = np.zeros(len(F), dtype=bool)  # triangles found folded or collapsed
+        self.left = self.left_folded = 0
         if self.check:
             from .mesh.intersections import intersecting_pairs_here
 
@@ -277,20 +282,27 @@ class _Hold:
             self.VF = vertex_face_adjacency(F, len(V0)).tocsr()
 
     def _bad(self, X: np.ndarray) -> np.ndarray:
+        """(k, 2) triangle pairs to hold at ``X``: the new crossing pairs, then each folded or
+        collapsed triangle as a pair with itself."""
+        from .mesh.damage import collapsed_triangles, folded_triangles
         from .mesh.intersections import intersecting_pairs_here, new_crossings_away_from
 
         bad = new_crossings_away_from(intersecting_pairs_here(X, self.F), self.F, self.known)
         self.seen.update(map(tuple, np.sort(bad, axis=1).tolist()))
         self.left = len(bad)
-        return bad
+        folded = folded_triangles(self.V0, X, self.F) | collapsed_triangles(self.V0, X, self.F)
+        self.seen_folded |= folded
+        self.left_folded = int(folded.sum())
+        f = np.flatnonzero(folded)
+        return np.concatenate([np.asarray(bad, dtype=np.int64).reshape(-1, 2), np.c_[f, f]])
 
     @property
     def count(self) -> int:
         return int(self.held.sum())
 
     def grow(self, X: np.ndarray, may_grow: bool = True) -> bool:
-        """Check ``X`` and hold more where it crosses itself; False when it does not, when
-        nothing new is to be held or ``may_grow`` is False."""
+        """Check ``X`` and hold more where it is damaged; False when it is not, when nothing
+        new is to be held or ``may_grow`` is False."""
         if not self.check:
             return False
         from .deform.collisions import grow_held
@@ -309,7 +321,9 @@ class _Hold:
         if not self.check:
             return {"crossings_checked": 0.0}
         return {"crossings_checked": 1.0, "crossings_made": float(len(self.seen)),
-                "crossings_left": float(self.left), "held_vertices": float(self.held.sum())}
+                "crossings_left": float(self.left),
+                "folded_made": float(self.seen_folded.sum()),
+                "folded_left": float(self.left_folded), "held_vertices": float(self.held.sum())}
 
 
 def smooth(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParams()) -> np.ndarray:

@@ -92,8 +92,6 @@ SHORT = {"result": "ok", "advice works": "ok*", "refused": "R", "no effect": "-"
 VISIBLE = 2e-3       # of the diagonal
 SPIKE = 1e-2         # of the diagonal
 FOLDS = 1e-3         # share of triangles
-FOLD_ANGLE = 120.0   # degrees between a triangle's normal and a neighbour's: folded back
-FOLD_TURN = 60.0     # ... and that angle grew by at least this much
 SLOW_S = 60.0        # seconds, meshes of at most SLOW_FACES triangles
 SLOW_FACES = 100_000
 #: self-intersections are measured on results and inputs of at most this many triangles (a
@@ -149,43 +147,18 @@ def _fallback(record) -> bool:
 
 
 def _folds_made(V0, V, F) -> np.ndarray:
-    """(m,) bool: triangles the method folded over (same triangles ``F`` before and after).
+    """(m,) bool: triangles the method folded over (same triangles ``F`` before and after):
+    :func:`algorithms.mesh.damage.folded_triangles`, the definition the smoothing flows keep
+    from making too."""
+    from algorithms.mesh.damage import folded_triangles
 
-    A triangle is folded over when, across at least two of its edges (across all of them if it
-    has fewer neighbours), the angle between its normal and the neighbour's is above
-    FOLD_ANGLE and grew by at least FOLD_TURN: it was turned back against the surface around
-    it, as a flipped triangle is. Triangles of (nearly) zero area before or after have no
-    normal to judge and are left to the degenerate count.
-
-    The comparison is edge by edge, with each angle measured against the same edge's angle in
-    the input, so a sharp edge the input already had (a CAD part's 90-degree rims, a thin
-    plate's knife edge) is no fold, and a triangle that hardly turned is never one.
-    """
-    import scipy.sparse as sp
-
-    from algorithms.mesh.operators import face_areas, face_normals
-    from algorithms.mesh.topology import face_adjacency
-
-    A = sp.triu(face_adjacency(F), k=1).tocoo()
-    f, g = A.row, A.col
-    N0, N = face_normals(V0, F), face_normals(V, F)
-    diag = float(np.linalg.norm(np.ptp(V0, axis=0))) or 1.0
-    tiny = 1e-12 * diag * diag
-    ok = (face_areas(V0, F) > tiny) & (face_areas(V, F) > tiny)
-    use = ok[f] & ok[g]
-    f, g = f[use], g[use]
-    before = np.degrees(np.arccos(np.clip((N0[f] * N0[g]).sum(axis=1), -1.0, 1.0)))
-    after = np.degrees(np.arccos(np.clip((N[f] * N[g]).sum(axis=1), -1.0, 1.0)))
-    back = (after > FOLD_ANGLE) & (after - before >= FOLD_TURN)
-    m = len(F)
-    n_nb = np.bincount(f, minlength=m) + np.bincount(g, minlength=m)
-    n_back = np.bincount(f[back], minlength=m) + np.bincount(g[back], minlength=m)
-    return ok & (n_nb > 0) & (n_back >= np.minimum(n_nb, 2))
+    return folded_triangles(V0, V, F)
 
 
 def _measure(mesh: Path, out: Path, clean: bool, moves: bool) -> dict:
     """Effect and artefact figures of a result (module docstring)."""
     from algorithms.mesh import read_mesh
+    from algorithms.mesh.damage import COLLAPSED_AREA, collapsed_triangles
     from algorithms.mesh.operators import face_areas
     from algorithms.mesh.validate import clean_mesh
 
@@ -203,10 +176,10 @@ def _measure(mesh: Path, out: Path, clean: bool, moves: bool) -> dict:
         return m
     a0 = face_areas(V0, F0)
     a = face_areas(V, F)
-    tiny = 1e-12 * diag * diag
+    tiny = COLLAPSED_AREA * diag * diag
     same = V.shape == V0.shape and np.array_equal(F, F0)
     if same:
-        m["degenerate_made"] = int(((a <= tiny) & (a0 > tiny)).sum())
+        m["degenerate_made"] = int(collapsed_triangles(V0, V, F).sum())
         d = np.linalg.norm(V - V0, axis=1)
         m["moved"] = float(d.max() / diag)
         m["folds_made"] = int(_folds_made(V0, V, F).sum())
@@ -403,12 +376,18 @@ def _contact_sheets(records: list[dict], methods: list[str], folder: Path) -> li
         pics = [r.get("picture") for r in records if r["method"] == method and r.get("picture")]
         if not pics:
             continue
+        path = folder / f"corpus_{method}.png"
+        if not all(Path(p).exists() for p in pics):
+            # a method merged from an earlier run whose pictures are gone: its sheet is kept
+            print(f"{method}: pictures of an earlier run are gone; {path} kept as it was")
+            if path.exists():
+                made.append(path)
+            continue
         cols = 8
         rows = (len(pics) + cols - 1) // cols
         sheet = Image.new("RGB", (cols * 160, rows * 160), "white")
         for k, p in enumerate(pics):
             sheet.paste(Image.open(p), ((k % cols) * 160, (k // cols) * 160))
-        path = folder / f"corpus_{method}.png"
         sheet.quantize(colors=255).save(path, optimize=True)
         made.append(path)
     return made

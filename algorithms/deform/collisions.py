@@ -41,7 +41,8 @@ import numpy as np
 from ..steps import Step
 
 __all__ = ["CHECK_MAX_FACES", "CHECKPOINT_EVERY", "HOLD_CROSSINGS_TOOLTIP", "ROUNDS", "WORDING",
-           "crossings_of", "crossings_sentence", "grow_held", "hold_where_crossed"]
+           "crossings_of", "crossings_sentence", "grow_held", "hold_where_crossed",
+           "metrics_of"]
 
 #: The tooltip of the setting (``hold_crossings`` of the cubic and analogy parameters).
 HOLD_CROSSINGS_TOOLTIP = (
@@ -199,40 +200,68 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
 
 
 def crossings_of(metrics: dict) -> dict | None:
-    """What :func:`hold_where_crossed` did, from a last Step's metrics, for a report:
-    ``{"checked", "made", "held_vertices", "left"}`` (None: it did not run)."""
+    """What :func:`hold_where_crossed` (or a smoothing flow's hold) did, from a last Step's
+    metrics, for a report: ``{"checked", "made", "held_vertices", "left"}``, and with a flow's
+    ``"folded"`` and ``"folded_left"`` (triangles folded over or collapsed; None: it did not
+    run)."""
     if "crossings_checked" not in metrics:
         return None
     if not metrics["crossings_checked"]:
         return {"checked": False, "made": None, "held_vertices": 0, "left": None}
-    return {"checked": True, "made": int(metrics["crossings_made"]),
-            "held_vertices": int(metrics["held_vertices"]), "left": int(metrics["crossings_left"])}
+    out = {"checked": True, "made": int(metrics["crossings_made"]),
+           "held_vertices": int(metrics["held_vertices"]), "left": int(metrics["crossings_left"])}
+    if "folded_made" in metrics:
+        out.update(folded=int(metrics["folded_made"]), folded_left=int(metrics["folded_left"]))
+    return out
 
 
-#: What moved the surface, and what to do about crossings that are left, per kind of method.
-WORDING = {"style": ("The style pushed", "lower λ, or move the parts apart"),
-           "smoothing": ("Its steps would have pushed",
+def metrics_of(crossings: dict | None) -> dict:
+    """The metrics that :func:`crossings_of` read ``crossings`` from (empty for None)."""
+    if crossings is None:
+        return {}
+    if not crossings["checked"]:
+        return {"crossings_checked": 0.0}
+    m = {"crossings_checked": 1.0, "crossings_made": crossings["made"],
+         "held_vertices": crossings["held_vertices"], "crossings_left": crossings["left"]}
+    if "folded" in crossings:
+        m.update(folded_made=crossings["folded"], folded_left=crossings["folded_left"])
+    return m
+
+
+#: Who moved the surface, the tense, and what to do about damage that is left, per kind of
+#: method.
+WORDING = {"style": ("The style", "", "lower λ, or move the parts apart"),
+           "smoothing": ("Its steps", "would have ",
                          "lower Step size or Iterations, or move the parts apart")}
 
 
 def crossings_sentence(metrics: dict, wording: str = "style") -> str:
-    """One sentence on what :func:`hold_where_crossed` did ("" when there is nothing to say:
-    it did not run, or the deformation made no crossing); ``wording``: a key of
-    :data:`WORDING`."""
-    who, advice = WORDING[wording]
+    """One sentence on what :func:`hold_where_crossed` (or a flow's hold) did ("" when there is
+    nothing to say: it did not run, or the deformation made no crossing, fold or collapse);
+    ``wording``: a key of :data:`WORDING`."""
+    who, tense, advice = WORDING[wording]
     c = crossings_of(metrics)
     if c is None:
         return ""
     if not c["checked"]:
         return (f"Self-intersections were not checked (more than {CHECK_MAX_FACES:,} "
                 f"triangles).")
-    if not c["made"]:
+    folded, folded_left = c.get("folded", 0), c.get("folded_left", 0)
+    if not c["made"] and not folded:
         return ""
-    left = ("none is left" if not c["left"] else
-            f"{c['left']} crossing(s) are left: {advice}")
+    did = []
+    if c["made"]:
+        did.append(f"pushed the surface through itself in {c['made']} place(s)")
+    if folded:
+        did.append(f"folded over or collapsed {folded} triangle(s)")
+    did = f"{who} {tense}{' and '.join(did)}"
+    rest = []
+    if c["left"]:
+        rest.append(f"{c['left']} crossing(s)")
+    if folded_left:
+        rest.append(f"{folded_left} folded or collapsed triangle(s)")
+    left = "none is left" if not rest else f"{' and '.join(rest)} are left: {advice}"
     if not c["held_vertices"]:
-        return (f"{who} the surface through itself in {c['made']} place(s); "
-                f"holding those points back did not reduce them, so {left}.")
-    return (f"{who} the surface through itself in {c['made']} place(s): "
-            f"{c['held_vertices']:,} vertices were held where they were before they crossed; "
-            f"{left}.")
+        return f"{did}; holding those points back did not reduce them, so {left}."
+    when = "before they crossed" if not folded else "before the step that did it"
+    return f"{did}: {c['held_vertices']:,} vertices were held where they were {when}; {left}."

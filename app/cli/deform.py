@@ -176,15 +176,9 @@ def output_for_lambda(output: str, lam: float, several: bool) -> str:
 def crossings_sentence_of(crossings: dict | None) -> str:
     """The sentence of :func:`algorithms.deform.collisions.crossings_sentence` for the report
     ``crossings`` (from :func:`~algorithms.deform.collisions.crossings_of`)."""
-    from algorithms.deform.collisions import crossings_sentence
+    from algorithms.deform.collisions import crossings_sentence, metrics_of
 
-    if crossings is None:
-        return ""
-    if not crossings["checked"]:
-        return crossings_sentence({"crossings_checked": 0.0})
-    return crossings_sentence({"crossings_checked": 1.0, "crossings_made": crossings["made"],
-                               "held_vertices": crossings["held_vertices"],
-                               "crossings_left": crossings["left"]})
+    return crossings_sentence(metrics_of(crossings)) if crossings is not None else ""
 
 
 def cmd_cubic(args: argparse.Namespace) -> int:

@@ -252,7 +252,8 @@ def _new_crossings(V0, V, F) -> int:
 @pytest.mark.parametrize("flow,step", [("cmcf", 1e-4), ("laplacian", 3e-4), ("mcf", 1e-4)])
 def test_steps_that_would_cross_the_surface_are_held_and_the_rest_still_smooths(flow, step):
     """fertility's arms pull through each other at a strong step (measured: cMCF 57 new
-    crossing pairs, the fixed-operator flow 21, MCF 3,366); held, none is left, the rest still
+    crossing pairs, the fixed-operator flow 21, MCF 3,366, and triangles fold over or collapse
+    on the way); held, none is left, the rest still
     moves and the result is no rougher than the flow's own (at this step the arms pinch: the
     bending energy rises with or without the hold)."""
     m = read_mesh(shared_mesh("fertility.off"))
@@ -268,9 +269,15 @@ def test_steps_that_would_cross_the_surface_are_held_and_the_rest_still_smooths(
     assert met["crossings_made"] >= 1 and 0 < met["held_vertices"] < 0.2 * len(V)
     assert [s.metrics["held_vertices"] for s in steps] == sorted(
         s.metrics["held_vertices"] for s in steps)  # once held, held to the end
+    assert met["folded_left"] == 0.0
     assert last.message.startswith("Its steps would have pushed the surface through itself in "
-                                   f"{int(met['crossings_made'])} place(s): ")
+                                   f"{int(met['crossings_made'])} place(s)")
+    if met["folded_made"]:  # holding the first folds also kept many crossings from happening
+        assert f"and folded over or collapsed {int(met['folded_made'])} triangle(s)" in \
+            last.message
     assert last.message.endswith("none is left.")
+    diag = np.linalg.norm(np.ptp(V, axis=0))
+    assert face_areas(last.V, F).min() > 1e-12 * diag ** 2  # nothing collapsed
     e_free, e_held = bending_energy(free.V, F), bending_energy(last.V, F)
     assert np.isfinite(e_held)  # MCF's own result has collapsed triangles there (NaN)
     assert not np.isfinite(e_free) or e_held <= e_free
