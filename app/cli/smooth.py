@@ -70,7 +70,10 @@ def cmd_smooth(args: argparse.Namespace) -> int:
                     "displacement": [h["displacement"] for h in history],
                     "crossings": crossings})
     else:
-        said = crossings_sentence(last.metrics, "smoothing")
+        from app.recipes.smooth import change_advice
+
+        said = " ".join(x for x in (crossings_sentence(last.metrics, "smoothing"),
+                                    change_advice(last, params)) if x)
         print(f"Smoothed {args.mesh} in {seconds:.2f} s ({last.iteration} steps); wrote "
               f"{args.output}." + (f" {said}" if said else ""))
     return 0

@@ -24,6 +24,11 @@ def change_advice(last: Step, params) -> str:
     moved = float(last.metrics.get("moved", 1.0))
     if moved >= VISIBLE_MOVE:
         return ""
+    if moved < 1e-9:
+        # a flat surface with its border fixed (a 2-D drawing): the cotangent Laplacian of
+        # positions in a plane is zero inside it, so no step size moves anything
+        return ("Nothing moved: the surface is flat with a fixed border (or every point is "
+                "fixed), which these flows leave as it is.")
     stronger = min(1.0, float(params.step_size) * 10.0)
     return (f"The shape changed little (at most {100 * moved:.2g} % of its size): it is already "
             f"smooth at this step size. Raise Step size (e.g. to {stronger:.0e}) or Iterations "

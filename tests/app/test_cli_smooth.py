@@ -107,3 +107,20 @@ def test_the_flow_says_where_it_held_the_surface_from_crossing_itself(tmp_path, 
     res = _json(capsys.readouterr().out)
     assert res["crossings"] is None and res["params"]["hold_crossings"] is False
     assert made(free) >= 20
+
+
+def test_a_flat_sheet_with_a_fixed_border_says_nothing_moved_and_why(tmp_path, capsys):
+    """A 2-D drawing (the corpus's woody): no step size moves it, so the line must not advise
+    a larger one."""
+    from tests.conftest import unit_square_grid
+
+    V, F = unit_square_grid(8)
+    V[:, 0] += 0.05 * np.sin(7 * V[:, 1])  # an uneven but flat layout
+    src = tmp_path / "flat.obj"
+    write_mesh(src, V, F)
+    out = tmp_path / "out.obj"
+    assert main(["smooth", str(src), "-o", str(out), "--step-size", "1e-3"]) == 0
+    line = capsys.readouterr().out
+    assert "Nothing moved: the surface is flat with a fixed border" in line
+    assert "Raise Step size" not in line
+    np.testing.assert_allclose(read_mesh(out).V, V, atol=1e-9)
