@@ -19,9 +19,11 @@ new self-intersections on 13.
    same energy, one more factorization), so the rest of the surface settles around them;
 4. while crossings are left, up to :data:`ROUNDS` times: the held set grows by the new
    crossings' vertices, and all of it is put back at one iterate (constraints taken from
-   different iterates can disagree and tear the surface); a round that does not lower the
-   count ends the rounds, and the result with the fewest crossings is kept. What is left is
-   said.
+   different iterates can disagree and tear the surface); the rounds go on while the held set
+   grows, also after a round that did not lower the count (the next, larger set often does:
+   on beast, twirl and cycloidal the first round changed nothing and the later ones removed
+   34 of 34, 4 of 4 and 104 of 105 crossings), and the result with the fewest crossings is
+   kept. What is left is said.
 
 This is not El Topo's continuous collision handling: held regions stop where they were before
 they first crossed (less styled there), the rest is the method's own optimum with those
@@ -58,7 +60,7 @@ CHECK_MAX_FACES = 200_000
 CHECKPOINT_EVERY = 5
 MAX_CHECKPOINTS = 48
 #: Rounds of holding and running again.
-ROUNDS = 3
+ROUNDS = 5
 
 
 def grow_held(held: np.ndarray, bad: np.ndarray, F: np.ndarray, VF, fixed: np.ndarray
@@ -183,8 +185,6 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
         bad = new_crossings_away_from(intersecting_pairs_here(last.V, F), F, known)
         if len(bad) < best[0]:
             best = (len(bad), last, len(ids))
-        else:
-            break  # holding more did not help: the result is the best one so far
     left, kept, n_held = best
     # the deformation's own figures (e.g. a progressive run's coarse and fine iteration counts,
     # the held rounds' iterations counted as fine ones), then the kept result's
