@@ -28,10 +28,10 @@ new self-intersections on 13.
 This is not El Topo's continuous collision handling: held regions stop where they were before
 they first crossed (less styled there), the rest is the method's own optimum with those
 constraints. Measured on the corpus (docs/results/corpus.md, every method at its defaults):
-cubic stylization made new crossings on 14 of 52 meshes and now leaves some on 6, analogies on
-18 and 8; camelhead's lips 136 -> 0 (cubic) in one round, keeping 97 % of the change of the L1
-norm of the normals; the runs took up to 2.7x as long (nefertiti's analogy, 100k triangles:
-4.4 -> 11.9 s).
+cubic stylization made new crossings on 14 of 52 meshes and now leaves some on 1 (ogre: 1,768
+-> 14), analogies on 18 and 4; camelhead's lips 136 -> 0 (cubic) in one round, keeping 97 % of
+the change of the L1 norm of the normals; the runs took up to 2.7x as long (nefertiti's
+analogy, 100k triangles: 4.4 -> 11.9 s; docs/results/cubic.md).
 """
 
 from __future__ import annotations
