@@ -70,17 +70,17 @@ def positions_result(before, last: Step, options: dict | None = None):
     return MeshState.make(V, F)
 
 
-#: Recipes whose hold on self-intersections is a flow's (the sentence's wording), by title.
-FLOW_RECIPES = ("Smooth", "Multigrid smoothing: mean curvature flow")
-
-
 def held_crossings_note(metrics: dict, title: str = "") -> str:
     """What a deformation's hold on self-intersections did, from its last Step's metrics, as one
     sentence for a panel's closing line ("" when there is nothing to say;
-    :func:`algorithms.deform.collisions.crossings_sentence`); ``title``: the recipe's."""
+    :func:`algorithms.deform.collisions.crossings_sentence`); ``title``: the recipe's (a
+    smoothing flow's, whose Params are SmoothParams, is worded as one)."""
     from algorithms.deform.collisions import crossings_sentence
+    from algorithms.smoothing import SmoothParams
 
-    return crossings_sentence(metrics, "smoothing" if title in FLOW_RECIPES else "style")
+    recipe = recipes().get(title)
+    flow = recipe is not None and recipe.params_cls() is SmoothParams
+    return crossings_sentence(metrics, "smoothing" if flow else "style")
 
 
 def unchanged_result(before, last: Step, options: dict | None = None):

@@ -402,3 +402,22 @@ def test_the_noisy_input_is_shown_and_compare_plots_its_cycles(window, dialogs, 
 
     m = re.search(r"(\d+) cycles?", panel.times_label.text())
     assert m and len(res) == int(m.group(1)), (panel.times_label.text(), len(res))
+
+
+def test_the_flow_says_where_it_held_the_surface_from_crossing_itself(window, dialogs, qtbot):
+    """fertility at a strong flow step (issue 38): the arms would pull through each other; the
+    panel's line after the flow says what was held, in the flow's words."""
+    from tests.conftest import shared_mesh
+
+    assert window.open_path(shared_mesh("fertility.off"))
+    panel = window.panels["Multigrid smoothing"]
+    panel.raise_()
+    panel.live_box.setChecked(False)
+    panel.dt_spin.setValue(1e-4)
+    panel.steps_spin.setValue(10)
+    with qtbot.waitSignal(window.job_committed, timeout=120000):
+        panel.mcf_run_button.click()
+    text = panel.status_label.text()
+    assert text.startswith("Flow applied. Its steps would have pushed the surface through "
+                           "itself in "), text
+    assert "none is left" in text and text.endswith("Undo with Ctrl+Z."), text
