@@ -209,7 +209,17 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
     def solve_step(X, M, A, solver, pinned):
         """One backward Euler step with the vertices ``pinned`` where they are in ``X``."""
         if solver is None:
-            solver = factor(A, once=params.flow != "laplacian", pinned=pinned)
+            try:
+                solver = factor(A, once=params.flow != "laplacian", pinned=pinned)
+            except RuntimeError as e:  # SuperLU: "Factor is exactly singular"
+                if "singular" not in str(e):
+                    raise
+                # triangles of the current mesh collapsed (mcf at a large step, with the hold
+                # off: fertility at 3e-4 after 7 steps)
+                raise InvalidMeshError(
+                    f"Smoothing collapsed part of the mesh at step {it} (its system became "
+                    "singular): use a smaller Step size or fewer Iterations, or switch Keep "
+                    "from crossing itself on.") from None
         if multigrid is None:
             return solver.solve(M @ X, X[pinned] if pinned.size else None), solver, {}
         Xn = solver.solve(M @ X, x0=X, rtol=multigrid_rtol, maxiter=200,

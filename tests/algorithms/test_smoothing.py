@@ -303,3 +303,16 @@ def test_above_the_size_limit_crossings_are_not_checked_and_that_is_said(monkeyp
     last = list(smooth_iter(V, F, SmoothParams(iterations=2)))[-1]
     assert last.metrics["crossings_checked"] == 0.0
     assert "not checked" in last.message
+
+
+def test_a_flow_whose_system_turns_singular_stops_with_advice_and_the_hold_avoids_it():
+    """Mean curvature flow at a large step collapses fertility's triangles and SuperLU found
+    the matrix singular: it stopped as "an unexpected error ... a bug" (exit 70). Now a plain
+    message; with the hold (the default) the collapsing triangles are held and it finishes."""
+    m = read_mesh(shared_mesh("fertility.off"))
+    p = dict(flow="mcf", step_size=3e-4)
+    with pytest.raises(InvalidMeshError, match="use a smaller Step size"):
+        list(smooth_iter(m.V, m.F, SmoothParams(**p, hold_crossings=False)))
+    last = list(smooth_iter(m.V, m.F, SmoothParams(**p)))[-1]
+    assert np.isfinite(last.V).all() and np.isfinite(last.metrics["bending_energy"])
+    assert last.metrics["folded_left"] == 0 and last.metrics["crossings_left"] == 0
