@@ -280,7 +280,7 @@ class _Hold:
         from .deform.collisions import CHECK_MAX_FACES
         from .mesh.topology import vertex_face_adjacency
 
-        self.V0, self.F, self.fixed = V0, F, fixed
+        self.F, self.fixed = F, fixed
         self.held = np.zeros(len(V0), dtype=bool)
         self.check = len(F) <= CHECK_MAX_FACES
         self.seen: set[tuple[int, int]] = set()  # crossing pairs found
@@ -289,19 +289,21 @@ class _Hold:
         if self.check:
             from .mesh.intersections import intersecting_pairs_here
 
+            from .mesh.damage import Damage
+
             self.known = intersecting_pairs_here(V0, F)
             self.VF = vertex_face_adjacency(F, len(V0)).tocsr()
+            self.damage = Damage(V0, F)  # the input's side of the fold and collapse tests
 
     def _bad(self, X: np.ndarray) -> np.ndarray:
         """(k, 2) triangle pairs to hold at ``X``: the new crossing pairs, then each folded or
         collapsed triangle as a pair with itself."""
-        from .mesh.damage import collapsed_triangles, folded_triangles
         from .mesh.intersections import intersecting_pairs_here, new_crossings_away_from
 
         bad = new_crossings_away_from(intersecting_pairs_here(X, self.F), self.F, self.known)
         self.seen.update(map(tuple, np.sort(bad, axis=1).tolist()))
         self.left = len(bad)
-        folded = folded_triangles(self.V0, X, self.F) | collapsed_triangles(self.V0, X, self.F)
+        folded = self.damage.folded(X) | self.damage.collapsed(X)
         self.seen_folded |= folded
         self.left_folded = int(folded.sum())
         f = np.flatnonzero(folded)

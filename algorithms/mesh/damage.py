@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["COLLAPSED_AREA", "FOLD_ANGLE", "FOLD_TURN", "collapsed_triangles",
+__all__ = ["COLLAPSED_AREA", "Damage", "FOLD_ANGLE", "FOLD_TURN", "collapsed_triangles",
            "folded_triangles"]
 
 #: Degrees between a triangle's normal and a neighbour's above which it is turned back ...
@@ -22,18 +22,53 @@ FOLD_TURN = 60.0
 COLLAPSED_AREA = 1e-12
 
 
-def _tiny(V0: np.ndarray) -> float:
-    diag = float(np.linalg.norm(np.ptp(V0, axis=0))) or 1.0
-    return COLLAPSED_AREA * diag * diag
+class Damage:
+    """The input's side of :func:`folded_triangles` and :func:`collapsed_triangles`, computed
+    once for a mesh that is checked again and again (a smoothing flow checks every step)."""
+
+    def __init__(self, V0, F):
+        import scipy.sparse as sp
+
+        from .operators import face_areas, face_normals
+        from .topology import face_adjacency
+
+        V0 = np.asarray(V0, dtype=np.float64)
+        self.F = np.asarray(F, dtype=np.int64)
+        diag = float(np.linalg.norm(np.ptp(V0, axis=0))) or 1.0
+        self.tiny = COLLAPSED_AREA * diag * diag
+        self.had_area = face_areas(V0, self.F) > self.tiny
+        A = sp.triu(face_adjacency(self.F), k=1).tocoo()
+        self.f, self.g = A.row, A.col
+        N0 = face_normals(V0, self.F)
+        self.before = np.degrees(np.arccos(np.clip((N0[self.f] * N0[self.g]).sum(axis=1),
+                                                   -1.0, 1.0)))
+
+    def collapsed(self, V) -> np.ndarray:
+        """:func:`collapsed_triangles` at ``V``."""
+        from .operators import face_areas
+
+        return (face_areas(V, self.F) <= self.tiny) & self.had_area
+
+    def folded(self, V) -> np.ndarray:
+        """:func:`folded_triangles` at ``V``."""
+        from .operators import face_areas, face_normals
+
+        f, g = self.f, self.g
+        N = face_normals(V, self.F)
+        ok = self.had_area & (face_areas(V, self.F) > self.tiny)
+        use = ok[f] & ok[g]
+        after = np.degrees(np.arccos(np.clip((N[f[use]] * N[g[use]]).sum(axis=1), -1.0, 1.0)))
+        back = (after > FOLD_ANGLE) & (after - self.before[use] >= FOLD_TURN)
+        m = len(self.F)
+        n_nb = np.bincount(f[use], minlength=m) + np.bincount(g[use], minlength=m)
+        n_back = np.bincount(f[use][back], minlength=m) + np.bincount(g[use][back], minlength=m)
+        return ok & (n_nb > 0) & (n_back >= np.minimum(n_nb, 2))
 
 
 def collapsed_triangles(V0, V, F) -> np.ndarray:
     """(m,) bool: triangles of ``F`` of (nearly) zero area at ``V`` that had area at ``V0``
     (below :data:`COLLAPSED_AREA` of the input's squared diagonal)."""
-    from .operators import face_areas
-
-    tiny = _tiny(np.asarray(V0))
-    return (face_areas(V, F) <= tiny) & (face_areas(V0, F) > tiny)
+    return Damage(V0, F).collapsed(V)
 
 
 def folded_triangles(V0, V, F) -> np.ndarray:
@@ -49,23 +84,4 @@ def folded_triangles(V0, V, F) -> np.ndarray:
     the input, so a sharp edge the input already had (a CAD part's 90-degree rims, a thin
     plate's knife edge) is no fold, and a triangle that hardly turned is never one.
     """
-    import scipy.sparse as sp
-
-    from .operators import face_areas, face_normals
-    from .topology import face_adjacency
-
-    V0 = np.asarray(V0)
-    A = sp.triu(face_adjacency(F), k=1).tocoo()
-    f, g = A.row, A.col
-    N0, N = face_normals(V0, F), face_normals(V, F)
-    tiny = _tiny(V0)
-    ok = (face_areas(V0, F) > tiny) & (face_areas(V, F) > tiny)
-    use = ok[f] & ok[g]
-    f, g = f[use], g[use]
-    before = np.degrees(np.arccos(np.clip((N0[f] * N0[g]).sum(axis=1), -1.0, 1.0)))
-    after = np.degrees(np.arccos(np.clip((N[f] * N[g]).sum(axis=1), -1.0, 1.0)))
-    back = (after > FOLD_ANGLE) & (after - before >= FOLD_TURN)
-    m = len(F)
-    n_nb = np.bincount(f, minlength=m) + np.bincount(g, minlength=m)
-    n_back = np.bincount(f[back], minlength=m) + np.bincount(g[back], minlength=m)
-    return ok & (n_nb > 0) & (n_back >= np.minimum(n_nb, 2))
+    return Damage(V0, F).folded(V)
