@@ -95,9 +95,11 @@ def compare_coarsenings_iter(V, F, operator: str = "cotangent", m: int = 500,
     n = L.shape[0]
     t = time.perf_counter()
     nnull = sp.csgraph.connected_components(L, directed=False)[0]
-    if nnull > m:   # checked before the (then large) eigendecomposition
+    if nnull >= m:   # checked before the (then large) eigendecomposition
+        # m = nnull gives one node per part: a coarse operator with no non-zero eigenvalue,
+        # nothing to compare (it crashed the scoring, issue 38)
         raise ParameterError(f"the mesh has {nnull} separate parts but only m = {m} coarse "
-                             "nodes were asked for; ask for at least one per part, or remove "
+                             "nodes were asked for; ask for more than one per part, or remove "
                              "small loose parts first.")
     if not 1 <= k < m < n:
         raise ParameterError(f"need 1 <= k < m < n (here n = {n}, m = {m}, k = {k}); the "

@@ -59,13 +59,16 @@ def c_diag_score(C: np.ndarray, lam=None, rtol: float = 1e-6) -> float:
 
 
 def eigenvalue_errors(lam_fine, lam_coarse, k: int, zero_tol: float = 1e-8):
-    """Mean and max |lam~ - lam| / lam over the first k non-zero eigenvalues of each side."""
+    """Mean and max |lam~ - lam| / lam over the first k non-zero eigenvalues of each side
+    (NaN, NaN where either side has none: a coarse operator of one node per part)."""
     lf = np.asarray(lam_fine)
     lc = np.asarray(lam_coarse)
     scale = max(np.abs(lf).max(), 1e-300)
     nf = lf[np.abs(lf) > zero_tol * scale][:k]
     nc = lc[np.abs(lc) > zero_tol * scale][:k]
     kk = min(len(nf), len(nc))
+    if kk == 0:
+        return float("nan"), float("nan")
     rel = np.abs(nc[:kk] - nf[:kk]) / np.abs(nf[:kk])
     return float(rel.mean()), float(rel.max())
 

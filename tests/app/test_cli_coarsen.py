@@ -45,6 +45,14 @@ def test_too_few_coarse_nodes_for_the_parts_fails_plainly_and_writes_nothing(tmp
     assert r.returncode == 5, r.stderr
     assert "12 separate parts" in r.stderr and "Traceback" not in r.stderr
     assert not out.exists()
+    # issue 38: the message names the flag and the value that works, and they do
+    assert "--m 15 or more" in r.stderr, r.stderr       # 12 parts + 3 eigenvectors
+    # one coarse vertex per part leaves no non-zero eigenvalue: refused (it crashed the scoring)
+    r = stylize3d("coarsen", path, "--m", "12", "--k", "3", "-o", out)
+    assert r.returncode == 5 and "--m 15 or more" in r.stderr, r.stderr
+    r = stylize3d("coarsen", path, "--m", "15", "--k", "3", "-o", out)
+    assert r.returncode == 0, r.stderr
+    assert out.exists()
 
 
 def test_many_parts_ours_beats_amg_and_writes_npz(tmp_path):
