@@ -69,8 +69,8 @@ from ..render import Camera, LambertianShading, Shading
 
 __all__ = ["FilterSpec", "FilterContext", "register_filter", "unregister_filter", "get_filter",
            "filter_names", "read_image", "ImageReadError", "icosahedron_face_normals",
-           "guided_filter", "l0_smooth", "front_camera", "NoParams", "load_filter_plugin",
-           "PluginError"]
+           "guided_filter", "guided_noise_pixels", "l0_smooth", "front_camera", "NoParams",
+           "load_filter_plugin", "PluginError"]
 
 
 class ImageReadError(Stylize3DError):
@@ -141,6 +141,13 @@ class FilterSpec:
     threshold for edges, so smoothing the noise first raises the energy); a small step stays on
     the near side of it. The guided filter: 2e-4 (docs/results/paparazzi.md, "Rough scans").
 
+    ``noise_pixels(image, mask, params)`` (None = no such test): ``(pixels, of)``, how many of
+    the shape's pixels of one rendering the filter takes for noise or edges, out of how many.
+    A probe that rises says "rough" only where this share, over the monitor views, is at least
+    ``Paparazzi.ROUGH_SHARE`` (issue 38): a clean CAD model already at the filter's fixed point
+    (flat faces, sharp creases) also rises under any step, but its pixels are flat. The guided
+    filter: pixels whose window colour variance exceeds epsilon (:func:`guided_noise_pixels`).
+
     ``halve_on_climb`` (default True): ``PaparazziParams.plateau_step`` applies to this filter,
     whose energy then reads as the run's progress. False for neural-style: the style network
     repaints a more textured picture more strongly, so its energy is no measure of how far the
@@ -182,6 +189,7 @@ class FilterSpec:
     crease_angle: float = 0.0
     rough_learning_rate: float = 0.0
     halve_on_climb: bool = True
+    noise_pixels: Callable | None = None
     panel_iterations: int = 0
     shown_caption: str | Callable[[Any], str] = "Filtered"
     quick_look: dict = field(default_factory=dict, compare=False, hash=False)
@@ -439,9 +447,27 @@ class GuidedParams:
                                    "which keeps sharp edges; larger values blur them).")
 
 
+def guided_noise_pixels(image: np.ndarray, mask: np.ndarray, params: GuidedParams
+                        ) -> tuple[int, int]:
+    """``(pixels, of)``: of the shape's pixels whose whole window (``params.radius``) lies on the
+    shape (``of``; silhouettes left out), how many have a window colour variance (the mean of
+    the three channels') above ``params.epsilon``: the pixels the guided filter keeps as edges
+    rather than smooths (:func:`_guided`). A noisy scan is edges nearly everywhere, a clean
+    surface only at its creases (``FilterSpec.noise_pixels``; measured in
+    docs/results/paparazzi.md, "Rough probe on clean CAD models")."""
+    I = np.asarray(image, np.float64)
+    r = max(1, int(params.radius))
+    inside = _box(np.asarray(mask, np.float64)[..., None], r)[..., 0] > 1.0 - 1e-9
+    means = _box(np.concatenate([I, I * I], axis=2), r)
+    k = I.shape[2]
+    var = (means[..., k:] - means[..., :k] ** 2).mean(axis=2)
+    return int((var[inside] > params.epsilon).sum()), int(inside.sum())
+
+
 @register_filter("guided", kind="iterative", params=GuidedParams, resolution=128,
                  learning_rate=GUIDED_LEARNING_RATE, crease_angle=45.0,
                  rough_learning_rate=GUIDED_ROUGH_LEARNING_RATE,
+                 noise_pixels=guided_noise_pixels,
                  description="Guided filter: edge-preserving smoothing")
 def _guided(image, params: GuidedParams, ctx: FilterContext):
     """Self-guided filter (He et al. 2010; He and Sun 2015 with ``subsample`` > 1) of the

@@ -242,6 +242,7 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
                                       ("render", "filter", "derivative", "remesh")},
             "learning_rate_used": run.learning_rate,
             "rough_input": run.rough_input,
+            "rough_probe": run.rough, "rough_share": run.rough_share,
             "initial_monitor_energy": outcome["initial_monitor_energy"],
             "final_monitor_energy": outcome["monitor_energy"],
             "last_monitor_energy": outcome.get("last_monitor_energy", outcome["monitor_energy"]),

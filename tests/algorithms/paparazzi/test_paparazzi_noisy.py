@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from algorithms.mesh import read_mesh
-from algorithms.paparazzi import Paparazzi, PaparazziParams, bending_energy, get_filter
+from algorithms.paparazzi import Paparazzi, PaparazziParams, bending_energy, get_filter, optimize
 from algorithms.paparazzi.measures import noisy_scan, surface_distance
 from algorithms.steps import run_to_end
 from tests.conftest import ROOT, shared_mesh
@@ -165,6 +165,30 @@ def test_the_rough_probe_tells_a_noisy_scan_from_a_clean_surface():
         run = Paparazzi(X, F, "guided", None, PaparazziParams())
         probe = run.rough_probe(run.V0, run.F0)
         assert (probe > 0) == rough, probe          # noisy blob +0.45 %, clean -4.1 %
+        share = run.noise_share(run.V0, run.F0)     # noisy 0.89, clean 0.015
+        assert (share >= optimize.ROUGH_SHARE) == rough, share
+
+
+def test_a_clean_cad_model_whose_probe_rises_keeps_the_filters_own_step():
+    # issue 38: on a clean box the guided filter's pull raises its energy too (the corpus's
+    # two boxes +122 %, woody +208 %: a fixed point of the filter, not a barrier), and the rough
+    # step then made the energy rise (two boxes 0.047 -> 0.081, nothing written); its pixels are
+    # flat, so it is not rough. Two boxes of different sizes, slightly apart
+    from algorithms.mesh.primitives import cube
+    from algorithms.paparazzi.filters import GUIDED_LEARNING_RATE
+
+    V1, F1 = cube(2)
+    V2, F2 = cube(2)
+    V = np.vstack([V1, 0.6 * V2 + [1.5, 0.2, 0.1]])
+    F = np.vstack([F1, F2 + len(V1)])
+    run = Paparazzi(V, F, "guided", None, PaparazziParams(iterations=1, monitor_every=0,
+                                                          remesh_every=0))
+    last = run_to_end(run.steps())
+    assert run.rough > 0, run.rough
+    assert run.rough_share < 0.2, run.rough_share
+    assert not run.rough_input and run.learning_rate == GUIDED_LEARNING_RATE
+    assert last.metrics["rough_input"] == 0.0 and last.metrics["rough_share"] == run.rough_share
+    assert last.message == ""
 
 
 def test_guided_takes_its_rough_step_on_a_noisy_scan_and_its_energy_then_falls():
@@ -219,6 +243,7 @@ def test_the_rough_step_shrinks_with_the_edges_of_a_fine_mesh(monkeypatch):
         monkeypatch.setattr(optimize, "ROUGH_EDGE", edge)
         run = Paparazzi(V, F, "guided", None, pp)
         run.rough_probe = lambda *a, **k: 0.01
+        run.noise_share = lambda *a, **k: 1.0
         first = next(iter(run.steps()))
         h = run.edge_length
         assert 0.1 < h < 0.2                      # icosphere(3): 0.151
