@@ -208,8 +208,8 @@ def _measure(mesh: Path, out: Path, clean: bool, moves: bool) -> dict:
         m["moved"] = float(dist.max() / diag)  # to the nearest input vertex (an upper bound)
     if len(F) <= CROSSING_FACES and len(F0) <= CROSSING_FACES:
         from algorithms.mesh.intersections import (crossings_away_from,
-                                                   crossings_not_in_parents,
-                                                   intersecting_pairs_here)
+                                                   intersecting_pairs_here,
+                                                   new_crossing_pairs_away)
 
         try:
             P0, P = intersecting_pairs_here(V0, F0), intersecting_pairs_here(V, F)
@@ -217,8 +217,9 @@ def _measure(mesh: Path, out: Path, clean: bool, moves: bool) -> dict:
             k = int(round(np.log(max(len(F), 1) / len(F0)) / np.log(4))) if len(F0) else 0
             if k >= 1 and len(F) == len(F0) * 4 ** k:
                 # a subdivided result: its triangles split the input's, so the input's own
-                # crossings come back many times; count those whose parents did not cross
-                m["intersections_made"] = crossings_not_in_parents(P, k, P0)
+                # crossings come back many times; count those whose parents did not cross,
+                # away from the input's own crossings (as for the methods that move vertices)
+                m["intersections_made"] = len(new_crossing_pairs_away(P, k, F0, P0))
             elif same:
                 # the same triangles moved: where the input already crossed itself, the
                 # crossing line shifts onto neighbouring triangles; count the others

@@ -89,6 +89,23 @@ def new_crossings_away_from(pairs: np.ndarray, F, known_pairs: np.ndarray,
     return fresh[~(near[fresh[:, 0]] & near[fresh[:, 1]])]
 
 
+def new_crossing_pairs_away(pairs: np.ndarray, levels: int, F0, parent_pairs: np.ndarray,
+                            rings: int = 2) -> np.ndarray:
+    """The intersecting face pairs of a mesh subdivided ``levels`` times from ``F0`` (children
+    numbered as in :func:`new_crossing_pairs`) that are new away from the input's own crossings:
+    :func:`new_crossings_away_from` applied to their parent pairs (a pair counts unless its
+    parents crossed, or both parents lie within ``rings`` vertex rings of triangles that
+    crossed: smoothing two sheets that already pass through each other moves their crossing
+    line onto the neighbouring triangles' children)."""
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    if not len(pairs):
+        return pairs
+    par = np.sort(pairs // 4 ** int(levels), axis=1)
+    keep = new_crossings_away_from(par, F0, parent_pairs, rings)
+    base = len(F0) + 1
+    return pairs[np.isin(par[:, 0] * base + par[:, 1], keep[:, 0] * base + keep[:, 1])]
+
+
 def crossings_away_from(pairs: np.ndarray, F, known_pairs: np.ndarray, rings: int = 2) -> int:
     """How many of ``pairs`` are new crossings away from ``known_pairs``
     (:func:`new_crossings_away_from`)."""

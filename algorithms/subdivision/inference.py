@@ -840,6 +840,8 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
             metrics["bending_vs_butterfly"] = guard.ratio
         if guard.blended:
             metrics["loop_blended_vertices"] = float(guard.blended)
+        if guard.held_flat:
+            metrics["unsmoothed_vertices"] = float(guard.held_flat)
         note = " ".join(x for x in (note, guard.note, guard.blend_note()) if x)
     yield SubdividedStep(1000, 1000, out, metrics, f"{len(F_next):,} triangles", F=F_next,
                          note=note, levels_used=("neural",) * lv)
@@ -861,8 +863,10 @@ class _Guard:
     the input did not intersect; a self-intersection is a defect a user sees and a 3-D printer
     refuses, and Loop's smoothing shows how many the subdivision itself makes where two sheets
     of the input come close), Loop's positions are blended in around those triangles only
-    (:func:`_blend_loop_where_crossed`; said in the note and ``loop_blended_vertices``, with
-    the crossings left when three rounds did not bring them down to Loop's count). Measured
+    (:func:`_blend_loop_where_crossed`; said in the note and ``loop_blended_vertices``); where
+    crossings are left away from the input's own (Loop's smoothing crosses there too), the
+    previous level's surface is blended in (``unsmoothed_vertices``), and what three more rounds
+    leave is said. Measured
     when it was added (corpus and shared meshes as they are, level 1): the network crossed
     itself on dense smooth meshes in a few places (wingnut 8, koala 10, Loop 0), which one
     blend of 60 and 119 vertices removed; on CAD parts in many (octagonal_pocket 745, Loop 361:
@@ -891,21 +895,29 @@ class _Guard:
         self.planar = None
         self.Vl, self.Fl, self.loop_level = V, F, 0   # Loop, level by level, when needed
         self.input_pairs = None     # the input's intersecting triangle pairs, when needed
-        #: vertices of the result where Loop's positions were blended in, and at which levels
+        #: vertices of the result where Loop's positions were blended in, where the previous
+        #: level's surface was (Loop's crossed too), and at which levels either was
         self.blended = 0
+        self.held_flat = 0
         self.blended_levels: list[int] = []
         self.crossings_seen = 0
         #: (crossings left, Loop's) after the last level's blend, when more than Loop's
         self.crossings_left: tuple[int, int] | None = None
 
     def blend_note(self) -> str:
-        if not self.blended:
+        if not (self.blended or self.held_flat):
             return ""
         at = ", ".join(str(k) for k in self.blended_levels)
+        levels = f"level{'s' if len(self.blended_levels) > 1 else ''} {at}"
+        loop = (f"Loop subdivision's positions were blended in ({self.blended:,} vertices, "
+                f"{levels})")
+        flat = (f"the surface was left unsmoothed ({self.held_flat:,} vertices"
+                + ("" if self.blended else f", {levels}") + ")")
+        there = (f"{loop}, and where Loop's cross too {flat}" if self.blended and self.held_flat
+                 else loop if self.blended else f"Loop subdivision crosses too, so {flat}")
         return (f"The network's result crossed itself in {self.crossings_seen:,} place"
                 f"{'s' if self.crossings_seen > 1 else ''} where the input does not; there "
-                f"Loop subdivision's positions were blended in ({self.blended:,} vertices, "
-                f"level{'s' if len(self.blended_levels) > 1 else ''} {at})"
+                + there
                 + (f"; {self.crossings_left[0]:,} crossings are left (Loop subdivision's: "
                    f"{self.crossings_left[1]:,})." if self.crossings_left else "."))
 
@@ -926,17 +938,19 @@ class _Guard:
         self.Vl, self.Fl = subdivide_baseline(self.Vl, self.Fl, k - self.loop_level, "loop")
         self.loop_level = k
         loop_crossed = len(self._new_pairs(self.Vl, self.Fl, k))
-        if crossed <= loop_crossed:
-            return "", None
-        blended, changed, left = _blend_loop_where_crossed(
+        blended, changed, flat, left = _blend_loop_where_crossed(
             V_net, F_net, prev[0], prev[1], net_pairs, lambda X: self._new_pairs(X, F_net, k),
-            loop_crossed)
-        self.blended += changed
-        self.blended_levels.append(k)
-        self.crossings_seen += crossed
+            loop_crossed, lambda P: self._away(P, k))
         # what is left after the last round is kept and said: refusing the level instead (Loop
         # from there) lost more accuracy than the crossings cost (module docstring of _Guard)
-        self.crossings_left = (left, loop_crossed) if left > loop_crossed else None
+        self.crossings_left = (left, loop_crossed) if left else None
+        if not (changed or flat):
+            # no more than Loop's, all beside the input's own crossings: left as they are
+            return "", None
+        self.blended += changed
+        self.held_flat += flat
+        self.blended_levels.append(k)
+        self.crossings_seen += crossed
         return "", blended
 
     def _new_pairs(self, V, F, k: int) -> np.ndarray:
@@ -950,6 +964,14 @@ class _Guard:
         if self.input_pairs is None:
             self.input_pairs = intersecting_pairs(self.V0, self.F0)
         return new_crossing_pairs(pairs, k, self.input_pairs)
+
+    def _away(self, pairs, k: int) -> np.ndarray:
+        """Of new pairs of a ``k``-level result, those away from the input's own crossings
+        (:func:`~algorithms.mesh.intersections.new_crossing_pairs_away`)."""
+        from ..mesh.intersections import new_crossing_pairs_away
+
+        return new_crossing_pairs_away(pairs, k, self.F0, self.input_pairs
+                                       if self.input_pairs is not None else np.zeros((0, 2)))
 
     def _check(self, k: int, V_net, F_net) -> str:
         from .baselines import subdivide_baseline
@@ -1005,33 +1027,79 @@ def loop_in_refine_numbering(V_prev, F_prev, F_net=None) -> np.ndarray:
     return np.asarray(VL, np.float64)[perm]
 
 
-def _blend_loop_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs, allowed: int
-                              ) -> tuple[np.ndarray, int, int]:
+def midpoints_in_refine_numbering(V_prev, F_prev, F_net) -> np.ndarray:
+    """The previous level's surface in the numbering of ``F_net`` (:func:`~.topology.refine` of
+    ``F_prev``): old vertices where they were, each edge's vertex at the edge's midpoint, so
+    every child triangle lies in its parent's plane."""
+    V_prev = np.asarray(V_prev, np.float64)
+    F_prev = np.asarray(F_prev, np.int64)
+    F_net = np.asarray(F_net, np.int64)
+    n_out = int(F_net.max()) + 1
+    VM = np.empty((n_out, 3))
+    VM[:len(V_prev)] = V_prev
+    mid = F_net.reshape(-1, 4, 3)[:, 3]           # (ab, bc, ca) of every parent triangle
+    a, b, c = F_prev[:, 0], F_prev[:, 1], F_prev[:, 2]
+    VM[mid[:, 0]] = 0.5 * (V_prev[a] + V_prev[b])
+    VM[mid[:, 1]] = 0.5 * (V_prev[b] + V_prev[c])
+    VM[mid[:, 2]] = 0.5 * (V_prev[c] + V_prev[a])
+    return VM
+
+
+def _rings(A, F, pairs, n) -> tuple[np.ndarray, np.ndarray]:
+    """The corners of the triangles in ``pairs`` with one ring around them, and one more."""
+    bad = np.zeros(n, dtype=bool)
+    bad[F[pairs.ravel()].ravel()] = True
+    ring1 = bad | (A @ bad.astype(np.float64) > 0)
+    ring2 = ring1 | (A @ ring1.astype(np.float64) > 0)
+    return ring1, ring2
+
+
+def _blend_loop_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs, allowed: int,
+                              away=None) -> tuple[np.ndarray, int, int, int]:
     """The network's level with Loop's positions blended in around the triangles that cross
     each other where the input's did not: weight 1 on their corners and the ring around them,
     1/2 on the next ring, ``V = (1 - w) V_net + w V_loop`` (Loop of the same coarser level, so
     the two share every vertex), widened up to :data:`BLEND_ROUNDS` times while the crossings
-    are more than ``allowed`` (Loop's own). ``pairs``: the new crossing pairs of ``V_net``;
-    ``new_pairs(V)``: those of other positions on ``F_net``. Returns (positions, vertices
-    changed, crossings left)."""
+    are more than ``allowed`` (Loop's own). Then, where crossings are left (Loop's smoothing
+    crosses there too: two sheets of the input closer than the smoothing shrinks them), the
+    previous level's surface itself (:func:`midpoints_in_refine_numbering`, whose triangles lie
+    in their parents' planes and so cross only where those did) is blended in the same way, up
+    to :data:`BLEND_ROUNDS` more times while any is left away from the input's own crossings
+    (``away(pairs)``, default all: near them, as on a model of interpenetrating parts, smoothing
+    only moves the crossing line; issue 38: octagonal_pocket and abominevole kept Loop's
+    crossings). ``pairs``: the new crossing pairs of ``V_net``; ``new_pairs(V)``: those of
+    other positions on ``F_net``. Returns
+    (positions, vertices with Loop's positions blended in, vertices with the previous level's
+    surface blended in, crossings left)."""
     from ..mesh.topology import vertex_adjacency
 
     n = len(V_net)
-    VL = loop_in_refine_numbering(V_prev, F_prev, F_net)
     A = vertex_adjacency(F_net, n)
     w = np.zeros(n)
     V = np.asarray(V_net, np.float64)
-    for _ in range(BLEND_ROUNDS):
-        if len(pairs) <= allowed:
-            break
-        bad = np.zeros(n, dtype=bool)
-        bad[F_net[pairs.ravel()].ravel()] = True
-        ring1 = bad | (A @ bad.astype(np.float64) > 0)
-        ring2 = ring1 | (A @ ring1.astype(np.float64) > 0)
-        w = np.maximum(w, np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0)))
-        V = (1.0 - w)[:, None] * V_net + w[:, None] * VL
-        pairs = new_pairs(V)
-    return V, int((w > 0).sum()), int(len(pairs))
+    if len(pairs) > allowed:
+        VL = loop_in_refine_numbering(V_prev, F_prev, F_net)
+        for _ in range(BLEND_ROUNDS):
+            if len(pairs) <= allowed:
+                break
+            ring1, ring2 = _rings(A, F_net, pairs, n)
+            w = np.maximum(w, np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0)))
+            V = (1.0 - w)[:, None] * V_net + w[:, None] * VL
+            pairs = new_pairs(V)
+    wf = np.zeros(n)
+    far = away(pairs) if away is not None else pairs
+    if len(far):
+        VM = midpoints_in_refine_numbering(V_prev, F_prev, F_net)
+        V_smooth = V
+        for _ in range(BLEND_ROUNDS):
+            if not len(far):
+                break
+            ring1, ring2 = _rings(A, F_net, far, n)
+            wf = np.maximum(wf, np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0)))
+            V = (1.0 - wf)[:, None] * V_smooth + wf[:, None] * VM
+            pairs = new_pairs(V)
+            far = away(pairs) if away is not None else pairs
+    return V, int((w > 0).sum()), int((wf > 0).sum()), int(len(far))
 
 
 def _guard_fallback(V, F, lv: int, li: int, kept, why: str, guard: _Guard, plan: ScalePlan,
@@ -1060,8 +1128,11 @@ def _guard_fallback(V, F, lv: int, li: int, kept, why: str, guard: _Guard, plan:
         said += (f" 'Coarsen first' to about {plan.advice} vertices lets the network rebuild "
                  f"the detail.")
     metrics = {"bending_vs_butterfly": guard.ratio} if np.isfinite(guard.ratio) else {}
-    if guard.blended:   # earlier levels the network kept, repaired where they crossed
-        metrics["loop_blended_vertices"] = float(guard.blended)
+    if guard.blended or guard.held_flat:   # earlier levels the network kept, repaired
+        if guard.blended:                   # where they crossed
+            metrics["loop_blended_vertices"] = float(guard.blended)
+        if guard.held_flat:
+            metrics["unsmoothed_vertices"] = float(guard.held_flat)
         said = f"{said} {guard.blend_note()}"
     yield SubdividedStep(1000, 1000, np.asarray(Vl, dtype=np.float64), metrics,
                          f"{len(Fl):,} triangles", F=np.asarray(Fl, dtype=np.int64),

@@ -110,7 +110,9 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
            "vertices_in": int(len(data.V)), "faces_in": int(len(data.F)),
            "vertices": int(len(V)), "faces": int(len(F)), "seconds": dt, "note": note,
            # vertices where the guard blended Loop's positions in (the network crossed itself)
-           "loop_blended_vertices": int((last.metrics or {}).get("loop_blended_vertices", 0))}
+           "loop_blended_vertices": int((last.metrics or {}).get("loop_blended_vertices", 0)),
+           # of those, held on the previous level's surface where Loop's crossed too
+           "unsmoothed_vertices": int((last.metrics or {}).get("unsmoothed_vertices", 0))}
     if args.json:
         print_json(out)
     else:

@@ -261,9 +261,12 @@ def _subdivision_outcome(last: Step) -> dict:
         out["fallback"] = bool(last.fallback)
         if getattr(last, "levels_used", ()):
             out["levels_used"] = list(last.levels_used)
-    blended = int((last.metrics or {}).get("loop_blended_vertices", 0))
-    if blended:   # the guard's local repair of crossings (said in the note too)
-        out["loop_blended_vertices"] = blended
+    # the guard's local repair of crossings (said in the note too): Loop's positions blended
+    # in, and the previous level's surface where Loop's crossed too
+    for key in ("loop_blended_vertices", "unsmoothed_vertices"):
+        count = int((last.metrics or {}).get(key, 0))
+        if count:
+            out[key] = count
     return out
 
 

@@ -1,0 +1,98 @@
+"""The guard's repair of crossings where Loop's smoothing crosses too (issue 38): the previous
+level's own surface is blended in there, away from the input's own crossings."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from algorithms.mesh.intersections import (intersecting_pairs, new_crossing_pairs,
+                                           new_crossing_pairs_away)
+from algorithms.mesh.primitives import grid
+from algorithms.subdivision import inference
+from algorithms.subdivision.inference import (_blend_loop_where_crossed, _Guard,
+                                              midpoints_in_refine_numbering)
+from algorithms.subdivision.topology import refine
+
+
+def _two_sheets(gap: float = 0.1):
+    V, F = grid(6, 6)
+    top = V + [0.0, 0.0, gap]
+    return np.vstack([V, top]), np.vstack([F, F[:, ::-1] + len(V)])
+
+
+def test_the_previous_levels_surface_keeps_each_child_in_its_parents_plane():
+    rng = np.random.default_rng(0)
+    V, F = _two_sheets()
+    V = V + 0.02 * rng.standard_normal(V.shape)
+    F1 = refine(F, len(V))
+    VM = midpoints_in_refine_numbering(V, F, F1)
+    np.testing.assert_array_equal(VM[:len(V)], V)
+    for f, kids in enumerate(F1.reshape(-1, 4, 3)):
+        a, b, c = V[F[f]]
+        n = np.cross(b - a, c - a)
+        d = (VM[kids.ravel()] - a) @ n / np.linalg.norm(n)
+        assert np.abs(d).max() < 1e-12
+    # so a surface that does not cross itself gives a level that does not either
+    assert len(intersecting_pairs(VM, F1)) == 0
+
+
+def test_where_loop_crosses_too_the_previous_levels_surface_is_blended_in(monkeypatch):
+    V, F = _two_sheets(0.1)
+    F1 = refine(F, len(V))
+    VM = midpoints_in_refine_numbering(V, F, F1)
+    # the "network" pushes the middle of the top sheet through the bottom one
+    V_net = VM.copy()
+    top = np.arange(len(V_net)) >= 0
+    top &= V_net[:, 2] > 0.05
+    middle = top & (np.abs(V_net[:, 0] - 0.5) < 0.15) & (np.abs(V_net[:, 1] - 0.5) < 0.15)
+    V_net[middle, 2] = -0.05
+
+    def new_pairs(X):
+        return new_crossing_pairs(intersecting_pairs(X, F1), 1, np.zeros((0, 2)))
+
+    pairs = new_pairs(V_net)
+    assert len(pairs) > 0
+    # Loop of the same level crossing in the same places (Loop's positions: the network's)
+    monkeypatch.setattr(inference, "loop_in_refine_numbering", lambda *a, **k: V_net.copy())
+    out, loop_n, flat_n, left = _blend_loop_where_crossed(V_net, F1, V, F, pairs, new_pairs, 0)
+    assert left == 0 and len(new_pairs(out)) == 0
+    assert loop_n > 0 and flat_n > 0
+    changed = (out != V_net).any(axis=1)
+    assert changed.any() and changed.sum() <= flat_n
+    # only around the crossing: the far corners of both sheets keep the network's positions
+    corner = (np.abs(V_net[:, 0] - 0.5) > 0.4) & (np.abs(V_net[:, 1] - 0.5) > 0.4)
+    assert not changed[corner].any()
+    # crossings beside the input's own are left alone (away() finds none)
+    out2, _, flat2, left2 = _blend_loop_where_crossed(V_net, F1, V, F, pairs, new_pairs, 0,
+                                                      away=lambda P: P[:0])
+    assert flat2 == 0 and left2 == 0
+    np.testing.assert_array_equal(out2, V_net)
+
+
+def test_crossings_beside_the_inputs_own_are_not_new():
+    V, F = grid(10, 10)
+    # face 10 i + j is the square (i, j) of the grid's first half: opposite corners
+    known = np.array([[0, 99]])                # the input's own crossing pair
+    kid = lambda f: 4 * f                       # noqa: E731 - a child of face f at level 1
+    pairs = np.array([[kid(0), kid(99)],        # children of the known pair
+                      [kid(1), kid(98)],        # beside it on both sides
+                      [kid(1), kid(55)],        # beside it on one side only
+                      [kid(44), kid(55)]])      # far from it
+    assert len(new_crossing_pairs(pairs, 1, known)) == 3
+    away = new_crossing_pairs_away(pairs, 1, F, known)
+    np.testing.assert_array_equal(away, pairs[2:])
+    # with no crossings in the input every new pair counts
+    np.testing.assert_array_equal(new_crossing_pairs_away(pairs, 1, F, np.zeros((0, 2))), pairs)
+
+
+def test_the_note_says_where_the_surface_was_left_unsmoothed():
+    V, F = _two_sheets()
+    g = _Guard(V, F)
+    g.held_flat, g.blended_levels, g.crossings_seen = 12, [2], 7
+    assert g.blend_note() == (
+        "The network's result crossed itself in 7 places where the input does not; there Loop "
+        "subdivision crosses too, so the surface was left unsmoothed (12 vertices, level 2).")
+    g.blended = 40
+    assert g.blend_note().endswith(
+        "Loop subdivision's positions were blended in (40 vertices, level 2), and where Loop's "
+        "cross too the surface was left unsmoothed (12 vertices).")
