@@ -89,6 +89,17 @@ def new_crossings_away_from(pairs: np.ndarray, F, known_pairs: np.ndarray,
     return fresh[~(near[fresh[:, 0]] & near[fresh[:, 1]])]
 
 
+def pairs_not_in(pairs: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """The rows of ``pairs`` (face index pairs, either order) that are not rows of ``known``."""
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    known = np.sort(np.asarray(known, np.int64).reshape(-1, 2), axis=1)
+    if not len(pairs) or not len(known):
+        return pairs
+    p = np.sort(pairs, axis=1)
+    base = int(max(p.max(), known.max())) + 1
+    return pairs[~np.isin(p[:, 0] * base + p[:, 1], known[:, 0] * base + known[:, 1])]
+
+
 def new_crossing_pairs_away(pairs: np.ndarray, levels: int, F0, parent_pairs: np.ndarray,
                             rings: int = 2) -> np.ndarray:
     """The intersecting face pairs of a mesh subdivided ``levels`` times from ``F0`` (children

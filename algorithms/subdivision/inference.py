@@ -1009,6 +1009,10 @@ class _Guard:
 
 #: the guard's local repair of crossings: at most this many rounds, each widening the blend
 BLEND_ROUNDS = 3
+#: and of the previous level's surface where Loop's crossed too: it crosses only where the
+#: level before did, so widening it ends the crossings; at most this many rounds (ADIS16480, a
+#: CAD part with slivers: 19 crossings left after 3)
+FLAT_ROUNDS = 8
 
 
 def loop_in_refine_numbering(V_prev, F_prev, F_net=None) -> np.ndarray:
@@ -1064,7 +1068,7 @@ def _blend_loop_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs, al
     crosses there too: two sheets of the input closer than the smoothing shrinks them), the
     previous level's surface itself (:func:`midpoints_in_refine_numbering`, whose triangles lie
     in their parents' planes and so cross only where those did) is blended in the same way, up
-    to :data:`BLEND_ROUNDS` more times while any is left away from the input's own crossings
+    to :data:`FLAT_ROUNDS` times while any is left away from the input's own crossings
     (``away(pairs)``, default all: near them, as on a model of interpenetrating parts, smoothing
     only moves the crossing line; issue 38: octagonal_pocket and abominevole kept Loop's
     crossings). ``pairs``: the new crossing pairs of ``V_net``; ``new_pairs(V)``: those of
@@ -1089,16 +1093,23 @@ def _blend_loop_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs, al
     wf = np.zeros(n)
     far = away(pairs) if away is not None else pairs
     if len(far):
+        from ..mesh.intersections import intersecting_pairs, pairs_not_in
+
         VM = midpoints_in_refine_numbering(V_prev, F_prev, F_net)
+        # pairs that the previous level's own surface shows at this resolution (triangles of a
+        # sliver-laden CAD part touching in their common plane: ADIS16480, 275 at level 2 of
+        # its unchanged surface) are not the smoothing's and cannot be mended here
+        own = intersecting_pairs(VM, F_net)
+        far = pairs_not_in(far, own)
         V_smooth = V
-        for _ in range(BLEND_ROUNDS):
+        for _ in range(FLAT_ROUNDS):
             if not len(far):
                 break
             ring1, ring2 = _rings(A, F_net, far, n)
             wf = np.maximum(wf, np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0)))
             V = (1.0 - wf)[:, None] * V_smooth + wf[:, None] * VM
             pairs = new_pairs(V)
-            far = away(pairs) if away is not None else pairs
+            far = pairs_not_in(away(pairs) if away is not None else pairs, own)
     return V, int((w > 0).sum()), int((wf > 0).sum()), int(len(far))
 
 

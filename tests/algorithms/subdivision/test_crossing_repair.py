@@ -96,3 +96,27 @@ def test_the_note_says_where_the_surface_was_left_unsmoothed():
     assert g.blend_note().endswith(
         "Loop subdivision's positions were blended in (40 vertices, level 2), and where Loop's "
         "cross too the surface was left unsmoothed (12 vertices).")
+
+
+def test_pairs_the_previous_levels_own_surface_shows_are_left_alone(monkeypatch):
+    # two sheets lying on each other: the previous level's own surface "crosses" at this
+    # resolution (as the touching coplanar slivers of a CAD part do), so nothing can mend it
+    # and nothing is held (ADIS16480 was held over 8 rounds for 16 such pairs)
+    from algorithms.mesh.intersections import pairs_not_in
+
+    V, F = _two_sheets(0.0)
+    F1 = refine(F, len(V))
+    VM = midpoints_in_refine_numbering(V, F, F1)
+    own = intersecting_pairs(VM, F1)
+    assert len(own) > 0
+    np.testing.assert_array_equal(pairs_not_in(own, own[:, ::-1]), own[:0])
+    np.testing.assert_array_equal(pairs_not_in(own, own[:3]), own[3:])
+    monkeypatch.setattr(inference, "loop_in_refine_numbering", lambda *a, **k: VM.copy())
+
+    def new_pairs(X):
+        return intersecting_pairs(X, F1)
+
+    out, loop_n, flat_n, left = _blend_loop_where_crossed(VM.copy(), F1, V, F, own, new_pairs,
+                                                          len(own))
+    assert (loop_n, flat_n, left) == (0, 0, 0)
+    np.testing.assert_array_equal(out, VM)
