@@ -224,7 +224,8 @@ def _measure(mesh: Path, out: Path, clean: bool, moves: bool) -> dict:
                 from algorithms.subdivision.inference import midpoints_in_refine_numbering
                 from algorithms.subdivision.topology import refine
 
-                VL, FL = np.asarray(V0, np.float64), np.asarray(F0, np.int64)
+                used, FL = np.unique(np.asarray(F0, np.int64), return_inverse=True)
+                VL, FL = np.asarray(V0, np.float64)[used], FL.reshape(-1, 3)
                 for _ in range(k):
                     F1 = refine(FL, len(VL))
                     VL, FL = midpoints_in_refine_numbering(VL, FL, F1), F1

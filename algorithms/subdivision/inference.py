@@ -1110,7 +1110,9 @@ def _blend_loop_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs, al
             V = (1.0 - wf)[:, None] * V_smooth + wf[:, None] * VM
             pairs = new_pairs(V)
             far = pairs_not_in(away(pairs) if away is not None else pairs, own)
-    return V, int((w > 0).sum()), int((wf > 0).sum()), int(len(far))
+    # what is left, said: also the pairs of the previous level's own surface (ADIS16480: 10)
+    left = away(pairs) if away is not None else pairs
+    return V, int((w > 0).sum()), int((wf > 0).sum()), int(len(left))
 
 
 def _guard_fallback(V, F, lv: int, li: int, kept, why: str, guard: _Guard, plan: ScalePlan,
