@@ -90,7 +90,8 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   metric ``rough_input`` says so), provided at least ``ROUGH_SHARE`` = 0.7 of the shape's
   pixels are in the filter's noise regime (``FilterSpec.noise_pixels``; issue 38: the probe
   also rises on clean CAD models at the filter's fixed point, flat faces and sharp creases,
-  where the rough step then raised the energy on 10 corpus meshes). The rough step was measured on meshes whose mean edge, in
+  where the rough step then raised the energy on 10 corpus meshes). The rough step was
+  measured on meshes whose mean edge, in
   the cube of side 2, is 0.0226-0.04; on a finer mesh it shrinks in proportion below
   ``ROUGH_EDGE`` = 0.02 (a step is about ``lr`` per coordinate, so a fixed one is a larger share
   of a shorter edge and of its noise: a 155,813-vertex noisy scan at 2e-4 crossed itself, 7
