@@ -23,7 +23,10 @@ new self-intersections on 13.
    grows, also after a round that did not lower the count (the next, larger set often does:
    on beast, twirl and cycloidal the first round changed nothing and the later ones removed
    34 of 34, 4 of 4 and 104 of 105 crossings), and the result with the fewest crossings is
-   kept. What is left is said.
+   kept;
+5. where crossings are still left, the surface around them is blended back towards the input
+   (:func:`put_back`, no new run; up to :data:`PUT_BACK_ROUNDS` widenings, the fewest
+   crossings kept). What is left is said.
 
 This is not El Topo's continuous collision handling: held regions stop where they were before
 they first crossed (less styled there), the rest is the method's own optimum with those
@@ -42,15 +45,16 @@ import numpy as np
 
 from ..steps import Step
 
-__all__ = ["CHECK_MAX_FACES", "CHECKPOINT_EVERY", "HOLD_CROSSINGS_TOOLTIP", "ROUNDS", "WORDING",
-           "crossings_of", "crossings_sentence", "grow_held", "hold_where_crossed",
-           "metrics_of"]
+__all__ = ["CHECK_MAX_FACES", "CHECKPOINT_EVERY", "HOLD_CROSSINGS_TOOLTIP", "PUT_BACK_ROUNDS",
+           "ROUNDS", "WORDING", "crossings_of", "crossings_sentence", "grow_held",
+           "hold_where_crossed", "metrics_of", "put_back"]
 
 #: The tooltip of the setting (``hold_crossings`` of the cubic and analogy parameters).
 HOLD_CROSSINGS_TOOLTIP = (
     "Where the style pushes the surface through itself (thin walls, parts that nearly touch), "
     "hold those vertices where they were before they crossed and let the rest settle around "
-    "them. Meshes of up to 200,000 triangles. Off: the thesis's method as it is.")
+    "them; where they would still cross, put the surface there back towards the input. Meshes "
+    "of up to 200,000 triangles. Off: the thesis's method as it is.")
 
 #: Meshes with more triangles are not checked (one self-intersection test takes about 0.2 s at
 #: 100,000 triangles and 3.3 s at 1.6M): the result's Step says so.
@@ -61,6 +65,8 @@ CHECKPOINT_EVERY = 5
 MAX_CHECKPOINTS = 48
 #: Rounds of holding and running again.
 ROUNDS = 5
+#: Rounds of putting the surface back towards the input where crossings are still left.
+PUT_BACK_ROUNDS = 10
 
 
 def grow_held(held: np.ndarray, bad: np.ndarray, F: np.ndarray, VF, fixed: np.ndarray
@@ -73,6 +79,40 @@ def grow_held(held: np.ndarray, bad: np.ndarray, F: np.ndarray, VF, fixed: np.nd
     grown[F[VF[np.flatnonzero(grown)].indices].ravel()] = True  # and one ring
     grown &= ~fixed
     return grown
+
+
+def put_back(V, V0, F, known, bad, fixed, rounds: int = PUT_BACK_ROUNDS
+             ) -> tuple[np.ndarray, int, int]:
+    """The last resort where holding and running again left crossings: around the crossing
+    triangles ``bad`` (k, 2) of ``V``, the surface is blended back towards the input ``V0``
+    (weight 1 on their corners and one ring, 1/2 on the next ring), widened up to ``rounds``
+    times while crossings are left; the input crosses itself nowhere new, so this ends them
+    where the widening settles (a few rounds on pizza and ogre; on beast and counter the blend's
+    edge crossed elsewhere round after round). ``fixed`` vertices (held by the caller) never
+    move. Returns the positions with the fewest crossings seen (``V`` itself if no round had
+    fewer), the vertices moved there, and their crossings."""
+    from ..mesh.intersections import intersecting_pairs_here, new_crossings_away_from
+    from ..mesh.topology import vertex_adjacency
+
+    V = np.asarray(V, np.float64)
+    n = len(V)
+    A = vertex_adjacency(F, n)
+    w = np.zeros(n)
+    best = (V, 0, len(bad))
+    for _ in range(int(rounds)):
+        if not len(bad):
+            break
+        corners = np.zeros(n, bool)
+        corners[F[bad.ravel()].ravel()] = True
+        ring1 = corners | (A @ corners.astype(np.float64) > 0)
+        ring2 = ring1 | (A @ ring1.astype(np.float64) > 0)
+        w = np.maximum(w, np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0)))
+        w[fixed] = 0.0
+        X = (1.0 - w)[:, None] * V + w[:, None] * V0
+        bad = new_crossings_away_from(intersecting_pairs_here(X, F), F, known)
+        if len(bad) < best[2]:
+            best = (X, int((w > 0).sum()), len(bad))
+    return best
 
 
 def _latest_clear(checkpoints: list[np.ndarray], F, known, faces: np.ndarray) -> int:
@@ -97,6 +137,7 @@ def _latest_clear(checkpoints: list[np.ndarray], F, known, faces: np.ndarray) ->
 def hold_where_crossed(steps: Iterator[Step], V0, F,
                        rerun: Callable[[np.ndarray, np.ndarray, np.ndarray], Iterator[Step]], *,
                        constrained=None, rounds: int = ROUNDS,
+                       put_back_rounds: int = PUT_BACK_ROUNDS,
                        wording: str = "style") -> Iterator[Step]:
     """``steps`` (a deformation of the mesh ``V0``, ``F`` from its input positions, one Step
     per iteration), then the rounds of the module docstring.
@@ -110,13 +151,15 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
         ``V_start``.
     constrained : (n,) bool, optional, vertices the caller already constrains (never held).
     rounds : int, at most this many rounds.
+    put_back_rounds : int, then at most this many widenings of :func:`put_back` (0: none).
     wording : a key of :data:`WORDING`, for the last Step's sentence.
 
     Yields
     ------
     The Steps of ``steps``, then those of each round (numbered on from the last), all passed
     through as they come. The last Step carries the metrics ``crossings_made`` (new crossings
-    of the deformation before any holding), ``crossings_left`` and ``held_vertices``, and its
+    of the deformation before any holding), ``crossings_left``, ``held_vertices`` (and
+    ``put_back_vertices`` where :func:`put_back` lowered the count), and its
     message says what was held; above :data:`CHECK_MAX_FACES` triangles nothing is checked
     and ``crossings_checked`` is 0.
     """
@@ -158,7 +201,7 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
     # the bisection runs over the deformation's own iterates, its result last
     checkpoints.append(np.array(last.V, dtype=np.float64, copy=True))
     first = last
-    best = (len(bad), last, 0)  # (crossings, Step, vertices held): the result kept
+    best = (len(bad), last, 0, bad)  # (crossings, Step, vertices held, their pairs): kept
     k_round = 0
     while len(bad) and k_round < rounds:
         k_round += 1
@@ -184,8 +227,15 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
                         metrics=dict(st.metrics), message=f"held where crossed, {st.message}")
         bad = new_crossings_away_from(intersecting_pairs_here(last.V, F), F, known)
         if len(bad) < best[0]:
-            best = (len(bad), last, len(ids))
-    left, kept, n_held = best
+            best = (len(bad), last, len(ids), bad)
+    left, kept, n_held, bad = best
+    V_kept, n_back = kept.V, 0
+    if left and put_back_rounds > 0:
+        V_back, n_back, left_back = put_back(kept.V, V0, F, known, bad, fixed, put_back_rounds)
+        if left_back < left:
+            V_kept, left = V_back, left_back
+        else:
+            n_back = 0
     # the deformation's own figures (e.g. a progressive run's coarse and fine iteration counts,
     # the held rounds' iterations counted as fine ones), then the kept result's
     metrics = {**first.metrics, **kept.metrics}
@@ -194,8 +244,10 @@ def hold_where_crossed(steps: Iterator[Step], V0, F,
                                            + last.iteration - first.iteration)
     metrics.update(crossings_checked=1.0, crossings_made=float(made),
                    crossings_left=float(left), held_vertices=float(n_held))
+    if n_back:
+        metrics["put_back_vertices"] = float(n_back)
     # numbered after every iteration that ran; the positions are the kept result's
-    yield Step(iteration=last.iteration, total=last.total, V=kept.V, metrics=metrics,
+    yield Step(iteration=last.iteration, total=last.total, V=V_kept, metrics=metrics,
                message=crossings_sentence(metrics, wording) or kept.message)
 
 
@@ -210,6 +262,8 @@ def crossings_of(metrics: dict) -> dict | None:
         return {"checked": False, "made": None, "held_vertices": 0, "left": None}
     out = {"checked": True, "made": int(metrics["crossings_made"]),
            "held_vertices": int(metrics["held_vertices"]), "left": int(metrics["crossings_left"])}
+    if metrics.get("put_back_vertices"):
+        out["put_back_vertices"] = int(metrics["put_back_vertices"])
     if "folded_made" in metrics:
         out.update(folded=int(metrics["folded_made"]), folded_left=int(metrics["folded_left"]))
     return out
@@ -223,6 +277,8 @@ def metrics_of(crossings: dict | None) -> dict:
         return {"crossings_checked": 0.0}
     m = {"crossings_checked": 1.0, "crossings_made": crossings["made"],
          "held_vertices": crossings["held_vertices"], "crossings_left": crossings["left"]}
+    if crossings.get("put_back_vertices"):
+        m["put_back_vertices"] = crossings["put_back_vertices"]
     if "folded" in crossings:
         m.update(folded_made=crossings["folded"], folded_left=crossings["folded_left"])
     return m
@@ -261,7 +317,12 @@ def crossings_sentence(metrics: dict, wording: str = "style") -> str:
     if folded_left:
         rest.append(f"{folded_left} folded or collapsed triangle(s)")
     left = "none is left" if not rest else f"{' and '.join(rest)} are left: {advice}"
+    back = c.get("put_back_vertices", 0)
+    back = (f"; where they still crossed, {back:,} vertices were put back towards the input"
+            if back else "")
     if not c["held_vertices"]:
-        return f"{did}; holding those points back did not reduce them, so {left}."
+        return (f"{did}; holding those points back did not reduce them{back}, so {left}."
+                if not back else f"{did}{back}; {left}.")
     when = "before they crossed" if not folded else "before the step that did it"
-    return f"{did}: {c['held_vertices']:,} vertices were held where they were {when}; {left}."
+    return (f"{did}: {c['held_vertices']:,} vertices were held where they were {when}{back}; "
+            f"{left}.")
