@@ -119,8 +119,9 @@ class SmoothParams:
         True, label="Keep from crossing itself",
         tooltip="Where a step would push the surface through itself (thin walls, parts that "
                 "nearly touch) or fold triangles over or collapse them, hold those vertices "
-                "where they were and smooth the rest. Meshes of up to 200,000 triangles. Off: "
-                "the flow as it is.")
+                "where they were and smooth the rest; where it still crosses at the end, put "
+                "the surface there back towards the input. Meshes of up to 200,000 triangles. "
+                "Off: the flow as it is.")
 
 
 def _centroid_and_area(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, float]:
@@ -258,6 +259,11 @@ def smooth_iter(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParam
             else:
                 scale = np.sqrt(area0 / area)
             Xn[used] = (Xn[used] - C) * scale + C0
+        if hold is not None and it == params.iterations and hold.left:
+            # crossings the held steps could not avoid: the surface there back towards the
+            # input (issue 38: pizza's 3)
+            Xn = hold.put_back(Xn, V0)
+            extra.update(hold.figures())
         disp = float(np.linalg.norm(Xn - X, axis=1).max()) / max(diag, 1e-300)
         moved = float(np.linalg.norm(Xn - V0, axis=1).max()) / max(diag, 1e-300)
         X = Xn
@@ -286,6 +292,7 @@ class _Hold:
         self.seen: set[tuple[int, int]] = set()  # crossing pairs found
         self.seen_folded = np.zeros(len(F), dtype=bool)  # triangles found folded or collapsed
         self.left = self.left_folded = 0
+        self.back = 0  # vertices put back towards the input at the end
         if self.check:
             from .mesh.intersections import intersecting_pairs_here
 
@@ -329,6 +336,29 @@ class _Hold:
         self.held = grown
         return True
 
+    def put_back(self, X: np.ndarray, V0: np.ndarray) -> np.ndarray:
+        """``X`` with the surface around its crossings (and folded or collapsed triangles)
+        blended back towards the input (:func:`algorithms.deform.collisions.put_back`), where
+        that leaves fewer of them in all; else ``X``."""
+        from .deform.collisions import put_back
+        from .mesh.intersections import intersecting_pairs_here, new_crossings_away_from
+
+        def folds(Y):
+            f = np.flatnonzero(self.damage.folded(Y) | self.damage.collapsed(Y))
+            return np.c_[f, f]
+
+        bad = new_crossings_away_from(intersecting_pairs_here(X, self.F), self.F, self.known)
+        if not len(bad):
+            return X
+        bad = np.concatenate([np.asarray(bad, np.int64).reshape(-1, 2), folds(X)])
+        Y, n_back, count = put_back(X, V0, self.F, self.known, bad, self.fixed, more=folds)
+        if count >= len(bad):
+            return X
+        left = len(new_crossings_away_from(intersecting_pairs_here(Y, self.F), self.F,
+                                           self.known))
+        self.left, self.left_folded, self.back = left, count - left, n_back
+        return Y
+
     def figures(self) -> dict:
         """The metrics of the module docstring after the last check."""
         if not self.check:
@@ -336,7 +366,8 @@ class _Hold:
         return {"crossings_checked": 1.0, "crossings_made": float(len(self.seen)),
                 "crossings_left": float(self.left),
                 "folded_made": float(self.seen_folded.sum()),
-                "folded_left": float(self.left_folded), "held_vertices": float(self.held.sum())}
+                "folded_left": float(self.left_folded), "held_vertices": float(self.held.sum()),
+                **({"put_back_vertices": float(self.back)} if self.back else {})}
 
 
 def smooth(V: np.ndarray, F: np.ndarray, params: SmoothParams = SmoothParams()) -> np.ndarray:

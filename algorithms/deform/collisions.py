@@ -81,7 +81,7 @@ def grow_held(held: np.ndarray, bad: np.ndarray, F: np.ndarray, VF, fixed: np.nd
     return grown
 
 
-def put_back(V, V0, F, known, bad, fixed, rounds: int = PUT_BACK_ROUNDS
+def put_back(V, V0, F, known, bad, fixed, rounds: int = PUT_BACK_ROUNDS, more=None
              ) -> tuple[np.ndarray, int, int]:
     """The last resort where holding and running again left crossings: around the crossing
     triangles ``bad`` (k, 2) of ``V``, the surface is blended back towards the input ``V0``
@@ -89,8 +89,10 @@ def put_back(V, V0, F, known, bad, fixed, rounds: int = PUT_BACK_ROUNDS
     times while crossings are left; the input crosses itself nowhere new, so this ends them
     where the widening settles (a few rounds on pizza and ogre; on beast and counter the blend's
     edge crossed elsewhere round after round). ``fixed`` vertices (held by the caller) never
-    move. Returns the positions with the fewest crossings seen (``V`` itself if no round had
-    fewer), the vertices moved there, and their crossings."""
+    move. ``more(X)``, optional: further (k, 2) triangle pairs to mend and count (a flow's folded
+    or collapsed triangles, each as a pair with itself; ``bad`` then holds them too). Returns
+    the positions with the fewest crossings (and ``more``) seen (``V`` itself if no round had
+    fewer), the vertices moved there, and that count."""
     from ..mesh.intersections import intersecting_pairs_here, new_crossings_away_from
     from ..mesh.topology import vertex_adjacency
 
@@ -110,6 +112,8 @@ def put_back(V, V0, F, known, bad, fixed, rounds: int = PUT_BACK_ROUNDS
         w[fixed] = 0.0
         X = (1.0 - w)[:, None] * V + w[:, None] * V0
         bad = new_crossings_away_from(intersecting_pairs_here(X, F), F, known)
+        if more is not None:
+            bad = np.concatenate([np.asarray(bad, np.int64).reshape(-1, 2), more(X)])
         if len(bad) < best[2]:
             best = (X, int((w > 0).sum()), len(bad))
     return best

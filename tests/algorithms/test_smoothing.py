@@ -316,3 +316,32 @@ def test_a_flow_whose_system_turns_singular_stops_with_advice_and_the_hold_avoid
     last = list(smooth_iter(m.V, m.F, SmoothParams(**p)))[-1]
     assert np.isfinite(last.V).all() and np.isfinite(last.metrics["bending_energy"])
     assert last.metrics["folded_left"] == 0 and last.metrics["crossings_left"] == 0
+
+
+def test_the_holds_last_resort_puts_the_surface_back_towards_the_input_where_it_crosses():
+    # issue 38: the pizza's smoothing left 3 crossings and 2 folded triangles with almost all
+    # of it held; the surface around them blended back towards the input ends them
+    from algorithms.mesh.intersections import crossings_away_from, intersecting_pairs_here
+    from algorithms.smoothing import _Hold
+    from tests.algorithms.deform.test_collisions import _dent
+    from tests.conftest import unit_square_grid
+
+    V, F = unit_square_grid(20)
+    W = V.copy()
+    W[:, 2] = 0.3
+    V0, F = np.vstack([V, W]), np.vstack([F, F + len(V)])
+    top = np.arange(len(V), 2 * len(V))
+    X = _dent(V0, top, 0.6)
+    fixed = np.zeros(len(V0), bool)
+    fixed[top[0]] = True
+    hold = _Hold(V0, F, fixed)
+    assert not hold.grow(X, may_grow=False) and hold.left > 0
+    Y = hold.put_back(X, V0)
+    known = intersecting_pairs_here(V0, F)
+    assert crossings_away_from(intersecting_pairs_here(Y, F), F, known) == 0
+    m = hold.figures()
+    assert m["crossings_left"] == 0 and m["folded_left"] == 0 and m["put_back_vertices"] > 0
+    moved = (Y != X).any(axis=1)
+    assert 0 < moved.sum() <= m["put_back_vertices"] and not moved[fixed].any()
+    # nothing to mend: the positions come back as they are
+    assert hold.put_back(V0, V0) is V0
