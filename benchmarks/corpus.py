@@ -115,9 +115,18 @@ ADVICE_FLAG = re.compile(r"(--[a-z][a-z-]*)[ =](\d+(?:\.\d+)?)")
 
 
 def advised_setting(message: str) -> list[str]:
-    """``[flag, value]`` of the first setting a refusal's message names with a value, or []."""
+    """``[flag, value, ...]`` of the first setting a refusal's message names with a value, and
+    of the settings named right after it ("--m 1750 --k 10"), or []."""
     hit = ADVICE_FLAG.search(message or "")
-    return [hit.group(1), hit.group(2)] if hit else []
+    out: list[str] = []
+    while hit:
+        out += [hit.group(1), hit.group(2)]
+        rest = message[hit.end():]
+        nxt = ADVICE_FLAG.match(rest.lstrip())
+        if not nxt or not rest[:len(rest) - len(rest.lstrip())].isspace():
+            break
+        hit = ADVICE_FLAG.search(message, hit.end() + (len(rest) - len(rest.lstrip())))
+    return out
 
 
 def _last_json(text: str) -> dict:

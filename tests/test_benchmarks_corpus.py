@@ -55,6 +55,10 @@ def test_the_setting_a_refusal_names_is_read(corpus):
     assert corpus.advised_setting(msg) == ["--m", "140"]
     assert corpus.advised_setting("use --step-size=0.001 instead") == ["--step-size", "0.001"]
     assert corpus.advised_setting("Run Clean first (stylize3d clean).") == []
+    # settings named together are followed together; a later one in another clause is not
+    msg = "This mesh has 1,740 separate parts ...: ask for --m 1750 --k 10 or more (one ..."
+    assert corpus.advised_setting(msg) == ["--m", "1750", "--k", "10"]
+    assert corpus.advised_setting("use --m 14, or --k 3") == ["--m", "14"]
 
 
 def test_folds_and_json_reading(corpus):

@@ -119,6 +119,10 @@ def _ours_matrices(outcome: dict) -> dict:
     return arrays
 
 
+#: the eigenvectors (--k) that the advice for a mesh of many loose parts names
+ADVICE_K = 10
+
+
 def _parts(V, F) -> int:
     """How many separate parts (connected through triangles, loose vertices counted) a mesh
     has: the number of null vectors of its Laplacian, each needing one coarse vertex."""
@@ -154,15 +158,17 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
                              f"fewer, or a larger --m below {n:,}.")
     parts = _parts(data.V, data.F)
     if parts >= params.m:
-        # the recipe's refusal, said with the flag that fixes it (issue 38: the corpus's
+        # the recipe's refusal, said with the flags that fix it (issue 38: the corpus's
         # abominevole, 1,740 loose parts after --clean, was refused with no flag named). Each
-        # part takes one coarse vertex for its constant vector; the k eigenvectors kept need k
-        # more: the smallest m with m - parts >= k (k = m / 3 unless --k is given)
-        m_ok = next((m for m in range(parts + 1, n)
-                     if m - parts >= (params.k or round(m / 3)) and 2 * (params.k or
-                                                                        round(m / 3)) < m), 0)
-        fix = (f"ask for --m {m_ok} or more (one coarse vertex per part and one per "
-               f"eigenvector kept; a mesh of many parts coarsens slowly)" if m_ok
+        # part takes one coarse vertex for its constant vector, and the k eigenvectors kept k
+        # more: m = parts + k, with --k as given, else 10 (k = m / 3, the default, would make
+        # that 2,610 coarse vertices and 870 eigenvectors there: over 5 minutes; --m 1750
+        # --k 10 took 107 s)
+        k_ok = params.k or ADVICE_K
+        m_ok = max(parts + k_ok, 2 * k_ok + 1)
+        fix = (f"ask for --m {m_ok}{'' if params.k else f' --k {k_ok}'} or more (one coarse "
+               f"vertex per part and one per eigenvector kept; a mesh of many parts coarsens "
+               f"slowly), or remove its small loose parts first" if m_ok < n
                else "this mesh is mostly loose pieces and cannot be coarsened")
         raise ParameterError(f"This mesh has {parts:,} separate parts, but the coarse operator "
                              f"was to have {params.m:,} vertices (--m): {fix}.")

@@ -53,6 +53,11 @@ def test_too_few_coarse_nodes_for_the_parts_fails_plainly_and_writes_nothing(tmp
     r = stylize3d("coarsen", path, "--m", "15", "--k", "3", "-o", out)
     assert r.returncode == 0, r.stderr
     assert out.exists()
+    # without --k the advice names a small one too (k = m / 3 would make it large and slow)
+    r = stylize3d("coarsen", path, "--m", "10", "-o", tmp_path / "b.npz")
+    assert r.returncode == 5 and "--m 22 --k 10 or more" in r.stderr, r.stderr
+    r = stylize3d("coarsen", path, "--m", "22", "--k", "10", "-o", tmp_path / "b.npz")
+    assert r.returncode == 0, r.stderr
 
 
 def test_many_parts_ours_beats_amg_and_writes_npz(tmp_path):
