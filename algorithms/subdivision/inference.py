@@ -914,7 +914,9 @@ class _Guard:
         flat = (f"the surface was left unsmoothed ({self.held_flat:,} vertices"
                 + ("" if self.blended else f", {levels}") + ")")
         there = (f"{loop}, and where Loop's cross too {flat}" if self.blended and self.held_flat
-                 else loop if self.blended else f"Loop subdivision crosses too, so {flat}")
+                 else loop if self.blended
+                 else f"Loop subdivision crosses too, and away from the input's own crossings "
+                      f"{flat}")
         return (f"The network's result crossed itself in {self.crossings_seen:,} place"
                 f"{'s' if self.crossings_seen > 1 else ''} where the input does not; there "
                 + there

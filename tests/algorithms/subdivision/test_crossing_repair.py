@@ -91,7 +91,8 @@ def test_the_note_says_where_the_surface_was_left_unsmoothed():
     g.held_flat, g.blended_levels, g.crossings_seen = 12, [2], 7
     assert g.blend_note() == (
         "The network's result crossed itself in 7 places where the input does not; there Loop "
-        "subdivision crosses too, so the surface was left unsmoothed (12 vertices, level 2).")
+        "subdivision crosses too, and away from the input's own crossings the surface was left "
+        "unsmoothed (12 vertices, level 2).")
     g.blended = 40
     assert g.blend_note().endswith(
         "Loop subdivision's positions were blended in (40 vertices, level 2), and where Loop's "
