@@ -323,15 +323,9 @@ def test_the_holds_last_resort_puts_the_surface_back_towards_the_input_where_it_
     # of it held; the surface around them blended back towards the input ends them
     from algorithms.mesh.intersections import crossings_away_from, intersecting_pairs_here
     from algorithms.smoothing import _Hold
-    from tests.algorithms.deform.test_collisions import _dent
-    from tests.conftest import unit_square_grid
+    from tests.algorithms.deform.test_collisions import fine_dented_sheets
 
-    V, F = unit_square_grid(20)
-    W = V.copy()
-    W[:, 2] = 0.3
-    V0, F = np.vstack([V, W]), np.vstack([F, F + len(V)])
-    top = np.arange(len(V), 2 * len(V))
-    X = _dent(V0, top, 0.6)
+    V0, F, top, X = fine_dented_sheets()
     fixed = np.zeros(len(V0), bool)
     fixed[top[0]] = True
     hold = _Hold(V0, F, fixed)

@@ -26,6 +26,17 @@ def _sheets():
     return np.vstack([V, W]), np.vstack([F, F + n]), np.arange(n, 2 * n)
 
 
+def fine_dented_sheets(depth: float = 0.6):
+    """Two parallel 20 x 20 grids 0.3 apart, the top one dented ``depth`` down through the
+    bottom one: (V0, F, top vertex ids, the dented positions)."""
+    V, F = unit_square_grid(20)
+    W = V.copy()
+    W[:, 2] = 0.3
+    V0, F = np.vstack([V, W]), np.vstack([F, F + len(V)])
+    top = np.arange(len(V), 2 * len(V))
+    return V0, F, top, _dent(V0, top, depth)
+
+
 def _dent(V0, top, depth):
     """The top sheet with a bump pushed down by ``depth`` around its middle."""
     V = V0.copy()
@@ -156,14 +167,8 @@ def test_rounds_that_do_not_help_go_on_while_the_held_set_grows_and_the_best_is_
 
 def test_where_holding_leaves_crossings_the_surface_is_put_back_towards_the_input_there():
     # issue 38: holding left crossings on the corpus (analogies: pizza 5, ogre 78; cubic: ogre
-    # 14); blending the surface around them back towards the input ends them there. Two
-    # 20 x 20 sheets, the top one dented through the bottom one
-    V, F = unit_square_grid(20)
-    W = V.copy()
-    W[:, 2] = 0.3
-    V0, F = np.vstack([V, W]), np.vstack([F, F + len(V)])
-    top = np.arange(len(V), 2 * len(V))
-    deep = _dent(V0, top, 0.6)
+    # 14); blending the surface around them back towards the input ends them there
+    V0, F, top, deep = fine_dented_sheets()
 
     def steps():
         for i, d in enumerate((0.2, 0.6), 1):
@@ -189,7 +194,7 @@ def test_where_holding_leaves_crossings_the_surface_is_put_back_towards_the_inpu
     # a fixed vertex is never put back: held by the caller in the dent's middle, the crossings
     # there stay (and are said)
     mid = np.zeros(len(V0), bool)
-    mid[top[len(V) // 2]] = True
+    mid[top[len(top) // 2]] = True
     kept = list(hold_where_crossed(steps(), V0, F, rerun, constrained=mid))[-1]
     assert np.array_equal(kept.V[mid], deep[mid]) and crossings_of(kept.metrics)["left"] > 0
     assert (f"{c['put_back_vertices']} vertices were put back towards the input; none is left"
