@@ -45,9 +45,9 @@ import numpy as np
 
 from ..steps import Step
 
-__all__ = ["CHECK_MAX_FACES", "CHECKPOINT_EVERY", "HOLD_CROSSINGS_TOOLTIP", "PUT_BACK_ROUNDS",
-           "ROUNDS", "WORDING", "crossings_of", "crossings_sentence", "grow_held",
-           "hold_where_crossed", "metrics_of", "put_back"]
+__all__ = ["CHECK_MAX_FACES", "CHECKPOINT_EVERY", "HOLD_CROSSINGS_TOOLTIP", "PUT_BACK_FALLOFF",
+           "PUT_BACK_ROUNDS", "ROUNDS", "WORDING", "crossings_of", "crossings_sentence",
+           "grow_held", "hold_where_crossed", "metrics_of", "put_back"]
 
 #: The tooltip of the setting (``hold_crossings`` of the cubic and analogy parameters).
 HOLD_CROSSINGS_TOOLTIP = (
@@ -65,8 +65,14 @@ CHECKPOINT_EVERY = 5
 MAX_CHECKPOINTS = 48
 #: Rounds of holding and running again.
 ROUNDS = 5
-#: Rounds of putting the surface back towards the input where crossings are still left.
+#: Rounds of putting the surface back towards the input where crossings are still left, and
+#: over how many rings past the first the blend's weight falls off (1: 1, then 1/2). A wider
+#: falloff (3: 1, 3/4, 1/2, 1/4) ended the crossings of beast and counter (analogies), but only
+#: by blending between a part the style had moved far and its input position, which tore the
+#: surface (edges 36 and 24 times their length): refused by the damage check, it gained nothing
+#: on the corpus (30 November 2026), so it is not tried.
 PUT_BACK_ROUNDS = 10
+PUT_BACK_FALLOFF = 1
 
 
 def grow_held(held: np.ndarray, bad: np.ndarray, F: np.ndarray, VF, fixed: np.ndarray
@@ -81,42 +87,76 @@ def grow_held(held: np.ndarray, bad: np.ndarray, F: np.ndarray, VF, fixed: np.nd
     return grown
 
 
-def put_back(V, V0, F, known, bad, fixed, rounds: int = PUT_BACK_ROUNDS, more=None
-             ) -> tuple[np.ndarray, int, int]:
+def put_back(V, V0, F, known, bad, fixed, rounds: int = PUT_BACK_ROUNDS, more=None,
+             falloff: int = PUT_BACK_FALLOFF) -> tuple[np.ndarray, int, int]:
     """The last resort where holding and running again left crossings: around the crossing
     triangles ``bad`` (k, 2) of ``V``, the surface is blended back towards the input ``V0``
-    (weight 1 on their corners and one ring, 1/2 on the next ring), widened up to ``rounds``
-    times while crossings are left; the input crosses itself nowhere new, so this ends them
-    where the widening settles (a few rounds on pizza and ogre; on beast and counter the blend's
-    edge crossed elsewhere round after round). ``fixed`` vertices (held by the caller) never
-    move. ``more(X)``, optional: further (k, 2) triangle pairs to mend and count (a flow's folded
-    or collapsed triangles, each as a pair with itself; ``bad`` then holds them too). Returns
-    the positions with the fewest crossings (and ``more``) seen (``V`` itself if no round had
-    fewer), the vertices moved there, and that count."""
+    (weight 1 on their corners and one ring, falling off over the next ``falloff`` rings),
+    widened up to ``rounds`` times while crossings are left; the input crosses itself nowhere
+    new, so this ends them where the widening settles (not always: the blend's edge can cross
+    elsewhere round after round). ``fixed`` vertices (held by the caller) never move. ``more(X)``, optional: further (k, 2)
+    triangle pairs to mend and count (a flow's folded or collapsed triangles, each as a pair
+    with itself; ``bad`` then holds them too). A blend is only a candidate if it damages
+    nothing (:func:`_blend_damage`: where the style moved a part far, a blend between the two
+    stretches and folds the triangles between them: beast's foot, edges 36 times their length).
+    Returns the positions with the fewest crossings (and ``more``) among the candidates (``V``
+    itself if none had fewer), the vertices moved there, and that count."""
     from ..mesh.intersections import intersecting_pairs_here, new_crossings_away_from
     from ..mesh.topology import vertex_adjacency
 
     V = np.asarray(V, np.float64)
+    V0 = np.asarray(V0, np.float64)
     n = len(V)
     A = vertex_adjacency(F, n)
-    w = np.zeros(n)
+    damaged = _blend_damage(V0, V, F)
     best = (V, 0, len(bad))
+    w = np.zeros(n)
     for _ in range(int(rounds)):
         if not len(bad):
             break
-        corners = np.zeros(n, bool)
-        corners[F[bad.ravel()].ravel()] = True
-        ring1 = corners | (A @ corners.astype(np.float64) > 0)
-        ring2 = ring1 | (A @ ring1.astype(np.float64) > 0)
-        w = np.maximum(w, np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0)))
+        ring = np.zeros(n, bool)
+        ring[F[bad.ravel()].ravel()] = True
+        ring |= A @ ring.astype(np.float64) > 0          # the corners and one ring: 1
+        wk = ring.astype(np.float64)
+        for i in range(1, int(falloff) + 1):             # then falling off
+            grown = ring | (A @ ring.astype(np.float64) > 0)
+            wk[grown & ~ring] = 1.0 - i / (int(falloff) + 1)
+            ring = grown
+        w = np.maximum(w, wk)
         w[fixed] = 0.0
         X = (1.0 - w)[:, None] * V + w[:, None] * V0
         bad = new_crossings_away_from(intersecting_pairs_here(X, F), F, known)
         if more is not None:
             bad = np.concatenate([np.asarray(bad, np.int64).reshape(-1, 2), more(X)])
-        if len(bad) < best[2]:
+        if len(bad) < best[2] and not damaged(X):
             best = (X, int((w > 0).sum()), len(bad))
     return best
+
+
+#: a blended edge longer than this times its length in both the input and the result it came
+#: from is a tear (:func:`put_back`)
+BLEND_STRETCH = 2.0
+
+
+def _blend_damage(V0, V, F):
+    """``damaged(X)``: whether positions ``X`` blended between ``V0`` and ``V`` tear or fold
+    the surface: an edge longer than :data:`BLEND_STRETCH` times its length in both, or a
+    triangle folded over or collapsed (:mod:`algorithms.mesh.damage`) that ``V`` did not have."""
+    from ..mesh.damage import Damage
+
+    F = np.asarray(F, np.int64)
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    longest = np.maximum(np.linalg.norm(V0[E[:, 0]] - V0[E[:, 1]], axis=1),
+                         np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1))
+    dmg = Damage(V0, F)
+    had = dmg.folded(V) | dmg.collapsed(V)
+
+    def damaged(X) -> bool:
+        if (np.linalg.norm(X[E[:, 0]] - X[E[:, 1]], axis=1) > BLEND_STRETCH * longest).any():
+            return True
+        return bool(((dmg.folded(X) | dmg.collapsed(X)) & ~had).any())
+
+    return damaged
 
 
 def _latest_clear(checkpoints: list[np.ndarray], F, known, faces: np.ndarray) -> int:

@@ -225,3 +225,34 @@ def test_progressive_meshes_finished_on_every_triangle_are_held_too():
     assert its == last.iteration
     known = intersecting_pairs_here(m.V, m.F)
     assert crossings_away_from(intersecting_pairs_here(last.V, m.F), m.F, known) == 0
+
+
+def test_a_put_back_that_would_tear_the_surface_is_not_taken():
+    # beast (analogies): the style swung a foot far from where it was; blending it part of the
+    # way back stretched edges to 36 times their length and folded triangles. A sheet tilted
+    # through the other one as a whole: a blend of part of it back tears, so it is not taken
+    from algorithms.deform.collisions import BLEND_STRETCH, _blend_damage, put_back
+
+    V0, F, top, _ = fine_dented_sheets()
+    V = V0.copy()
+    V[top, 2] = 0.3 - 0.6 * V0[top, 0]          # the top sheet tilted through the bottom one
+    from algorithms.mesh.intersections import new_crossings_away_from
+
+    known = intersecting_pairs_here(V0, F)
+    bad = new_crossings_away_from(intersecting_pairs_here(V, F), F, known)
+    assert len(bad) > 0
+    fixed = np.zeros(len(V0), bool)
+    # two widenings cover part of the sheet only: every blend tears, none is taken
+    X, moved, count = put_back(V, V0, F, known, bad, fixed, rounds=2)
+    assert X is V or np.array_equal(X, V)
+    assert moved == 0 and count == len(bad)
+    # widened further, a blend that ends the crossings without a tear is found: taken
+    X, moved, count = put_back(V, V0, F, known, bad, fixed)
+    assert count == 0 and moved > 0 and not _blend_damage(V0, V, F)(X)
+    # the check itself: the blends tried tear (an edge over BLEND_STRETCH times its lengths)
+    damaged = _blend_damage(V0, V, F)
+    assert not damaged(V) and not damaged(V0)
+    half = V.copy()
+    strip = np.isin(np.arange(len(V0)), top) & (np.abs(V0[:, 0] - 0.5) < 0.1)
+    half[strip] = V0[strip]                    # a strip of it put back, the rest not
+    assert damaged(half) and BLEND_STRETCH == 2.0
