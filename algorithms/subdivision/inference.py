@@ -865,8 +865,8 @@ class _Guard:
     of the input come close), Loop's positions are blended in around those triangles only
     (:func:`_blend_loop_where_crossed`; said in the note and ``loop_blended_vertices``); where
     crossings are left away from the input's own (Loop's smoothing crosses there too), the
-    previous level's surface is blended in (``unsmoothed_vertices``), and what three more rounds
-    leave is said. Measured
+    previous level's surface is blended in (``unsmoothed_vertices``; up to :data:`FLAT_ROUNDS`
+    rounds), and what is left is said. Measured
     when it was added (corpus and shared meshes as they are, level 1): the network crossed
     itself on dense smooth meshes in a few places (wingnut 8, koala 10, Loop 0), which one
     blend of 60 and 119 vertices removed; on CAD parts in many (octagonal_pocket 745, Loop 361:
