@@ -48,7 +48,8 @@ Choices written down here (the thesis gives no smoothing method for the foundati
   defaults damaged 7 of the 52 meshes of the corpus (docs/results/corpus.md): thin walls and
   parts that nearly touch pulled through each other (counter, a CAD part, 7,466 crossing
   pairs), thin parts collapsed (beast: 1,329 triangles of zero area) and tiny CAD triangles
-  turned over (block: 30); now 1 (pizza: 3 crossing pairs left, said). A per-step hold, not
+  turned over (block: 30); now none (pizza's last 3 crossings and 2 folds are put back towards
+  the input at the end: :func:`~algorithms.deform.collisions.put_back`). A per-step hold, not
   the after-the-fact hold of cubic stylization
   (:func:`~algorithms.deform.collisions.hold_where_crossed`): a flow has no optimum to settle
   at, and vertices held only at the end let their neighbours flow on through them (fertility at
@@ -292,6 +293,7 @@ class _Hold:
         self.seen: set[tuple[int, int]] = set()  # crossing pairs found
         self.seen_folded = np.zeros(len(F), dtype=bool)  # triangles found folded or collapsed
         self.left = self.left_folded = 0
+        self.crossing = np.zeros((0, 2), np.int64)
         self.back = 0  # vertices put back towards the input at the end
         if self.check:
             from .mesh.intersections import intersecting_pairs_here
@@ -308,6 +310,7 @@ class _Hold:
         from .mesh.intersections import intersecting_pairs_here, new_crossings_away_from
 
         bad = new_crossings_away_from(intersecting_pairs_here(X, self.F), self.F, self.known)
+        self.crossing = bad  # the last check's crossings (a uniform rescale keeps them)
         self.seen.update(map(tuple, np.sort(bad, axis=1).tolist()))
         self.left = len(bad)
         folded = self.damage.folded(X) | self.damage.collapsed(X)
@@ -337,26 +340,25 @@ class _Hold:
         return True
 
     def put_back(self, X: np.ndarray, V0: np.ndarray) -> np.ndarray:
-        """``X`` with the surface around its crossings (and folded or collapsed triangles)
-        blended back towards the input (:func:`algorithms.deform.collisions.put_back`), where
-        that leaves fewer of them in all; else ``X``."""
+        """``X`` (the positions of the last check, or those uniformly rescaled) with the
+        surface around its crossings (and folded or collapsed triangles) blended back towards
+        the input (:func:`algorithms.deform.collisions.put_back`), where that leaves fewer of
+        them in all; else ``X``."""
         from .deform.collisions import put_back
-        from .mesh.intersections import intersecting_pairs_here, new_crossings_away_from
 
         def folds(Y):
             f = np.flatnonzero(self.damage.folded(Y) | self.damage.collapsed(Y))
             return np.c_[f, f]
 
-        bad = new_crossings_away_from(intersecting_pairs_here(X, self.F), self.F, self.known)
-        if not len(bad):
+        if not len(self.crossing):
             return X
-        bad = np.concatenate([np.asarray(bad, np.int64).reshape(-1, 2), folds(X)])
-        Y, n_back, count = put_back(X, V0, self.F, self.known, bad, self.fixed, more=folds)
+        bad = np.concatenate([np.asarray(self.crossing, np.int64).reshape(-1, 2), folds(X)])
+        Y, n_back, count = put_back(X, V0, self.F, self.known, bad, self.fixed, more=folds,
+                                    damage=self.damage)
         if count >= len(bad):
             return X
-        left = len(new_crossings_away_from(intersecting_pairs_here(Y, self.F), self.F,
-                                           self.known))
-        self.left, self.left_folded, self.back = left, count - left, n_back
+        folded_left = len(folds(Y))
+        self.left, self.left_folded, self.back = count - folded_left, folded_left, n_back
         return Y
 
     def figures(self) -> dict:

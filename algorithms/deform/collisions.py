@@ -88,7 +88,8 @@ def grow_held(held: np.ndarray, bad: np.ndarray, F: np.ndarray, VF, fixed: np.nd
 
 
 def put_back(V, V0, F, known, bad, fixed, rounds: int = PUT_BACK_ROUNDS, more=None,
-             falloff: int = PUT_BACK_FALLOFF) -> tuple[np.ndarray, int, int]:
+             falloff: int = PUT_BACK_FALLOFF, crossings=None, damage=None
+             ) -> tuple[np.ndarray, int, int]:
     """The last resort where holding and running again left crossings: around the crossing
     triangles ``bad`` (k, 2) of ``V``, the surface is blended back towards the input ``V0``
     (weight 1 on their corners and one ring, falling off over the next ``falloff`` rings),
@@ -96,7 +97,11 @@ def put_back(V, V0, F, known, bad, fixed, rounds: int = PUT_BACK_ROUNDS, more=No
     new, so this ends them where the widening settles (not always: the blend's edge can cross
     elsewhere round after round). ``fixed`` vertices (held by the caller) never move. ``more(X)``, optional: further (k, 2)
     triangle pairs to mend and count (a flow's folded or collapsed triangles, each as a pair
-    with itself; ``bad`` then holds them too). A blend is only a candidate if it damages
+    with itself; ``bad`` then holds them too). ``crossings(X)``, optional: the crossing pairs
+    to end (default: the new ones away from ``known``, of the same triangles; a subdivision
+    counts them through their parents). ``damage``: the caller's
+    :class:`~algorithms.mesh.damage.Damage` of ``V0``, if it has one. A blend is only a
+    candidate if it damages
     nothing (:func:`_blend_damage`: where the style moved a part far, a blend between the two
     stretches and folds the triangles between them: beast's foot, edges 36 times their length).
     Returns the positions with the fewest crossings (and ``more``) among the candidates (``V``
@@ -108,7 +113,10 @@ def put_back(V, V0, F, known, bad, fixed, rounds: int = PUT_BACK_ROUNDS, more=No
     V0 = np.asarray(V0, np.float64)
     n = len(V)
     A = vertex_adjacency(F, n)
-    damaged = _blend_damage(V0, V, F)
+    damaged = _blend_damage(V0, V, F, damage)
+    if crossings is None:
+        def crossings(X):
+            return new_crossings_away_from(intersecting_pairs_here(X, F), F, known)
     best = (V, 0, len(bad))
     w = np.zeros(n)
     for _ in range(int(rounds)):
@@ -125,7 +133,7 @@ def put_back(V, V0, F, known, bad, fixed, rounds: int = PUT_BACK_ROUNDS, more=No
         w = np.maximum(w, wk)
         w[fixed] = 0.0
         X = (1.0 - w)[:, None] * V + w[:, None] * V0
-        bad = new_crossings_away_from(intersecting_pairs_here(X, F), F, known)
+        bad = crossings(X)
         if more is not None:
             bad = np.concatenate([np.asarray(bad, np.int64).reshape(-1, 2), more(X)])
         if len(bad) < best[2] and not damaged(X):
@@ -138,17 +146,18 @@ def put_back(V, V0, F, known, bad, fixed, rounds: int = PUT_BACK_ROUNDS, more=No
 BLEND_STRETCH = 2.0
 
 
-def _blend_damage(V0, V, F):
+def _blend_damage(V0, V, F, dmg=None):
     """``damaged(X)``: whether positions ``X`` blended between ``V0`` and ``V`` tear or fold
     the surface: an edge longer than :data:`BLEND_STRETCH` times its length in both, or a
-    triangle folded over or collapsed (:mod:`algorithms.mesh.damage`) that ``V`` did not have."""
+    triangle folded over or collapsed (:mod:`algorithms.mesh.damage`) that ``V`` did not have
+    (``dmg``: a :class:`~algorithms.mesh.damage.Damage` of ``V0`` already built)."""
     from ..mesh.damage import Damage
 
     F = np.asarray(F, np.int64)
     E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     longest = np.maximum(np.linalg.norm(V0[E[:, 0]] - V0[E[:, 1]], axis=1),
                          np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1))
-    dmg = Damage(V0, F)
+    dmg = Damage(V0, F) if dmg is None else dmg
     had = dmg.folded(V) | dmg.collapsed(V)
 
     def damaged(X) -> bool:

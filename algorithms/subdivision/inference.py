@@ -1092,9 +1092,10 @@ def _blend_loop_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs, al
             w = np.maximum(w, np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0)))
             V = (1.0 - w)[:, None] * V_net + w[:, None] * VL
             pairs = new_pairs(V)
-    wf = np.zeros(n)
+    flat = 0
     far = away(pairs) if away is not None else pairs
     if len(far):
+        from ..deform.collisions import put_back
         from ..mesh.intersections import intersecting_pairs, pairs_not_in
 
         VM = midpoints_in_refine_numbering(V_prev, F_prev, F_net)
@@ -1102,19 +1103,25 @@ def _blend_loop_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs, al
         # sliver-laden CAD part touching in their common plane: ADIS16480, 275 at level 2 of
         # its unchanged surface) are not the smoothing's and cannot be mended here
         own = intersecting_pairs(VM, F_net)
+
+        def crossings(X):
+            found = new_pairs(X)
+            return pairs_not_in(away(found) if away is not None else found, own)
+
         far = pairs_not_in(far, own)
-        V_smooth = V
-        for _ in range(FLAT_ROUNDS):
-            if not len(far):
-                break
-            ring1, ring2 = _rings(A, F_net, far, n)
-            wf = np.maximum(wf, np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0)))
-            V = (1.0 - wf)[:, None] * V_smooth + wf[:, None] * VM
-            pairs = new_pairs(V)
-            far = pairs_not_in(away(pairs) if away is not None else pairs, own)
+        if len(far):
+            # the shared blend back (the one cubic, analogies and smoothing use), taken only
+            # where it tears nothing
+            V_back, flat, n_far = put_back(V, VM, F_net, None, far, np.zeros(n, bool),
+                                           rounds=FLAT_ROUNDS, crossings=crossings)
+            if n_far < len(far):
+                V = V_back
+                pairs = new_pairs(V)
+            else:
+                flat = 0
     # what is left, said: also the pairs of the previous level's own surface (ADIS16480: 10)
     left = away(pairs) if away is not None else pairs
-    return V, int((w > 0).sum()), int((wf > 0).sum()), int(len(left))
+    return V, int((w > 0).sum()), int(flat), int(len(left))
 
 
 def _guard_fallback(V, F, lv: int, li: int, kept, why: str, guard: _Guard, plan: ScalePlan,

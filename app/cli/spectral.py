@@ -123,19 +123,6 @@ def _ours_matrices(outcome: dict) -> dict:
 ADVICE_K = 10
 
 
-def _parts(V, F) -> int:
-    """How many separate parts (connected through triangles, loose vertices counted) a mesh
-    has: the number of null vectors of its Laplacian, each needing one coarse vertex."""
-    import numpy as np
-
-    from algorithms.mesh.components import connected_components
-
-    F = np.asarray(F, np.int64)
-    i = np.concatenate([F[:, 0], F[:, 1]])
-    j = np.concatenate([F[:, 1], F[:, 2]])
-    return int(connected_components(len(V), i, j)[0])
-
-
 def cmd_coarsen(args: argparse.Namespace) -> int:
     from algorithms.spectral.coarsen import CoarsenParams
 
@@ -156,7 +143,10 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
         raise ParameterError(f"{k} eigenvectors (--k) need more than {2 * k} coarse vertices "
                              f"(--m {params.m}): ask for --k {max((params.m - 1) // 2, 1)} or "
                              f"fewer, or a larger --m below {n:,}.")
-    parts = _parts(data.V, data.F)
+    from algorithms.mesh.topology import connected_components
+
+    # the parts the Laplacian's null vectors count (loose vertices each one)
+    parts = connected_components(data.F, len(data.V), over="vertices")[0]
     if parts >= params.m:
         # the recipe's refusal, said with the flags that fix it (issue 38: the corpus's
         # abominevole, 1,740 loose parts after --clean, was refused with no flag named). Each

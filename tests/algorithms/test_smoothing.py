@@ -337,5 +337,6 @@ def test_the_holds_last_resort_puts_the_surface_back_towards_the_input_where_it_
     assert m["crossings_left"] == 0 and m["folded_left"] == 0 and m["put_back_vertices"] > 0
     moved = (Y != X).any(axis=1)
     assert 0 < moved.sum() <= m["put_back_vertices"] and not moved[fixed].any()
-    # nothing to mend: the positions come back as they are
+    # nothing to mend (the last check found nothing): the positions come back as they are
+    assert not hold.grow(V0, may_grow=False)
     assert hold.put_back(V0, V0) is V0
