@@ -474,14 +474,18 @@ class Paparazzi:
         cams = self.monitor_cameras() if cameras is None else cameras
         return float(np.mean([self.evaluate(V, F, c)[0] for c in cams]))
 
-    def monitor_pull(self, V, F, cameras=None) -> tuple[float, np.ndarray]:
+    def monitor_pull(self, V, F, cameras=None, renders: list | None = None
+                     ) -> tuple[float, np.ndarray]:
         """(:meth:`monitor_energy`, the filter's pull summed over the same views): the mean
-        energy and its full-batch gradient with respect to ``V``, from one pass over the views."""
+        energy and its full-batch gradient with respect to ``V``, from one pass over the views
+        (whose renderings are appended to ``renders`` when given)."""
         cams = self.monitor_cameras() if cameras is None else cameras
         g = np.zeros_like(V)
         energies = []
         for c in cams:
             E, G, r, _ = self.evaluate(V, F, c)
+            if renders is not None:
+                renders.append(r)
             energies.append(E)
             g += image_vjp(V, F, r, G)
         return float(np.mean(energies)), g
@@ -507,16 +511,19 @@ class Paparazzi:
         step = g * (self.edge_length / 32.0 / top)
         return (self.monitor_energy(V - step, F, cams) - e0) / e0
 
-    def noise_share(self, V, F, cameras=None) -> float | None:
+    def noise_share(self, V, F, cameras=None, renders: list | None = None) -> float | None:
         """The share of the shape's pixels over the monitor views that the filter takes for
-        noise or edges (``FilterSpec.noise_pixels``), or None for a filter without that test."""
+        noise or edges (``FilterSpec.noise_pixels``), or None for a filter without that test;
+        ``renders``: those views' renderings of ``V`` when the caller has them
+        (:meth:`monitor_pull`)."""
         test = self.spec.noise_pixels
         if test is None:
             return None
-        cams = self.monitor_cameras() if cameras is None else cameras
+        if renders is None:
+            cams = self.monitor_cameras() if cameras is None else cameras
+            renders = [render(V, F, c, self.shading) for c in cams]
         hits = total = 0
-        for c in cams:
-            r = render(V, F, c, self.shading)
+        for r in renders:
             h, n = test(r.image, r.mask, self.filter_params)
             hits, total = hits + h, total + n
         return hits / total if total else 0.0
@@ -674,7 +681,8 @@ class Paparazzi:
         probing = bool(not p.learning_rate and p.rough_step and self.spec.rough_learning_rate
                        and not self.single_view)
         tm = time.perf_counter()
-        start = self.monitor_pull(V, F, monitor_cams) if probing else None
+        renders: list = []
+        start = self.monitor_pull(V, F, monitor_cams, renders) if probing else None
         monitor0 = monitor = start[0] if probing else self.monitor_energy(V, F, monitor_cams)
         secs["monitor"] += time.perf_counter() - tm
         hold = np.zeros((0, 3))          # where steps made the surface cross itself
@@ -694,7 +702,7 @@ class Paparazzi:
             tm = time.perf_counter()
             self.rough = self.rough_probe(V, F, monitor_cams, free, start)
             if self.rough > 0:
-                self.rough_share = self.noise_share(V, F, monitor_cams)
+                self.rough_share = self.noise_share(V, F, monitor_cams, renders)
             secs["monitor"] += time.perf_counter() - tm
             if self.rough_input:
                 self.learning_rate = self.spec.rough_learning_rate * min(
