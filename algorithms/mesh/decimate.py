@@ -190,7 +190,8 @@ def _costs_vectorized(Q: np.ndarray, Pa: np.ndarray, Pb: np.ndarray, anchor_a: n
         cand = np.stack([Pa, Pb, mid], axis=1)
         pos = cand[np.arange(k), best]
         pos[use] = opt[use]
-        cost = np.where(use, qc + g * x + h * y + i_ * z, np.choose(best, [ca, cb, cm]))
+        with np.errstate(invalid="ignore", over="ignore"):  # x, y, z are NaN where not use
+            cost = np.where(use, qc + g * x + h * y + i_ * z, np.choose(best, [ca, cb, cm]))
     pos[anchor_a] = Pa[anchor_a]
     pos[anchor_b] = Pb[anchor_b]
     if strategy != "midpoint":
