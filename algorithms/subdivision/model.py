@@ -481,25 +481,47 @@ class SubdivisionNet:
         disp = torch.bmm(out[:, None, :3], R)[:, 0]  # back to world axes
         return disp, out[:, 3:]
 
-    def forward(self, V0, levels: MeshLevels, n_levels: int | None = None):
-        """Positions of every level: a list of tensors, level 0 (after I) .. L."""
+    @property
+    def mirror_average(self) -> bool:
+        """Whether inference averages the network with its mirror image (ours: yes; the
+        author's formulation runs as published). See
+        :func:`algorithms.subdivision.inference._mirrored_stage`."""
+        return self.formulation == "stylize3d"
+
+    def forward(self, V0, levels: MeshLevels, n_levels: int | None = None,
+                mirror: bool = False):
+        """Positions of every level: a list of tensors, level 0 (after I) .. L.
+
+        ``mirror``: every stage is averaged with the network run on the mesh mirrored in x
+        (its own features carried level to level), its displacement mirrored back -- what
+        inference does (:attr:`mirror_average`); training's loss runs the plain network."""
         torch = _torch()
         L = len(levels.levels) if n_levels is None else n_levels
+        sign = torch.tensor([-1.0, 1.0, 1.0], dtype=V0.dtype)
+
+        def pooled(name, V, Zs, lv, dst, count):
+            a = self._pooled(torch, name, V, Zs[0], lv, dst, count)
+            if not mirror:
+                return a[:, :3], [a[:, 3:]]
+            b = self._pooled(torch, name, V * sign, Zs[1], lv, dst, count)
+            return 0.5 * (a[:, :3] + b[:, :3] * sign), [a[:, 3:], b[:, 3:]]
+
         lv = levels.levels[0]
-        acc = self._pooled(torch, "I", V0, None, lv, lv["src"], lv["src_count"])
-        V, Z = V0 + acc[:, :3], acc[:, 3:]
+        disp, Zs = pooled("I", V0, [None, None], lv, lv["src"], lv["src_count"])
+        V = V0 + disp
         outs = [V]
         for lev in range(L):
             lv = levels.levels[lev]
-            acc = self._pooled(torch, "V", V, Z, lv, lv["src"], lv["src_count"])
-            V, Z = V + acc[:, :3], acc[:, 3:]
-            acc = self._pooled(torch, "E", V, Z, lv, lv["edge"], lv["edge_count"])
+            disp, Zs = pooled("V", V, Zs, lv, lv["src"], lv["src_count"])
+            V = V + disp
+            dispE, ZE = pooled("E", V, Zs, lv, lv["edge"], lv["edge_count"])
             E = lv["E"]
-            Vo = 0.5 * (V[E[:, 0]] + V[E[:, 1]]) + acc[:, :3]
+            Vo = 0.5 * (V[E[:, 0]] + V[E[:, 1]]) + dispE
             V = torch.cat([V, Vo], dim=0)
-            Z = torch.cat([Z, acc[:, 3:]], dim=0)
+            Zs = [torch.cat([Z, Ze], dim=0) for Z, Ze in zip(Zs, ZE)]
             if lv["perm"] is not None:
-                V, Z = V[lv["perm"]], Z[lv["perm"]]
+                V = V[lv["perm"]]
+                Zs = [Z[lv["perm"]] for Z in Zs]
             outs.append(V)
         return outs
 
@@ -596,7 +618,8 @@ def neural_subdivide_torch(V, F, levels: int = 2, weights=None) -> tuple[np.ndar
         raise InvalidMeshError(f"Neural subdivision could not read the mesh's connectivity "
                                f"({exc}). Run 'Clean' first.") from None
     with torch.no_grad():
-        out = net.forward(torch.from_numpy((V - c) * s).to(net.dtype), ml)[-1].double().numpy()
+        out = net.forward(torch.from_numpy((V - c) * s).to(net.dtype), ml,
+                          mirror=net.mirror_average)[-1].double().numpy()
     if not np.isfinite(out).all():
         raise InvalidMeshError("Neural subdivision produced invalid positions (degenerate "
                                "triangles in the input?). Run 'Clean' first.")

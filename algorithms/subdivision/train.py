@@ -170,11 +170,13 @@ class Trainer:
                                    dtype=V0.dtype) for it in items]) for lv in range(L + 1)]
         return V0, ml, T, w
 
-    def _loss(self, item, scale: float = 1.0):
+    def _loss(self, item, scale: float = 1.0, mirror: bool = False):
         """The loss of one prepared mesh (or batch); ``scale`` (augmentation) scales the
-        coarse mesh and its targets, and the loss is taken back to the unscaled frame."""
+        coarse mesh and its targets, and the loss is taken back to the unscaled frame.
+        ``mirror``: the network averaged with its mirror image, as inference runs it (the
+        validation loss that chooses the epoch); training steps run the plain network."""
         V0, ml, T = item[:3]
-        outs = self.net.forward(V0 * scale if scale != 1.0 else V0, ml)
+        outs = self.net.forward(V0 * scale if scale != 1.0 else V0, ml, mirror=mirror)
         if scale != 1.0:
             outs = [o / scale for o in outs]
         loss = 0.0
@@ -188,7 +190,7 @@ class Trainer:
         import torch
 
         with one_torch_thread(), torch.no_grad():
-            return float(self._loss(self._val_batch))
+            return float(self._loss(self._val_batch, mirror=self.net.mirror_average))
 
     def steps(self, epochs: int | None = None) -> Iterator[Step]:
         """Train ``epochs`` (default ``params.epochs``) epochs, one Step per epoch; fewer when
@@ -272,7 +274,8 @@ class Trainer:
 
         V0, ml, _ = (self.val_set or self.train_set)[0]
         with one_torch_thread(), torch.no_grad():
-            return self.net.forward(V0, ml)[-1].double().numpy().copy()
+            out = self.net.forward(V0, ml, mirror=self.net.mirror_average)[-1]
+            return out.double().numpy().copy()
 
 
 def _adam(torch, parameters, lr):

@@ -53,5 +53,9 @@ def test_early_stopping_on_a_validation_plateau(samples):
 def test_batched_validation_is_the_mean_of_the_meshes_losses(samples):
     tr = Trainer(samples, TrainParams(epochs=1, validation_fraction=0.0))
     with torch.no_grad():
-        one_by_one = np.mean([float(tr._loss(it)) for it in tr.train_set])
+        # the validation loss is inference's: the network averaged with its mirror image
+        assert tr.net.mirror_average
+        one_by_one = np.mean([float(tr._loss(it, mirror=True)) for it in tr.train_set])
+        plain = np.mean([float(tr._loss(it)) for it in tr.train_set])
     assert tr.validation_loss() == pytest.approx(one_by_one, rel=1e-5)
+    assert abs(plain - one_by_one) > 1e-3 * one_by_one
