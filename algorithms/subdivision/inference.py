@@ -29,6 +29,17 @@ vertices plus the averaged displacement), and the order I, then per level V then
 boundary edge the missing ``l`` is ``k`` turned by pi about the edge (ours; the author's code
 refuses meshes with boundary).
 
+**The mirror average** (ours, not the thesis's; :attr:`Network.mirror_average`): every stage of
+our networks is averaged with the same network run on the mesh mirrored in x (its own learned
+features carried level to level), its displacement mirrored back (:func:`_mirrored_stage`).
+The half-flap network is equivariant to rotations but not to reflections; the average is, so a
+region flat over the network's reach stays exactly flat, and the network's bias along the
+normal on flaps flatter than it was trained on (dimples on dense meshes) cancels. It costs a
+second pass of the network. Measured (docs/results/subdivision.md, "The mirror average"):
+fandisk as it is 1.9 -> 0.01 degrees off its flat sides; bob as it is 2.28x -> 1.15x
+butterfly's bending; the default on 32 coarse unseen meshes (Table 4.2 protocol) mean H
+1.659 -> 1.420 % and M 0.139 -> 0.128 %. The author's network runs as published, without it.
+
 **Staying inside what the network was trained on** (:func:`scale_plan`). The network is not
 scale invariant (thesis §4.7): it was trained on coarse meshes of 150-300 vertices, so in its
 normalized frame it has only seen edges of about one length (``reference_edge``: the mean edge
