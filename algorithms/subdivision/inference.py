@@ -865,7 +865,7 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
                                      level.by_edge, f"{head}: placing the new vertices")
         mid = 0.5 * (X[level.E[:, 0]] + X[level.E[:, 1]]) + dispE
         X = np.concatenate([X, mid])
-        Zs = [np.concatenate([a, b]) for a, b in zip(Zs, ZE)] + [None] * (2 - len(Zs))
+        Zs = [np.concatenate([a, b]) for a, b in zip(Zs, ZE)]
         F_next = refine(level.F, level.n, level.EF)
         if guard is not None:
             out = X.astype(np.float64) / s + c
