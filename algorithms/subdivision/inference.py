@@ -879,7 +879,7 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
             if why:
                 yield from _guard_fallback(V, F, lv, li, kept, why, guard, plan, note)
                 return
-            if blended is not None:   # Loop's positions where the network crossed itself
+            if blended is not None:   # the level before, where the network crossed itself
                 out = blended
                 X = ((out - c) * s).astype(np.float32)
             kept = (out, F_next)
@@ -896,10 +896,8 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
     if guard is not None:
         if np.isfinite(guard.ratio):
             metrics["bending_vs_butterfly"] = guard.ratio
-        if guard.blended:
-            metrics["loop_blended_vertices"] = float(guard.blended)
-        if guard.held_flat:
-            metrics["unsmoothed_vertices"] = float(guard.held_flat)
+        if guard.unsmoothed:
+            metrics["unsmoothed_vertices"] = float(guard.unsmoothed)
         note = " ".join(x for x in (note, guard.note, guard.blend_note()) if x)
     yield SubdividedStep(1000, 1000, out, metrics, f"{len(F_next):,} triangles", F=F_next,
                          note=note, levels_used=("neural",) * lv)
@@ -916,23 +914,18 @@ class _Guard:
     (RMS) further from flat than butterfly's. The network's levels up to the last that passed
     are kept and Loop subdivision makes the rest (:func:`_guard_fallback`).
 
-    Crossings: where the network's level crosses itself in more places than Loop subdivision
-    of the same input to ``k`` levels (intersecting triangle pairs whose parent triangles in
-    the input did not intersect; a self-intersection is a defect a user sees and a 3-D printer
-    refuses, and Loop's smoothing shows how many the subdivision itself makes where two sheets
-    of the input come close), Loop's positions are blended in around those triangles only
-    (:func:`_blend_loop_where_crossed`; said in the note and ``loop_blended_vertices``); where
-    crossings are left away from the input's own (Loop's smoothing crosses there too), the
-    previous level's surface is blended in (``unsmoothed_vertices``; up to :data:`FLAT_ROUNDS`
-    rounds), and what is left is said. Measured
-    when it was added (corpus and shared meshes as they are, level 1): the network crossed
-    itself on dense smooth meshes in a few places (wingnut 8, koala 10, Loop 0), which one
-    blend of 60 and 119 vertices removed; on CAD parts in many (octagonal_pocket 745, Loop 361:
-    185 left after one blend; 1002_tray_bottom 1,042, Loop 8: 8 after three). Refusing the
-    whole level on crossings sent 24 more of the 52 corpus and shared meshes to Loop, and on
-    the coarse copies of docs/results/subdivision.md (issue 36) raised the guarded result's
-    mean Hausdorff distance from 1.756 to 1.850 % (the network forced: 1.777): a level is never
-    refused for crossings.
+    Crossings: where the network's level crosses itself (intersecting triangle pairs whose
+    parent triangles in the input did not intersect; a self-intersection is a defect a user
+    sees and a 3-D printer refuses), the surface of the level before is blended back in around
+    those triangles only (:func:`_blend_back_where_crossed`; said in the note and
+    ``unsmoothed_vertices``), and what is left is said beside Loop subdivision's own count.
+    Measured when the repair was added (with Loop's positions then; corpus and shared meshes
+    as they are, level 1): the network crossed itself on dense smooth meshes in a few places
+    (wingnut 8, koala 10, Loop 0); on CAD parts in many (octagonal_pocket 745, Loop 361;
+    1002_tray_bottom 1,042, Loop 8). Refusing the whole level on crossings sent 24 more of the
+    52 corpus and shared meshes to Loop, and on the coarse copies of
+    docs/results/subdivision.md (issue 36) raised the guarded result's mean Hausdorff distance
+    from 1.756 to 1.850 % (the network forced: 1.777): a level is never refused for crossings.
 
     Why butterfly, not Loop: Loop smooths the detail away, so a network that rebuilds detail is
     always more bent than Loop (0.8-22x on 25 meshes coarsened to 400 vertices, where it beat
@@ -953,39 +946,31 @@ class _Guard:
         self.planar = None
         self.Vl, self.Fl, self.loop_level = V, F, 0   # Loop, level by level, when needed
         self.input_pairs = None     # the input's intersecting triangle pairs, when needed
-        #: vertices of the result where Loop's positions were blended in, where the previous
-        #: level's surface was (Loop's crossed too), and at which levels either was
-        self.blended = 0
-        self.held_flat = 0
+        #: vertices of the result where the previous level's surface was blended back in (the
+        #: network crossed itself there), and at which levels
+        self.unsmoothed = 0
         self.blended_levels: list[int] = []
         self.crossings_seen = 0
-        #: (crossings left, Loop's) after the last level's blend, when more than Loop's
+        #: (crossings left, Loop's) after the last level's blend, when any is left
         self.crossings_left: tuple[int, int] | None = None
 
     def blend_note(self) -> str:
-        if not (self.blended or self.held_flat):
+        if not self.unsmoothed:
             return ""
         at = ", ".join(str(k) for k in self.blended_levels)
         levels = f"level{'s' if len(self.blended_levels) > 1 else ''} {at}"
-        loop = (f"Loop subdivision's positions were blended in ({self.blended:,} vertices, "
-                f"{levels})")
-        flat = (f"the surface was left unsmoothed ({self.held_flat:,} vertices"
-                + ("" if self.blended else f", {levels}") + ")")
-        there = (f"{loop}, and where Loop's cross too {flat}" if self.blended and self.held_flat
-                 else loop if self.blended
-                 else f"Loop subdivision crosses too, and away from the input's own crossings "
-                      f"{flat}")
         return (f"The network's result crossed itself in {self.crossings_seen:,} place"
                 f"{'s' if self.crossings_seen > 1 else ''} where the input does not; there "
-                + there
+                f"the surface of the level before was blended back in ({self.unsmoothed:,} "
+                f"vertices, {levels}, left unsmoothed)"
                 + (f"; {self.crossings_left[0]:,} crossings are left (Loop subdivision's: "
                    f"{self.crossings_left[1]:,})." if self.crossings_left else "."))
 
     def check(self, k: int, V_net, F_net, prev=None) -> tuple[str, np.ndarray | None]:
         """``(why, blended)``: ``why`` is '' when the network's result after ``k`` levels
-        passes, else why it fails; ``blended`` is None, or the result with Loop's positions
-        blended in where it crossed itself (``prev``: the ``(V, F)`` the network subdivided
-        at this level, see :func:`_blend_loop_where_crossed`)."""
+        passes, else why it fails; ``blended`` is None, or the result with the previous level's
+        surface blended back in where it crossed itself (``prev``: the ``(V, F)`` the network
+        subdivided at this level, see :func:`_blend_back_where_crossed`)."""
         why = self._check(k, V_net, F_net)
         if why or prev is None:
             return why, None
@@ -993,25 +978,28 @@ class _Guard:
         crossed = len(net_pairs)
         if not crossed:
             return "", None
+        blended, moved, left = _blend_back_where_crossed(
+            V_net, F_net, prev[0], prev[1], net_pairs, lambda X: self._new_pairs(X, F_net, k),
+            lambda P: self._away(P, k))
+        # what is left after the last round is kept and said, with Loop's own count beside it
+        # (two sheets closer than a subdivision's smoothing shrinks them): refusing the level
+        # instead (Loop from there) lost more accuracy than the crossings cost (class docstring)
+        self.crossings_left = (left, self._loop_crossings(k)) if left else None
+        if not moved:
+            # all beside the input's own crossings: left as they are
+            return "", None
+        self.unsmoothed += moved
+        self.blended_levels.append(k)
+        self.crossings_seen += crossed
+        return "", blended
+
+    def _loop_crossings(self, k: int) -> int:
+        """How many new crossings Loop subdivision of the input to ``k`` levels makes."""
         from .baselines import subdivide_baseline
 
         self.Vl, self.Fl = subdivide_baseline(self.Vl, self.Fl, k - self.loop_level, "loop")
         self.loop_level = k
-        loop_crossed = len(self._new_pairs(self.Vl, self.Fl, k))
-        blended, changed, flat, left = _blend_loop_where_crossed(
-            V_net, F_net, prev[0], prev[1], net_pairs, lambda X: self._new_pairs(X, F_net, k),
-            loop_crossed, lambda P: self._away(P, k))
-        # what is left after the last round is kept and said: refusing the level instead (Loop
-        # from there) lost more accuracy than the crossings cost (module docstring of _Guard)
-        self.crossings_left = (left, loop_crossed) if left else None
-        if not (changed or flat):
-            # no more than Loop's, all beside the input's own crossings: left as they are
-            return "", None
-        self.blended += changed
-        self.held_flat += flat
-        self.blended_levels.append(k)
-        self.crossings_seen += crossed
-        return "", blended
+        return len(self._new_pairs(self.Vl, self.Fl, k))
 
     def _new_pairs(self, V, F, k: int) -> np.ndarray:
         """The intersecting pairs of a ``k``-level result whose parents did not intersect in
@@ -1067,28 +1055,12 @@ class _Guard:
         return ""
 
 
-#: the guard's local repair of crossings: at most this many rounds, each widening the blend
+#: the guard's local repair of crossings (:func:`_blend_back_where_crossed`): at most this many
+#: rounds, each widening the blend of the previous level's surface
 BLEND_ROUNDS = 3
-#: and of the previous level's surface where Loop's crossed too: it crosses only where the
-#: level before did, so widening it ends the crossings; at most this many rounds (ADIS16480, a
-#: CAD part with slivers: 19 crossings left after 3)
+#: then, where crossings are left, at most this many rounds of the tear-checked blend back
+#: (ADIS16480, a CAD part with slivers: 19 crossings left after 3)
 FLAT_ROUNDS = 8
-
-
-def loop_in_refine_numbering(V_prev, F_prev, F_net=None) -> np.ndarray:
-    """One level of Loop subdivision of ``(V_prev, F_prev)`` with its vertices numbered as
-    the network's result ``F_net`` (default: :func:`~.topology.refine` of ``F_prev``: old
-    vertices first, then edge ``e``'s vertex at ``n + e``), so that they pair vertex for vertex.
-    Loop's triangle 4 f + 2 and refine's 4 f + 3 are both (ab, bc, ca) of triangle f."""
-    from .baselines import subdivide_baseline
-    from .topology import refine
-
-    n = len(V_prev)
-    VL, FL = subdivide_baseline(V_prev, F_prev, 1, "loop")
-    FR = refine(np.asarray(F_prev, np.int64), n) if F_net is None else np.asarray(F_net)
-    perm = np.arange(len(VL), dtype=np.int64)
-    perm[FR.reshape(-1, 4, 3)[:, 3].ravel()] = FL.reshape(-1, 4, 3)[:, 2].ravel()
-    return np.asarray(VL, np.float64)[perm]
 
 
 def midpoints_in_refine_numbering(V_prev, F_prev, F_net) -> np.ndarray:
@@ -1118,48 +1090,53 @@ def _rings(A, F, pairs, n) -> tuple[np.ndarray, np.ndarray]:
     return ring1, ring2
 
 
-def _blend_loop_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs, allowed: int,
-                              away=None) -> tuple[np.ndarray, int, int, int]:
-    """The network's level with Loop's positions blended in around the triangles that cross
-    each other where the input's did not: weight 1 on their corners and the ring around them,
-    1/2 on the next ring, ``V = (1 - w) V_net + w V_loop`` (Loop of the same coarser level, so
-    the two share every vertex), widened up to :data:`BLEND_ROUNDS` times while the crossings
-    are more than ``allowed`` (Loop's own). Then, where crossings are left (Loop's smoothing
-    crosses there too: two sheets of the input closer than the smoothing shrinks them), the
-    previous level's surface itself (:func:`midpoints_in_refine_numbering`, whose triangles lie
-    in their parents' planes and so cross only where those did) is blended in the same way, up
-    to :data:`FLAT_ROUNDS` times while any is left away from the input's own crossings
-    (``away(pairs)``, default all: near them, as on a model of interpenetrating parts, smoothing
-    only moves the crossing line; issue 38: octagonal_pocket and abominevole kept Loop's
-    crossings). ``pairs``: the new crossing pairs of ``V_net``; ``new_pairs(V)``: those of
-    other positions on ``F_net``. Returns
-    (positions, vertices with Loop's positions blended in, vertices with the previous level's
-    surface blended in, crossings left)."""
+def _blend_back_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs,
+                              away=None) -> tuple[np.ndarray, int, int]:
+    """The network's level with the previous level's surface blended back in around the
+    triangles that cross each other where the input's did not.
+
+    The previous level's surface (:func:`midpoints_in_refine_numbering`: the level the network
+    subdivided, each new vertex at its edge's midpoint) has every child triangle in its
+    parent's plane, so it crosses itself only where that level did. Only crossings away from
+    the input's own count (``away(pairs)``, default all: near them, as on a model of
+    interpenetrating parts, subdividing only moves the crossing line). Weight 1 on the crossing
+    triangles' corners and the ring around them, 1/2 on the next ring, ``V = (1 - w) V_net + w
+    V_prev``, widened up to :data:`BLEND_ROUNDS` times while any crossing is left; then the
+    shared blend back of :func:`algorithms.deform.collisions.put_back`, taken only where it
+    tears nothing, up to :data:`FLAT_ROUNDS` more rounds. ``pairs``: the new crossing pairs of
+    ``V_net``; ``new_pairs(V)``: those of other positions on ``F_net``.
+
+    Until 30 November 2026 the first blend used Loop subdivision's positions (and only down to
+    Loop's own crossing count): Loop shrinks, so on CAD parts with thin walls the blend cost
+    accuracy and rounded corners (coarse ADIS16480, 2 levels: H 5.76 % with Loop's positions,
+    0.99 % with the previous level's, the network alone 1.37 %; 497 crossings left against 0;
+    docs/results/subdivision.md, "The blend back").
+
+    Returns (positions, vertices moved towards the previous level's surface, crossings left
+    away from the input's own)."""
+    from ..deform.collisions import put_back
+    from ..mesh.intersections import intersecting_pairs, pairs_not_in
     from ..mesh.topology import vertex_adjacency
 
     n = len(V_net)
+    V_net = np.asarray(V_net, np.float64)
+    VM = midpoints_in_refine_numbering(V_prev, F_prev, F_net)
     A = vertex_adjacency(F_net, n)
     w = np.zeros(n)
-    V = np.asarray(V_net, np.float64)
-    if len(pairs) > allowed:
-        VL = loop_in_refine_numbering(V_prev, F_prev, F_net)
-        for _ in range(BLEND_ROUNDS):
-            if len(pairs) <= allowed:
-                break
-            ring1, ring2 = _rings(A, F_net, pairs, n)
-            w = np.maximum(w, np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0)))
-            V = (1.0 - w)[:, None] * V_net + w[:, None] * VL
-            pairs = new_pairs(V)
-    flat = 0
+    V = V_net
     far = away(pairs) if away is not None else pairs
+    for _ in range(BLEND_ROUNDS):
+        if not len(far):
+            break
+        ring1, ring2 = _rings(A, F_net, far, n)
+        w = np.maximum(w, np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0)))
+        V = (1.0 - w)[:, None] * V_net + w[:, None] * VM
+        pairs = new_pairs(V)
+        far = away(pairs) if away is not None else pairs
     if len(far):
-        from ..deform.collisions import put_back
-        from ..mesh.intersections import intersecting_pairs, pairs_not_in
-
-        VM = midpoints_in_refine_numbering(V_prev, F_prev, F_net)
         # pairs that the previous level's own surface shows at this resolution (triangles of a
         # sliver-laden CAD part touching in their common plane: ADIS16480, 275 at level 2 of
-        # its unchanged surface) are not the smoothing's and cannot be mended here
+        # its unchanged surface) are not the subdivision's and cannot be mended here
         own = intersecting_pairs(VM, F_net)
 
         def crossings(X):
@@ -1168,18 +1145,14 @@ def _blend_loop_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs, al
 
         far = pairs_not_in(far, own)
         if len(far):
-            # the shared blend back (the one cubic, analogies and smoothing use), taken only
-            # where it tears nothing
-            V_back, flat, n_far = put_back(V, VM, F_net, None, far, np.zeros(n, bool),
-                                           rounds=FLAT_ROUNDS, crossings=crossings)
+            V_back, _, n_far = put_back(V, VM, F_net, None, far, np.zeros(n, bool),
+                                        rounds=FLAT_ROUNDS, crossings=crossings)
             if n_far < len(far):
                 V = V_back
                 pairs = new_pairs(V)
-            else:
-                flat = 0
-    # what is left, said: also the pairs of the previous level's own surface (ADIS16480: 10)
     left = away(pairs) if away is not None else pairs
-    return V, int((w > 0).sum()), int(flat), int(len(left))
+    moved = int((np.abs(V - V_net).max(axis=1) > 0).sum()) if len(V) else 0
+    return V, moved, int(len(left))
 
 
 def _guard_fallback(V, F, lv: int, li: int, kept, why: str, guard: _Guard, plan: ScalePlan,
@@ -1208,11 +1181,8 @@ def _guard_fallback(V, F, lv: int, li: int, kept, why: str, guard: _Guard, plan:
         said += (f" 'Coarsen first' to about {plan.advice} vertices lets the network rebuild "
                  f"the detail.")
     metrics = {"bending_vs_butterfly": guard.ratio} if np.isfinite(guard.ratio) else {}
-    if guard.blended or guard.held_flat:   # earlier levels the network kept, repaired
-        if guard.blended:                   # where they crossed
-            metrics["loop_blended_vertices"] = float(guard.blended)
-        if guard.held_flat:
-            metrics["unsmoothed_vertices"] = float(guard.held_flat)
+    if guard.unsmoothed:   # earlier levels the network kept, repaired where they crossed
+        metrics["unsmoothed_vertices"] = float(guard.unsmoothed)
         said = f"{said} {guard.blend_note()}"
     yield SubdividedStep(1000, 1000, np.asarray(Vl, dtype=np.float64), metrics,
                          f"{len(Fl):,} triangles", F=np.asarray(Fl, dtype=np.int64),

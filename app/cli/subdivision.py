@@ -109,9 +109,8 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
            "levels": params.levels, "coarsen_first": params.coarsen_first,
            "vertices_in": int(len(data.V)), "faces_in": int(len(data.F)),
            "vertices": int(len(V)), "faces": int(len(F)), "seconds": dt, "note": note,
-           # vertices where the guard blended Loop's positions in (the network crossed itself)
-           "loop_blended_vertices": int((last.metrics or {}).get("loop_blended_vertices", 0)),
-           # of those, held on the previous level's surface where Loop's crossed too
+           # vertices where the guard blended the level before back in (the network's result
+           # crossed itself there)
            "unsmoothed_vertices": int((last.metrics or {}).get("unsmoothed_vertices", 0))}
     if args.json:
         print_json(out)
@@ -306,8 +305,7 @@ def add_parsers(sub) -> None:
                         "denser mesh; level by level its result is kept unless it is more than "
                         "twice as bent as modified butterfly's, 1.25x on a denser mesh, or bends "
                         "flat sides; from there Loop subdivision makes the levels; where it "
-                        "crosses itself more than Loop's result, Loop's positions are blended "
-                        "in there; all said on "
+                        "crosses itself, the level before is blended back in there; all said on "
                         "stderr and in --json levels_used), loop "
                         "(Loop on any mesh denser than the training meshes), scale (always the "
                         "network, scaled), off (as is). Default: guard.")

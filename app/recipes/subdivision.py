@@ -205,7 +205,7 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
                 step.V = state.V
                 yield step
         V, F, note = last.V, last.F, last.note
-        metrics = dict(last.metrics)   # the guard's (bending_vs_butterfly, loop_blended_vertices)
+        metrics = dict(last.metrics)   # the guard's (bending_vs_butterfly, unsmoothed_vertices)
         fallback = bool(getattr(last, "fallback", False))
         levels_used = tuple(last.levels_used) or (("loop" if fallback else "neural"),) * levels
         method_used = "+".join(dict.fromkeys(levels_used))   # neural, loop or neural+loop
@@ -261,12 +261,11 @@ def _subdivision_outcome(last: Step) -> dict:
         out["fallback"] = bool(last.fallback)
         if getattr(last, "levels_used", ()):
             out["levels_used"] = list(last.levels_used)
-    # the guard's local repair of crossings (said in the note too): Loop's positions blended
-    # in, and the previous level's surface where Loop's crossed too
-    for key in ("loop_blended_vertices", "unsmoothed_vertices"):
-        count = int((last.metrics or {}).get(key, 0))
-        if count:
-            out[key] = count
+    # the guard's local repair of crossings (said in the note too): the level before blended
+    # back in where the network crossed itself
+    count = int((last.metrics or {}).get("unsmoothed_vertices", 0))
+    if count:
+        out["unsmoothed_vertices"] = count
     return out
 
 

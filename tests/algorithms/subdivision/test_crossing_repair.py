@@ -1,5 +1,6 @@
-"""The guard's repair of crossings where Loop's smoothing crosses too (issue 38): the previous
-level's own surface is blended in there, away from the input's own crossings."""
+"""The guard's repair of crossings (issues 36 and 38): the previous level's own surface is
+blended back in where the network's level crosses itself, away from the input's own
+crossings."""
 
 from __future__ import annotations
 
@@ -8,8 +9,7 @@ import numpy as np
 from algorithms.mesh.intersections import (intersecting_pairs, new_crossing_pairs,
                                            new_crossing_pairs_away)
 from algorithms.mesh.primitives import grid
-from algorithms.subdivision import inference
-from algorithms.subdivision.inference import (_blend_loop_where_crossed, _Guard,
+from algorithms.subdivision.inference import (_blend_back_where_crossed, _Guard,
                                               midpoints_in_refine_numbering)
 from algorithms.subdivision.topology import refine
 
@@ -36,7 +36,7 @@ def test_the_previous_levels_surface_keeps_each_child_in_its_parents_plane():
     assert len(intersecting_pairs(VM, F1)) == 0
 
 
-def test_where_loop_crosses_too_the_previous_levels_surface_is_blended_in(monkeypatch):
+def test_where_the_network_crosses_the_previous_levels_surface_is_blended_back_in():
     V, F = _two_sheets(0.1)
     F1 = refine(F, len(V))
     VM = midpoints_in_refine_numbering(V, F, F1)
@@ -52,20 +52,17 @@ def test_where_loop_crosses_too_the_previous_levels_surface_is_blended_in(monkey
 
     pairs = new_pairs(V_net)
     assert len(pairs) > 0
-    # Loop of the same level crossing in the same places (Loop's positions: the network's)
-    monkeypatch.setattr(inference, "loop_in_refine_numbering", lambda *a, **k: V_net.copy())
-    out, loop_n, flat_n, left = _blend_loop_where_crossed(V_net, F1, V, F, pairs, new_pairs, 0)
+    out, moved, left = _blend_back_where_crossed(V_net, F1, V, F, pairs, new_pairs)
     assert left == 0 and len(new_pairs(out)) == 0
-    assert loop_n > 0 and flat_n > 0
     changed = (out != V_net).any(axis=1)
-    assert changed.any() and changed.sum() <= flat_n
+    assert changed.any() and changed.sum() == moved
     # only around the crossing: the far corners of both sheets keep the network's positions
     corner = (np.abs(V_net[:, 0] - 0.5) > 0.4) & (np.abs(V_net[:, 1] - 0.5) > 0.4)
     assert not changed[corner].any()
     # crossings beside the input's own are left alone (away() finds none)
-    out2, _, flat2, left2 = _blend_loop_where_crossed(V_net, F1, V, F, pairs, new_pairs, 0,
-                                                      away=lambda P: P[:0])
-    assert flat2 == 0 and left2 == 0
+    out2, moved2, left2 = _blend_back_where_crossed(V_net, F1, V, F, pairs, new_pairs,
+                                                    away=lambda P: P[:0])
+    assert moved2 == 0 and left2 == 0
     np.testing.assert_array_equal(out2, V_net)
 
 
@@ -88,18 +85,14 @@ def test_crossings_beside_the_inputs_own_are_not_new():
 def test_the_note_says_where_the_surface_was_left_unsmoothed():
     V, F = _two_sheets()
     g = _Guard(V, F)
-    g.held_flat, g.blended_levels, g.crossings_seen = 12, [2], 7
+    g.unsmoothed, g.blended_levels, g.crossings_seen = 12, [2], 7
     assert g.blend_note() == (
-        "The network's result crossed itself in 7 places where the input does not; there Loop "
-        "subdivision crosses too, and away from the input's own crossings the surface was left "
-        "unsmoothed (12 vertices, level 2).")
-    g.blended = 40
-    assert g.blend_note().endswith(
-        "Loop subdivision's positions were blended in (40 vertices, level 2), and where Loop's "
-        "cross too the surface was left unsmoothed (12 vertices).")
+        "The network's result crossed itself in 7 places where the input does not; there the "
+        "surface of the level before was blended back in (12 vertices, level 2, left "
+        "unsmoothed).")
 
 
-def test_pairs_the_previous_levels_own_surface_shows_are_left_alone(monkeypatch):
+def test_pairs_the_previous_levels_own_surface_shows_are_left_alone():
     # two sheets lying on each other: the previous level's own surface "crosses" at this
     # resolution (as the touching coplanar slivers of a CAD part do), so nothing can mend it
     # and nothing is held (ADIS16480 was held over 8 rounds for 16 such pairs); they are
@@ -113,13 +106,10 @@ def test_pairs_the_previous_levels_own_surface_shows_are_left_alone(monkeypatch)
     assert len(own) > 0
     np.testing.assert_array_equal(pairs_not_in(own, own[:, ::-1]), own[:0])
     np.testing.assert_array_equal(pairs_not_in(own, own[:3]), own[3:])
-    monkeypatch.setattr(inference, "loop_in_refine_numbering", lambda *a, **k: VM.copy())
-
     def new_pairs(X):
         return intersecting_pairs(X, F1)
 
-    out, loop_n, flat_n, left = _blend_loop_where_crossed(VM.copy(), F1, V, F, own, new_pairs,
-                                                          len(own))
-    assert (loop_n, flat_n) == (0, 0)
+    out, moved, left = _blend_back_where_crossed(VM.copy(), F1, V, F, own, new_pairs)
+    assert moved == 0
     assert left == len(own)            # left, and said
     np.testing.assert_array_equal(out, VM)

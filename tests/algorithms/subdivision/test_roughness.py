@@ -269,33 +269,19 @@ def test_crossings_not_in_parents_counts_only_new_ones():
     assert crossings_not_in_parents(np.array([[48, 150], [0, 160]]), 2, inherited) == 1
 
 
-def test_loop_in_refine_numbering_is_loops_mesh_vertex_for_vertex():
-    from algorithms.subdivision.inference import loop_in_refine_numbering
-    from algorithms.subdivision.topology import refine
-
-    V, F = _bracket()
-    VL, FL = subdivide_baseline(V, F, 1, "loop")
-    W = loop_in_refine_numbering(V, F)
-    FR = refine(F, len(V))
-    assert W.shape == VL.shape
-    # the same triangles: each corner of refine's triangle is Loop's vertex at that place
-    tri = lambda X: np.sort(np.round(X.reshape(-1, 3, 3), 12).tolist(), axis=1)  # noqa: E731
-    assert sorted(map(tuple, tri(W[FR]).reshape(-1, 9).tolist())) == \
-        sorted(map(tuple, tri(VL[FL]).reshape(-1, 9).tolist()))
-    assert not np.array_equal(W, VL)    # (the numbering does differ)
-
-
-def test_the_guard_blends_loop_in_where_the_network_crosses_itself():
+def test_the_guard_blends_the_level_before_back_in_where_the_network_crosses_itself():
     """A CAD bracket with thin ribs close to each other (closed, genus 6): the network's level
     1 crosses itself where the input does not (its ribs pushed through each other); Loop's
-    does not. The guard keeps the network's result and blends Loop's positions in around the
-    crossing triangles only, said in the note; the result crosses itself nowhere new, and away
-    from there it is the network's, bit for bit."""
+    does not. The guard keeps the network's result and blends the level before (here the
+    input, split at its edges' midpoints) back in around the crossing triangles only, said in
+    the note; the result crosses itself nowhere new, and away from there it is the network's,
+    bit for bit."""
     from algorithms.mesh.intersections import (count_self_intersections,
                                                crossings_not_in_parents,
                                                intersecting_pairs_here)
-    from algorithms.subdivision.inference import (loop_in_refine_numbering,
+    from algorithms.subdivision.inference import (midpoints_in_refine_numbering,
                                                   neural_subdivision_iter)
+    from algorithms.subdivision.topology import refine
 
     V, F = _bracket()
     assert count_self_intersections(V, F) == 0
@@ -311,12 +297,13 @@ def test_the_guard_blends_loop_in_where_the_network_crosses_itself():
     np.testing.assert_array_equal(guarded.F, forced.F)
     assert count_self_intersections(guarded.V, guarded.F) == 0
     changed = np.flatnonzero((guarded.V != forced.V).any(axis=1))
-    n = int(guarded.metrics["loop_blended_vertices"])
-    assert 0 < len(changed) <= n < 0.05 * len(guarded.V)
+    n = int(guarded.metrics["unsmoothed_vertices"])
+    assert 0 < len(changed) == n < 0.05 * len(guarded.V)
     assert f"crossed itself in {made} places where the input does not" in guarded.note
-    assert f"Loop subdivision's positions were blended in ({n} vertices, level 1)" in guarded.note
-    # where the weight is 1 the vertex is Loop's
-    W = loop_in_refine_numbering(V, F)
+    assert (f"the surface of the level before was blended back in ({n} vertices, level 1, "
+            f"left unsmoothed)") in guarded.note
+    # where the weight is 1 the vertex is the level before's (the input split at midpoints)
+    W = midpoints_in_refine_numbering(V, F, refine(F, len(V)))
     assert np.isclose(guarded.V[changed], W[changed]).all(axis=1).any()
     # two levels: level 2 goes on from the repaired level 1, and crosses nowhere new either
     two = list(neural_subdivision_iter(V, F, 2, net, dense="guard"))[-1]
@@ -330,11 +317,11 @@ def test_the_blend_note_says_what_was_changed_and_what_is_left():
     V, F = _bracket()
     g = _Guard(V, F)
     assert g.blend_note() == ""
-    g.blended, g.blended_levels, g.crossings_seen = 38, [1], 5
-    assert g.blend_note().endswith("blended in (38 vertices, level 1).")
-    g.blended, g.blended_levels, g.crossings_seen = 1200, [1, 2], 900
+    g.unsmoothed, g.blended_levels, g.crossings_seen = 38, [1], 5
+    assert g.blend_note().endswith("blended back in (38 vertices, level 1, left unsmoothed).")
+    g.unsmoothed, g.blended_levels, g.crossings_seen = 1200, [1, 2], 900
     g.crossings_left = (40, 12)
     assert g.blend_note() == (
         "The network's result crossed itself in 900 places where the input does not; there "
-        "Loop subdivision's positions were blended in (1,200 vertices, levels 1, 2); 40 "
-        "crossings are left (Loop subdivision's: 12).")
+        "the surface of the level before was blended back in (1,200 vertices, levels 1, 2, "
+        "left unsmoothed); 40 crossings are left (Loop subdivision's: 12).")
