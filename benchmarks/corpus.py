@@ -9,8 +9,11 @@ with a time limit, and sorts each run into one class:
   advice works  refused, and the advice in the message works: the message names Clean and the
                 same command with --clean gives a result, or it names a setting with a value
                 ("ask for fewer: --m 140") and the command with that setting gives one (then
-                classified like any result)
+                classified like any result); or a result with no visible effect whose --json
+                ``note`` says which setting to raise, with a value ("--step-size 1e-04"), and
+                the command with it (twice at most) gives a visible result
   no effect     exit 0, but a method that deforms moved no vertex by 0.2 % of the diagonal
+                (also after its advice, if it gave one)
   artefact      exit 0, but the result has NaN coordinates, triangles it made degenerate
                 (area below 1e-12 of the diagonal squared where the input's was not), more
                 than 0.1 % of its triangles folded over (turned back against at least two
@@ -110,8 +113,9 @@ def _command(method: str, mesh: Path, out: Path, clean: bool, extra=()) -> list[
     return cmd + list(extra)
 
 
-#: a setting with its value named in a refusal ("ask for fewer: --m 140")
-ADVICE_FLAG = re.compile(r"(--[a-z][a-z-]*)[ =](\d+(?:\.\d+)?)")
+#: a setting with its value named in a refusal ("ask for fewer: --m 140") or in a result's
+#: advice ("--step-size 1e-04")
+ADVICE_FLAG = re.compile(r"(--[a-z][a-z-]*)[ =](\d+(?:\.\d+)?(?:[eE][-+]?\d+)?)")
 
 
 def advised_setting(message: str) -> list[str]:
@@ -127,6 +131,14 @@ def advised_setting(message: str) -> list[str]:
             break
         hit = ADVICE_FLAG.search(message, hit.end() + (len(rest) - len(rest.lstrip())))
     return out
+
+
+def merge_settings(extra: list[str], advice: list[str]) -> list[str]:
+    """``extra`` (``[flag, value, ...]``) with the settings of ``advice`` added, or their values
+    replaced where ``extra`` already names the flag."""
+    pairs = dict(zip(extra[::2], extra[1::2]))
+    pairs.update(zip(advice[::2], advice[1::2]))
+    return [x for kv in pairs.items() for x in kv]
 
 
 def _last_json(text: str) -> dict:
@@ -346,13 +358,37 @@ def run_one(method: str, mesh: Path, work: Path, timeout: float) -> dict:
             rec["advice"] = " ".join(extra)
             continue
         break
-    m = None
-    if rc == 0 and suffix == ".obj" and out.exists():
-        try:
-            m = _measure(mesh, out, clean, moves)
-        except Exception as e:  # noqa: BLE001 - reported in the cell
-            m = {"measure_error": f"{type(e).__name__}: {e}"[:160]}
+
+    def measured(rc):
+        if rc == 0 and suffix == ".obj" and out.exists():
+            try:
+                return _measure(mesh, out, clean, moves)
+            except Exception as e:  # noqa: BLE001 - reported in the cell
+                return {"measure_error": f"{type(e).__name__}: {e}"[:160]}
+        return None
+
+    m = measured(rc)
     kind, why = _classify(rc, seconds, stderr, record, m, moves, faces, timeout)
+    # a result that changed nothing visible and says which setting to raise (smooth: "Raise
+    # --step-size (e.g. --step-size 1e-04)"): follow that advice, twice at most
+    for _ in range(2):
+        advice = advised_setting(str(record.get("note") or ""))
+        if kind != "no effect" or not advice:
+            break
+        extra = merge_settings(extra, advice)
+        rec["advice"] = " ".join(extra)
+        rec.setdefault("first", why)
+        t0 = time.perf_counter()
+        try:
+            p = subprocess.run(_command(method, mesh, out, clean, extra), cwd=ROOT, env=env,
+                               capture_output=True, text=True, timeout=timeout)
+            rc, stdout, stderr = p.returncode, p.stdout, p.stderr
+        except subprocess.TimeoutExpired:
+            rc, stdout, stderr = None, "", ""
+        seconds = time.perf_counter() - t0
+        record = _last_json(stdout)
+        m = measured(rc)
+        kind, why = _classify(rc, seconds, stderr, record, m, moves, faces, timeout)
     followed = " ".join((["--clean"] if clean else []) + extra)
     if followed and kind == "result":
         kind = "advice works"

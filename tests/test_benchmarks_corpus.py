@@ -59,6 +59,15 @@ def test_the_setting_a_refusal_names_is_read(corpus):
     msg = "This mesh has 1,740 separate parts ...: ask for --m 1750 --k 10 or more (one ..."
     assert corpus.advised_setting(msg) == ["--m", "1750", "--k", "10"]
     assert corpus.advised_setting("use --m 14, or --k 3") == ["--m", "14"]
+    # a result's advice (smooth that barely moved the shape), with a value in e-notation
+    msg = ("The shape changed little (at most 0.18 % of its size): it is already smooth at "
+           "this step size. Raise --step-size (e.g. --step-size 1e-04) or --iterations to "
+           "smooth more.")
+    assert corpus.advised_setting(msg) == ["--step-size", "1e-04"]
+    assert corpus.merge_settings(["--clean-x", "1", "--step-size", "1e-04"],
+                                 ["--step-size", "1e-03"]) == ["--clean-x", "1",
+                                                               "--step-size", "1e-03"]
+    assert corpus.merge_settings([], ["--m", "81"]) == ["--m", "81"]
 
 
 def test_folds_and_json_reading(corpus):

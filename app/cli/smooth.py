@@ -63,17 +63,23 @@ def cmd_smooth(args: argparse.Namespace) -> int:
     seconds = time.perf_counter() - t0
     write_result(args, args.output, last.V, data.F, data)
     crossings = crossings_of(last.metrics)
-    if args.json:
-        print_json({"input": args.mesh, "output": args.output, "params": params_to_dict(params),
-                    "iterations": last.iteration, "seconds": seconds,
-                    "bending_energy": [h["bending_energy"] for h in history],
-                    "displacement": [h["displacement"] for h in history],
-                    "crossings": crossings})
-    else:
-        from app.recipes.smooth import change_advice
+    from app.recipes.smooth import change_advice
 
-        said = " ".join(x for x in (crossings_sentence(last.metrics, "smoothing"),
-                                    change_advice(last, params)) if x)
+    advice = change_advice(last, params, flags=True)
+    if args.json:
+        out = {"input": args.mesh, "output": args.output, "params": params_to_dict(params),
+               "iterations": last.iteration, "seconds": seconds,
+               "bending_energy": [h["bending_energy"] for h in history],
+               "displacement": [h["displacement"] for h in history],
+               # the largest move, in units of the bounding-box diagonal
+               "moved": float(last.metrics.get("moved", 0.0)),
+               "crossings": crossings}
+        if advice:   # the shape barely changed: why, and what to raise
+            out["note"] = advice
+        print_json(out)
+    else:
+        said = " ".join(x for x in (crossings_sentence(last.metrics, "smoothing"), advice)
+                        if x)
         print(f"Smoothed {args.mesh} in {seconds:.2f} s ({last.iteration} steps); wrote "
               f"{args.output}." + (f" {said}" if said else ""))
     return 0

@@ -18,9 +18,10 @@ def smooth_steps(state, params, options=None, cache=None) -> Iterator[Step]:
 VISIBLE_MOVE = 0.005
 
 
-def change_advice(last: Step, params) -> str:
+def change_advice(last: Step, params, flags: bool = False) -> str:
     """What to tell a user whose run barely changed the shape (empty when it visibly did):
-    the input was already smooth at this step size, and how to smooth more."""
+    the input was already smooth at this step size, and how to smooth more -- the panel's
+    setting names, or with ``flags`` the command line's (``--step-size 1e-04``)."""
     moved = float(last.metrics.get("moved", 1.0))
     if moved >= VISIBLE_MOVE:
         return ""
@@ -30,9 +31,10 @@ def change_advice(last: Step, params) -> str:
         return ("Nothing moved: the surface is flat with a fixed border (or every point is "
                 "fixed), which these flows leave as it is.")
     stronger = min(1.0, float(params.step_size) * 10.0)
+    raise_it = (f"Raise --step-size (e.g. --step-size {stronger:.0e}) or --iterations" if flags
+                else f"Raise Step size (e.g. to {stronger:.0e}) or Iterations")
     return (f"The shape changed little (at most {100 * moved:.2g} % of its size): it is already "
-            f"smooth at this step size. Raise Step size (e.g. to {stronger:.0e}) or Iterations "
-            "to smooth more.")
+            f"smooth at this step size. {raise_it} to smooth more.")
 
 
 def _smooth_params():
