@@ -466,8 +466,10 @@ def _page(records: list[dict], methods: list[str], meshes: list[Path], args, sec
         f"runs; this invocation {seconds / 60:.1f} min). "
         f"{len(meshes)} meshes x {len(methods)} methods. The classes are defined in the "
         "script's docstring: ok = a visible, artefact-free result; ok* = after the advice of "
-        "the refusal (Clean, or the setting and value it named) was followed; R = refused with "
-        "a message (also after its advice); - = no visible effect; "
+        "the refusal (Clean, or the setting and value it named) was followed, or the setting "
+        "and value named by a result that changed nothing visible (smooth: --step-size); R = "
+        "refused with a message (also after its advice); - = no visible effect (also after "
+        "its advice); "
         "X = artefact; S = another method ran (said in the output); T = over time; "
         "C! = crash or traceback." + (
             " Part of the table comes from an earlier run of the same script (--merge): the "
