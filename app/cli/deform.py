@@ -224,7 +224,10 @@ def cmd_cubic(args: argparse.Namespace) -> int:
             online = seconds
         V = recipe.result(state, last, options).V
         write_result(args, output, V, data.F, data)
+        from app.recipes.cubic import change_note
+
         results.append({"lam": params.lam, "output": output, "params": params,
+                        "note": change_note(data.V, V, data.F, params.lam, flags=True),
                         "iterations": last.iteration, "seconds": seconds,
                         "online_seconds": online,
                         "final_relative_displacement": last.metrics.get("displacement"),
@@ -251,14 +254,16 @@ def cmd_cubic(args: argparse.Namespace) -> int:
                         "seconds": r["seconds"], "online_seconds": r["online_seconds"],
                         "final_relative_displacement": r["final_relative_displacement"],
                         **{k: v for k, v in common.items() if k != "input"},
-                        "l1_normals_after": r["l1_normals_after"], "crossings": r["crossings"]})
+                        "l1_normals_after": r["l1_normals_after"], "crossings": r["crossings"],
+                        **({"note": r["note"]} if r["note"] else {})})
         else:
             print_json({**common, "runs": [
                 {"lambda": r["lam"], "output": r["output"], "params": params_to_dict(r["params"]),
                  "iterations": r["iterations"], "seconds": r["seconds"],
                  "online_seconds": r["online_seconds"],
                  "final_relative_displacement": r["final_relative_displacement"],
-                 "l1_normals_after": r["l1_normals_after"], "crossings": r["crossings"]}
+                 "l1_normals_after": r["l1_normals_after"], "crossings": r["crossings"],
+                 **({"note": r["note"]} if r["note"] else {})}
                 for r in results]})
     else:
         how = ("on every triangle" if prog is None else
@@ -271,7 +276,7 @@ def cmd_cubic(args: argparse.Namespace) -> int:
             print(f"Stylized {args.mesh} (λ {r['lam']:g}) in {r['seconds']:.2f} s "
                   f"({r['iterations']} iterations); mean L1 norm of normals {l1_before:.4f} -> "
                   f"{r['l1_normals_after']:.4f}; wrote {r['output']}.")
-            said = crossings_sentence_of(r["crossings"])
+            said = " ".join(x for x in (crossings_sentence_of(r["crossings"]), r["note"]) if x)
             if said:
                 print(said)
         pre = "" if preprocess is None else f" (pre-processing {preprocess:.1f} s, once)"

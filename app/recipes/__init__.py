@@ -47,6 +47,10 @@ import numpy as np
 from algorithms.steps import Step
 
 #: Per-vertex fields the Cubic panel paints (names shared with its tools).
+#: below this largest move (fraction of the bounding-box diagonal) a result looks unchanged, and
+#: the methods that move vertices say why (smooth, cubic)
+VISIBLE_MOVE = 0.005
+
 LAMBDA_FIELD = "lambda_scale"
 FIXED_FIELD = "fixed"
 PLANE_FIELD = "plane"

@@ -199,6 +199,52 @@ def touching_parts_of(state) -> tuple[int, int]:
     return touching_parts(state.V, state.F)
 
 
+#: a result with at least this share of its area facing within :data:`AXIS_DEGREES` of an axis
+#: is box-like already: the style has little left to square off
+BOX_LIKE_SHARE = 0.9
+AXIS_DEGREES = 10.0
+
+
+def axis_facing_share(V, F) -> float:
+    """Share of the surface's area whose triangle normal is within :data:`AXIS_DEGREES` of a
+    coordinate axis."""
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    area = np.linalg.norm(n, axis=1)
+    ok = area > 0
+    if not ok.any():
+        return 0.0
+    cos = np.abs(n[ok]).max(axis=1) / area[ok]
+    return float(area[ok][cos >= np.cos(np.radians(AXIS_DEGREES))].sum() / area[ok].sum())
+
+
+def change_note(V0, V, F, lam: float, flags: bool = False) -> str:
+    """What to tell a user whose stylization barely changed the shape (empty when it visibly
+    did, :data:`~app.recipes.VISIBLE_MOVE`): its faces already face the axes, or how to
+    stylize more -- the panel's setting name, or with ``flags`` the command line's."""
+    from app.recipes import VISIBLE_MOVE
+
+    V0 = np.asarray(V0, np.float64)
+    V = np.asarray(V, np.float64)
+    if V.shape != V0.shape or not len(V):
+        return ""
+    diag = float(np.linalg.norm(np.ptp(V0, axis=0))) or 1.0
+    moved = float(np.linalg.norm(V - V0, axis=1).max()) / diag
+    if moved >= VISIBLE_MOVE:
+        return ""
+    said = ("The shape did not change: " if moved < 1e-9 else
+            f"The shape changed little (at most {100 * moved:.2g} % of its size): ")
+    share = axis_facing_share(V, F)
+    if share >= BOX_LIKE_SHARE:
+        return said + (f"its faces already face the axes ({100 * share:.0f} % of its area "
+                       f"within {AXIS_DEGREES:g} degrees of one), so the style has little left "
+                       f"to square off.")
+    more = min(1.0, 2.5 * float(lam))
+    return said + (f"raise --lambda (e.g. --lambda {more:g}) to stylize more." if flags else
+                   f"raise λ (e.g. to {more:g}) to stylize more.")
+
+
 def _cubic_params():
     from algorithms.deform.cubic import CubicParams
 

@@ -5,17 +5,13 @@ from __future__ import annotations
 from typing import Iterator
 
 from algorithms.steps import Step
-from app.recipes import Recipe, register
+from app.recipes import VISIBLE_MOVE, Recipe, register
 
 
 def smooth_steps(state, params, options=None, cache=None) -> Iterator[Step]:
     from algorithms.smoothing import smooth_iter
 
     return smooth_iter(state.V, state.F, params)
-
-
-#: Below this largest move (fraction of the bounding-box diagonal) a result looks unchanged.
-VISIBLE_MOVE = 0.005
 
 
 def change_advice(last: Step, params, flags: bool = False) -> str:

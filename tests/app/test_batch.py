@@ -113,6 +113,20 @@ def test_cubic_batch_equals_one_mesh_command_and_reports_broken_meshes(cubic_bat
     assert not _no_tmp(out)
 
 
+def test_a_box_in_a_batch_says_its_faces_already_face_the_axes(tmp_path):
+    """The batch record carries the note the line gives (issue 38: the corpus's CAD tray)."""
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.primitives import cube
+
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    write_mesh(lib / "box.obj", *cube(3))
+    out = tmp_path / "out"
+    assert main(["batch", "cubic", str(lib), "-o", str(out), "--workers", "1", "--quiet"]) == 0
+    (rec,) = [r for r in _records(out / "batch-report.jsonl") if r.get("status") == "done"]
+    assert any("already face the axes" in n for n in rec.get("notes", [])), rec
+
+
 def test_dry_run_lists_what_would_run_or_be_skipped_and_runs_nothing(cubic_batch, capsys,
                                                                       tmp_path):
     lib, out = cubic_batch["lib"], cubic_batch["out"]

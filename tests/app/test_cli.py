@@ -146,6 +146,26 @@ def test_cubic_json_reports_cubier_normals(tmp_path):
     assert data.F.shape == (1654, 3)
 
 
+def test_cubic_on_a_box_says_its_faces_already_face_the_axes(tmp_path):
+    """A box (the corpus's CAD tray is one): the style has nothing to square off; the line and
+    --json say why nothing visible changed, instead of a silent copy. A shape that changes
+    says nothing of the kind."""
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.primitives import cube
+
+    src = tmp_path / "box.obj"
+    write_mesh(src, *cube(3))
+    out = tmp_path / "c.obj"
+    r = stylize3d("cubic", src, "-o", out)
+    assert r.returncode == 0, r.stderr
+    assert "its faces already face the axes (100 % of its area within 10 degrees" in r.stdout
+    r = stylize3d("cubic", src, "-o", out, "--overwrite", "--json")
+    assert "already face the axes" in json.loads(r.stdout)["note"]
+    r = stylize3d("cubic", shared_mesh("spot_lowres.obj"), "-o", out, "--overwrite", "--json",
+                  "--max-iters", "20")
+    assert "note" not in json.loads(r.stdout)
+
+
 def test_cubic_lambda_xyz_and_bad_values(tmp_path):
     out = tmp_path / "c.obj"
     r = stylize3d("cubic", SAMPLES / "blob.obj", "-o", out, "--lambda-xyz", "1", "0", "0",

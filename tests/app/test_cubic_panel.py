@@ -33,6 +33,9 @@ def test_run_streams_and_is_one_undoable_command(window, dialogs, qtbot):
     assert l1_of_normals(V1, F) < l1_of_normals(V0, F) - 0.01  # cubier
     assert window.undo_stack.count() == 1 and window.undo_stack.undoText() == "Cubic"
     assert len(panel.plot.series["energy"]) >= 2
+    # a shape that changed says nothing about an unchanged one
+    text = panel.status_label.text()
+    assert "Done" in text and "did not change" not in text and "changed little" not in text
     window.undo_stack.undo()
     np.testing.assert_array_equal(window.document.V, V0)
     np.testing.assert_array_equal(window.viewport.points, V0)
@@ -390,3 +393,21 @@ def test_a_run_that_would_cross_itself_says_what_it_held(window, dialogs, qtbot,
     assert not np.array_equal(window.document.V, V0)
     window.undo_stack.undo()  # the held run is one undo step, like any run
     assert np.array_equal(window.document.V, V0)
+
+
+def test_a_box_says_its_faces_already_face_the_axes(window, dialogs, qtbot, tmp_path):
+    """Cubic on a shape that is a box already: the closing line says why nothing changed."""
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.primitives import cube
+
+    src = tmp_path / "box.obj"
+    write_mesh(src, *cube(3))
+    assert window.open_path(src)
+    panel = window.panels["Cubic"]
+    panel.raise_()
+    panel.live_box.setChecked(False)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: "already face the axes" in panel.status_label.text(),
+                    timeout=10000)
+
