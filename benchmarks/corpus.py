@@ -334,7 +334,9 @@ def run_one(method: str, mesh: Path, work: Path, timeout: float) -> dict:
     env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1")
     clean = False
     extra: list[str] = []
-    for attempt in (0, 1, 2):
+
+    def command():
+        """(exit status or None when killed, stdout, stderr, seconds, its --json)."""
         t0 = time.perf_counter()
         try:
             p = subprocess.run(_command(method, mesh, out, clean, extra), cwd=ROOT, env=env,
@@ -342,8 +344,10 @@ def run_one(method: str, mesh: Path, work: Path, timeout: float) -> dict:
             rc, stdout, stderr = p.returncode, p.stdout, p.stderr
         except subprocess.TimeoutExpired:
             rc, stdout, stderr = None, "", ""
-        seconds = time.perf_counter() - t0
-        record = _last_json(stdout)
+        return rc, stdout, stderr, time.perf_counter() - t0, _last_json(stdout)
+
+    for attempt in (0, 1, 2):
+        rc, stdout, stderr, seconds, record = command()
         refused = rc is not None and 2 <= rc <= 6
         said = str(record.get("error") or "") + "\n" + stderr
         if attempt == 0 and refused and "clean" in (stderr + json.dumps(record)).lower():
@@ -378,15 +382,7 @@ def run_one(method: str, mesh: Path, work: Path, timeout: float) -> dict:
         extra = merge_settings(extra, advice)
         rec["advice"] = " ".join(extra)
         rec.setdefault("first", why)
-        t0 = time.perf_counter()
-        try:
-            p = subprocess.run(_command(method, mesh, out, clean, extra), cwd=ROOT, env=env,
-                               capture_output=True, text=True, timeout=timeout)
-            rc, stdout, stderr = p.returncode, p.stdout, p.stderr
-        except subprocess.TimeoutExpired:
-            rc, stdout, stderr = None, "", ""
-        seconds = time.perf_counter() - t0
-        record = _last_json(stdout)
+        rc, stdout, stderr, seconds, record = command()
         m = measured(rc)
         kind, why = _classify(rc, seconds, stderr, record, m, moves, faces, timeout)
     followed = " ".join((["--clean"] if clean else []) + extra)
