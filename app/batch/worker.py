@@ -265,14 +265,22 @@ def _run(job, task: dict, rec: dict) -> dict:
         rec["surface_attributes"] = status
         rec["notes"] = list(rec.get("notes", [])) + [status["note"]]
     outcome = recipe.outcome(last) if recipe.outcome is not None else {}
-    if job.method == "cubic":   # a shape the style barely changed: why (as the line says)
+    said = ""   # a shape the style barely changed: why (as the line says)
+    if job.method == "cubic":
         from algorithms.deform.cubic import CubicParams
         from app.recipes.cubic import change_note
 
         lam = float(job.params.get("lam", CubicParams().lam))
         said = change_note(state.V, V, F, lam, flags=True)
-        if said:
-            rec["notes"] = list(rec.get("notes", [])) + [said]
+    elif job.method == "analogy" and "mean_angle_to_targets" in (outcome or {}):
+        from algorithms.deform.analogies import AnalogyParams
+        from app.recipes.analogies import change_note as analogy_note
+
+        lam = float(job.params.get("lam", AnalogyParams().lam))
+        said = analogy_note(state.V, V, float(outcome["mean_angle_to_targets"]), lam,
+                            flags=True)
+    if said:
+        rec["notes"] = list(rec.get("notes", [])) + [said]
     return {**rec, "status": "done", "message": "",
             "output_sha256": file_sha256(out), "figures": _figures(job, state, after, outcome)}
 

@@ -132,6 +132,9 @@ def cmd_analogy(args: argparse.Namespace) -> int:
     V = recipe.result(state, last, options).V
     write_result(args, args.output, V, data.F, data)
     after = _angles_to_targets(V, data.F, target_map)
+    from app.recipes.analogies import change_note
+
+    note = change_note(data.V, V, after[0], params.lam, flags=True)
     if args.json:
         print_json({"input": args.mesh, "output": args.output,
                     "style": args.style if args.style is not None else options["style"],
@@ -143,12 +146,14 @@ def cmd_analogy(args: argparse.Namespace) -> int:
                     "progressive_not_finished": not_finished or None,
                     "mean_angle_before": before[0], "max_angle_before": before[1],
                     "mean_angle_after": after[0], "max_angle_after": after[1],
-                    "crossings": crossings_of(last.metrics)})
+                    "crossings": crossings_of(last.metrics),
+                    **({"note": note} if note else {})})
     else:
         print(f"Stylized {args.mesh} after {what} in {seconds:.2f} s ({last.iteration} "
               f"iterations); mean angle to the target normals {before[0]:.1f}° -> "
               f"{after[0]:.1f}°; wrote {args.output}.")
-        said = crossings_sentence_of(crossings_of(last.metrics))
+        said = " ".join(x for x in (crossings_sentence_of(crossings_of(last.metrics)), note)
+                        if x)
         if said:
             print(said)
         if prog is not None:

@@ -388,6 +388,23 @@ class AnalogiesPanel(MethodPanel):
                 and self.is_shown()):
             self.show_view()
 
+    def _on_finished(self, step) -> None:
+        super()._on_finished(step)
+        if self.window_.last_job_name != self.title:
+            return
+        from app.recipes.analogies import change_note
+
+        request = self.last_request or {}
+        start, recipe = request.get("input"), self.recipe()
+        angle = step.metrics.get("mean_angle_to_targets")
+        if start is None or recipe is None or step.V is None or angle is None:
+            return
+        # the positions the run committed (as the command line reads them)
+        V = recipe.result(start, step, request.get("options") or {}).V
+        note = change_note(start.V, V, float(angle), request["params"].lam)
+        if note:
+            self.status_label.setText(f"{self.status_label.text()} {note}")
+
     def refresh_view(self) -> None:
         self.show_view()
 

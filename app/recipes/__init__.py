@@ -51,6 +51,23 @@ from algorithms.steps import Step
 #: the methods that move vertices say why (smooth, cubic)
 VISIBLE_MOVE = 0.005
 
+
+def largest_move(V0, V) -> float:
+    """The largest vertex move from ``V0`` to ``V``, as a fraction of ``V0``'s bounding-box
+    diagonal (inf when they do not pair vertex for vertex)."""
+    V0 = np.asarray(V0, np.float64)
+    V = np.asarray(V, np.float64)
+    if V.shape != V0.shape or not len(V):
+        return float("inf")
+    diag = float(np.linalg.norm(np.ptp(V0, axis=0))) or 1.0
+    return float(np.linalg.norm(V - V0, axis=1).max()) / diag
+
+
+def unchanged_words(moved: float) -> str:
+    """The opening of a note on a result that looks unchanged (see :data:`VISIBLE_MOVE`)."""
+    return ("The shape did not change: " if moved < 1e-9 else
+            f"The shape changed little (at most {100 * moved:.2g} % of its size): ")
+
 LAMBDA_FIELD = "lambda_scale"
 FIXED_FIELD = "fixed"
 PLANE_FIELD = "plane"

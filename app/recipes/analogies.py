@@ -228,6 +228,30 @@ def analogy_steps(state, params, options: dict | None = None, cache: dict | None
     return hold_where_crossed(steps, state.V, state.F, rerun) if params.hold_crossings else steps
 
 
+#: a result whose normals are on average within this many degrees of the style's targets
+#: matches the style already: there is little left to turn
+STYLE_MATCH_DEGREES = 5.0
+
+
+def change_note(V0, V, mean_angle: float, lam: float, flags: bool = False) -> str:
+    """What to tell a user whose analogy barely changed the shape (empty when it visibly did,
+    :data:`~app.recipes.VISIBLE_MOVE`): its normals already match the style's (``mean_angle``,
+    degrees, the result's mean angle to the targets), or how to pull harder -- the panel's
+    setting name, or with ``flags`` the command line's."""
+    from app.recipes import VISIBLE_MOVE, largest_move, unchanged_words
+
+    moved = largest_move(V0, V)
+    if moved >= VISIBLE_MOVE:
+        return ""
+    said = unchanged_words(moved)
+    if mean_angle <= STYLE_MATCH_DEGREES:
+        return said + (f"its normals are already within {mean_angle:.1f} degrees of the style's "
+                       f"on average, so there is little left to turn.")
+    more = max(2.0, 5.0 * float(lam))
+    return said + (f"raise --lambda (e.g. --lambda {more:g}) to pull harder." if flags else
+                   f"raise λ (e.g. to {more:g}) to pull harder.")
+
+
 def _analogy_params():
     from algorithms.deform.analogies import AnalogyParams
 

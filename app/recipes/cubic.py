@@ -223,18 +223,12 @@ def change_note(V0, V, F, lam: float, flags: bool = False) -> str:
     """What to tell a user whose stylization barely changed the shape (empty when it visibly
     did, :data:`~app.recipes.VISIBLE_MOVE`): its faces already face the axes, or how to
     stylize more -- the panel's setting name, or with ``flags`` the command line's."""
-    from app.recipes import VISIBLE_MOVE
+    from app.recipes import VISIBLE_MOVE, largest_move, unchanged_words
 
-    V0 = np.asarray(V0, np.float64)
-    V = np.asarray(V, np.float64)
-    if V.shape != V0.shape or not len(V):
-        return ""
-    diag = float(np.linalg.norm(np.ptp(V0, axis=0))) or 1.0
-    moved = float(np.linalg.norm(V - V0, axis=1).max()) / diag
+    moved = largest_move(V0, V)
     if moved >= VISIBLE_MOVE:
         return ""
-    said = ("The shape did not change: " if moved < 1e-9 else
-            f"The shape changed little (at most {100 * moved:.2g} % of its size): ")
+    said = unchanged_words(moved)
     share = axis_facing_share(V, F)
     if share >= BOX_LIKE_SHARE:
         return said + (f"its faces already face the axes ({100 * share:.0f} % of its area "

@@ -31,6 +31,8 @@ def test_gallery_run_is_one_undoable_command_and_reduces_angles(window, dialogs,
     hist = panel.plot.series["mean_angle_to_targets"]
     assert hist[-1] < hist[0] and m["mean_angle_to_targets"] == hist[-1]
     assert window.undo_stack.undoText() == "Analogies"
+    text = panel.status_label.text()   # a shape that changed says nothing of the kind
+    assert "Done" in text and "did not change" not in text and "changed little" not in text
     window.undo_stack.undo()
     np.testing.assert_array_equal(window.document.V, V0)
 
@@ -271,3 +273,23 @@ def test_job_options_are_json_and_restore_round_trips(window, dialogs, tmp_path)
     assert panel.gallery.currentItem() is None or not panel.gallery.currentItem().isSelected()
     N = np.array([[0.9, 0.2, 0.3]])
     np.testing.assert_allclose(panel.target_map()(N), [[1, 1, 1]] / np.sqrt(3), atol=1e-12)
+
+
+def test_a_flat_drawing_says_its_normals_already_match_the_cube_style(window, dialogs, qtbot,
+                                                                      tmp_path):
+    """Analogies (cube style) on a flat drawing: the closing line says why nothing changed."""
+    from algorithms.mesh import write_mesh
+    from tests.conftest import unit_square_grid
+
+    src = tmp_path / "box.obj"
+    write_mesh(src, *unit_square_grid(8))
+    assert window.open_path(src)
+    panel = window.panels["Analogies"]
+    panel.raise_()
+    panel.live_box.setChecked(False)
+    items = {panel.gallery.item(i).data(256): i for i in range(panel.gallery.count())}
+    panel.gallery.setCurrentRow(items["cube"])
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: "already within" in panel.status_label.text(), timeout=10000)
+

@@ -114,7 +114,8 @@ def test_cubic_batch_equals_one_mesh_command_and_reports_broken_meshes(cubic_bat
 
 
 def test_a_box_in_a_batch_says_its_faces_already_face_the_axes(tmp_path):
-    """The batch record carries the note the line gives (issue 38: the corpus's CAD tray)."""
+    """The batch record carries the note the line gives (issue 38: the corpus's CAD tray; a
+    flat drawing for analogies)."""
     from algorithms.mesh import write_mesh
     from algorithms.mesh.primitives import cube
 
@@ -125,6 +126,15 @@ def test_a_box_in_a_batch_says_its_faces_already_face_the_axes(tmp_path):
     assert main(["batch", "cubic", str(lib), "-o", str(out), "--workers", "1", "--quiet"]) == 0
     (rec,) = [r for r in _records(out / "batch-report.jsonl") if r.get("status") == "done"]
     assert any("already face the axes" in n for n in rec.get("notes", [])), rec
+    from tests.conftest import unit_square_grid
+
+    (lib / "box.obj").unlink()
+    write_mesh(lib / "flat.obj", *unit_square_grid(8))   # every normal is a cube normal
+    out = tmp_path / "out2"
+    assert main(["batch", "analogy", str(lib), "-o", str(out), "--workers", "1", "--quiet",
+                 "--style", "cube"]) == 0
+    (rec,) = [r for r in _records(out / "batch-report.jsonl") if r.get("status") == "done"]
+    assert any("already within" in n for n in rec.get("notes", [])), rec
 
 
 def test_dry_run_lists_what_would_run_or_be_skipped_and_runs_nothing(cubic_batch, capsys,

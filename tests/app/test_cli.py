@@ -166,6 +166,21 @@ def test_cubic_on_a_box_says_its_faces_already_face_the_axes(tmp_path):
     assert "note" not in json.loads(r.stdout)
 
 
+def test_analogy_on_a_flat_drawing_says_its_normals_already_match_the_style(tmp_path):
+    """A flat drawing (the corpus's woody): every normal is a cube normal already."""
+    from algorithms.mesh import write_mesh
+    from tests.conftest import unit_square_grid
+
+    src = tmp_path / "box.obj"
+    write_mesh(src, *unit_square_grid(8))
+    out = tmp_path / "a.obj"
+    r = stylize3d("analogy", src, "-o", out, "--style", "cube")
+    assert r.returncode == 0, r.stderr
+    assert "its normals are already within 0.0 degrees of the style's" in r.stdout
+    r = stylize3d("analogy", src, "-o", out, "--style", "cube", "--overwrite", "--json")
+    assert "already within" in json.loads(r.stdout)["note"]
+
+
 def test_cubic_lambda_xyz_and_bad_values(tmp_path):
     out = tmp_path / "c.obj"
     r = stylize3d("cubic", SAMPLES / "blob.obj", "-o", out, "--lambda-xyz", "1", "0", "0",
