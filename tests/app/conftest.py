@@ -104,3 +104,24 @@ def drag(qtbot, window, points, modifier=None):
     for p in pts[1:]:
         qtbot.mouseMove(w, p)
     qtbot.mouseRelease(w, Qt.MouseButton.LeftButton, modifier, pts[-1])
+
+
+def open_and_run(window, qtbot, tmp_path, V, F, panel_name: str, prepare=None):
+    """Write ``(V, F)``, open it, run panel ``panel_name`` once (Live off; ``prepare(panel)``
+    first, if given) with a real click, and return the panel."""
+    from PySide6.QtCore import Qt
+
+    from algorithms.mesh import write_mesh
+
+    src = tmp_path / "shape.obj"
+    write_mesh(src, V, F)
+    assert window.open_path(src)
+    panel = window.panels[panel_name]
+    panel.raise_()
+    panel.live_box.setChecked(False)
+    if prepare is not None:
+        prepare(panel)
+    with qtbot.waitSignal(window.runner.finished, timeout=120000):
+        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    return panel
+

@@ -278,18 +278,13 @@ def test_job_options_are_json_and_restore_round_trips(window, dialogs, tmp_path)
 def test_a_flat_drawing_says_its_normals_already_match_the_cube_style(window, dialogs, qtbot,
                                                                       tmp_path):
     """Analogies (cube style) on a flat drawing: the closing line says why nothing changed."""
-    from algorithms.mesh import write_mesh
+    from tests.app.conftest import open_and_run
     from tests.conftest import unit_square_grid
 
-    src = tmp_path / "box.obj"
-    write_mesh(src, *unit_square_grid(8))
-    assert window.open_path(src)
-    panel = window.panels["Analogies"]
-    panel.raise_()
-    panel.live_box.setChecked(False)
-    items = {panel.gallery.item(i).data(256): i for i in range(panel.gallery.count())}
-    panel.gallery.setCurrentRow(items["cube"])
-    with qtbot.waitSignal(window.runner.finished, timeout=120000):
-        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: "already within" in panel.status_label.text(), timeout=10000)
+    def cube_style(panel):
+        items = {panel.gallery.item(i).data(256): i for i in range(panel.gallery.count())}
+        panel.gallery.setCurrentRow(items["cube"])
 
+    panel = open_and_run(window, qtbot, tmp_path, *unit_square_grid(8), "Analogies",
+                         cube_style)
+    qtbot.waitUntil(lambda: "already within" in panel.status_label.text(), timeout=10000)

@@ -397,17 +397,9 @@ def test_a_run_that_would_cross_itself_says_what_it_held(window, dialogs, qtbot,
 
 def test_a_box_says_its_faces_already_face_the_axes(window, dialogs, qtbot, tmp_path):
     """Cubic on a shape that is a box already: the closing line says why nothing changed."""
-    from algorithms.mesh import write_mesh
     from algorithms.mesh.primitives import cube
+    from tests.app.conftest import open_and_run
 
-    src = tmp_path / "box.obj"
-    write_mesh(src, *cube(3))
-    assert window.open_path(src)
-    panel = window.panels["Cubic"]
-    panel.raise_()
-    panel.live_box.setChecked(False)
-    with qtbot.waitSignal(window.runner.finished, timeout=120000):
-        qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+    panel = open_and_run(window, qtbot, tmp_path, *cube(3), "Cubic")
     qtbot.waitUntil(lambda: "already face the axes" in panel.status_label.text(),
                     timeout=10000)
-
