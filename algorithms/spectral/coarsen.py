@@ -207,6 +207,11 @@ def _check_L(L) -> sp.csr_matrix:
     return L
 
 
+#: an operator of at least this many loose parts (blocks) is solved part by part
+#: (:func:`_eigs_by_part`)
+EIGS_BY_PART = 50
+
+
 def generalized_eigs(L, M, k: int, sigma: float | None = None, progress=None):
     """First ``k`` eigenpairs of ``L x = lam M x`` (ascending), eigenvectors M-orthonormal.
 
@@ -230,7 +235,49 @@ def generalized_eigs(L, M, k: int, sigma: float | None = None, progress=None):
     from ._blas import single_blas_thread
 
     with single_blas_thread():
+        Ld = L if sp.issparse(L) else sp.csr_matrix(L)
+        parts, label = csgraph.connected_components(Ld, directed=False)
+        if parts >= EIGS_BY_PART:
+            return _eigs_by_part(Ld, M, k, sigma, progress, parts, label)
         return _generalized_eigs(L, M, k, sigma, progress)
+
+
+def _eigs_by_part(L, M, k, sigma, progress, parts: int, label: np.ndarray):
+    """:func:`generalized_eigs` of a block-diagonal operator (a mesh of ``parts`` loose parts):
+    the spectrum is the union of the parts' spectra, so each part gives its own first ``k``
+    (or all it has) and the smallest ``k`` of them are kept. On a mesh of many parts asking
+    for ``k`` pairs past the null space of dimension ``parts`` (the corpus's abominevole:
+    1,750 of 6,508 after 1,740 parts) one ARPACK run over the whole took 96 s."""
+    n = L.shape[0]
+    k = int(min(k, n - 1))
+    Ms = sp.csr_matrix(M if sp.issparse(M) else sp.diags(np.asarray(M, float)))
+    Lc = sp.csr_matrix(L)
+    lams, vecs = [], []
+    order = np.argsort(label, kind="stable")
+    starts = np.searchsorted(label[order], np.arange(parts + 1))
+    big = np.argmax(np.diff(starts))
+    for c in range(parts):
+        idx = order[starts[c]:starts[c + 1]]
+        kc = int(min(k, len(idx)))
+        Lp, Mp = Lc[idx][:, idx], Ms[idx][:, idx]
+        if len(idx) <= max(200, 3 * kc):
+            import scipy.linalg as sla
+
+            lam, phi = sla.eigh(Lp.toarray(), Mp.toarray(), subset_by_index=[0, kc - 1])
+        else:
+            lam, phi = _generalized_eigs(Lp, Mp, kc, sigma,
+                                         progress if c == big else None)
+        lams.append(np.asarray(lam, float))
+        vecs.append((idx, np.asarray(phi, float)))
+    lam_all = np.concatenate(lams)
+    owner = np.concatenate([np.full(len(x), c) for c, x in enumerate(lams)])
+    column = np.concatenate([np.arange(len(x)) for x in lams])
+    keep = np.argsort(lam_all, kind="stable")[:k]
+    phi = np.zeros((n, len(keep)))
+    for j, t in enumerate(keep):
+        idx, P = vecs[owner[t]]
+        phi[idx, j] = P[:, column[t]]
+    return lam_all[keep], phi
 
 
 def _generalized_eigs(L, M, k, sigma, progress):
