@@ -152,8 +152,8 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
         # abominevole, 1,740 loose parts after --clean, was refused with no flag named). Each
         # part takes one coarse vertex for its constant vector, and the k eigenvectors kept k
         # more: m = parts + k, with --k as given, else 10 (k = m / 3, the default, would make
-        # that 2,610 coarse vertices and 870 eigenvectors there: over 5 minutes; --m 1750
-        # --k 10 took 107 s)
+        # that 2,610 coarse vertices and 870 eigenvectors there; --m 1750 --k 10 took 107 s
+        # with one eigensolve of the whole, 2-3 s part by part since 30 November 2026)
         k_ok = params.k or ADVICE_K
         m_ok = max(parts + k_ok, 2 * k_ok + 1)
         fix = (f"ask for --m {m_ok}{'' if params.k else f' --k {k_ok}'} or more (one coarse "
