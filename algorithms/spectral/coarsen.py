@@ -258,15 +258,10 @@ def _eigs_by_part(L, M, k, sigma, progress, parts: int, label: np.ndarray):
     big = np.argmax(np.diff(starts))
     for c in range(parts):
         idx = order[starts[c]:starts[c + 1]]
-        kc = int(min(k, len(idx)))
-        Lp, Mp = Lc[idx][:, idx], Ms[idx][:, idx]
-        if len(idx) <= max(200, 3 * kc):
-            import scipy.linalg as sla
-
-            lam, phi = sla.eigh(Lp.toarray(), Mp.toarray(), subset_by_index=[0, kc - 1])
-        else:
-            lam, phi = _generalized_eigs(Lp, Mp, kc, sigma,
-                                         progress if c == big else None)
+        # the same solver as a whole operator (its checks, dense or ARPACK, plain errors),
+        # every pair a small part has
+        lam, phi = _generalized_eigs(Lc[idx][:, idx], Ms[idx][:, idx], min(k, len(idx)), sigma,
+                                     progress if c == big else None, every=True)
         lams.append(np.asarray(lam, float))
         vecs.append((idx, np.asarray(phi, float)))
     lam_all = np.concatenate(lams)
@@ -280,9 +275,11 @@ def _eigs_by_part(L, M, k, sigma, progress, parts: int, label: np.ndarray):
     return lam_all[keep], phi
 
 
-def _generalized_eigs(L, M, k, sigma, progress):
+def _generalized_eigs(L, M, k, sigma, progress, every: bool = False):
+    """``every``: up to all ``n`` pairs (a part of :func:`_eigs_by_part`; the dense solve),
+    else at most ``n - 1``."""
     n = L.shape[0]
-    k = int(min(k, n - 1))
+    k = int(min(k, n if every else n - 1))
     Ms = M if sp.issparse(M) else sp.diags(np.asarray(M, float))
     mass = np.asarray(Ms.diagonal(), float)
     if not np.all(np.isfinite(mass)) or np.any(mass <= 0):

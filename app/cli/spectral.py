@@ -157,8 +157,8 @@ def cmd_coarsen(args: argparse.Namespace) -> int:
         k_ok = params.k or ADVICE_K
         m_ok = max(parts + k_ok, 2 * k_ok + 1)
         fix = (f"ask for --m {m_ok}{'' if params.k else f' --k {k_ok}'} or more (one coarse "
-               f"vertex per part and one per eigenvector kept; a mesh of many parts coarsens "
-               f"slowly), or remove its small loose parts first" if m_ok < n
+               f"vertex per part and one per eigenvector kept), or remove its small loose "
+               f"parts first" if m_ok < n
                else "this mesh is mostly loose pieces and cannot be coarsened")
         raise ParameterError(f"This mesh has {parts:,} separate parts, but the coarse operator "
                              f"was to have {params.m:,} vertices (--m): {fix}.")

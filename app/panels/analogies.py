@@ -395,13 +395,12 @@ class AnalogiesPanel(MethodPanel):
         from app.recipes.analogies import change_note
 
         request = self.last_request or {}
-        start, recipe = request.get("input"), self.recipe()
+        start = request.get("input")
         angle = step.metrics.get("mean_angle_to_targets")
-        if start is None or recipe is None or step.V is None or angle is None:
+        if start is None or step.V is None or angle is None:
             return
-        # the positions the run committed (as the command line reads them)
-        V = recipe.result(start, step, request.get("options") or {}).V
-        note = change_note(start.V, V, float(angle), request["params"].lam)
+        # the last step's positions: what was committed
+        note = change_note(start.V, step.V, float(angle), request["params"].lam)
         if note:
             self.status_label.setText(f"{self.status_label.text()} {note}")
 

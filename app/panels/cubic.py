@@ -273,11 +273,9 @@ class CubicPanel(MethodPanel):
             from app.recipes.cubic import change_note
 
             request = self.last_request or {}
-            start, recipe = request.get("input"), self.recipe()
-            if start is not None and recipe is not None and step.V is not None:
-                # the positions the run committed (as the command line reads them)
-                V = recipe.result(start, step, request.get("options") or {}).V
-                note = change_note(start.V, V, start.F, request["params"].lam)
+            start = request.get("input")
+            if start is not None and step.V is not None:   # the last step: what was committed
+                note = change_note(start.V, step.V, start.F, request["params"].lam)
                 if note:
                     self.status_label.setText(f"{self.status_label.text()} {note}")
         warning = self.parts_warning() if self.window_.last_job_name == self.title else ""

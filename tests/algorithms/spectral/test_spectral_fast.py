@@ -182,3 +182,10 @@ def test_eigenpairs_of_a_mesh_of_many_parts_are_found_part_by_part():
     part = np.repeat(np.arange(60), [len(v) for v in Vs])
     for j in range(k):
         assert len(np.unique(part[np.abs(phi[:, j]) > 1e-12])) == 1
+    # a vertex with no area in one part: the same plain refusal as for a whole operator
+    from algorithms.errors import ParameterError
+
+    mass = np.asarray(M.diagonal()).copy()
+    mass[5] = 0.0
+    with pytest.raises(ParameterError, match="mass matrix"):
+        generalized_eigs(L, sp.diags(mass), k)
