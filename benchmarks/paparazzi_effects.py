@@ -702,6 +702,9 @@ def main() -> int:
                     help="with --corpus: only meshes of at most this many triangles")
     ap.add_argument("--from-index", type=int, default=0,
                     help="with --corpus: start at this mesh of the list sorted by size")
+    ap.add_argument("--worker", default="1/1", metavar="K/N",
+                    help="with --corpus: run only the K-th of every N meshes (smallest first), "
+                         "so N workers (K = 1..N, each its own --json) share the corpus evenly")
     ap.add_argument("--time-limit", type=float, default=None,
                     help="seconds per run; a run stopped there is 'over time', not a result")
     ap.add_argument("--json", default="", help="append one JSON line per row to this file")
@@ -739,6 +742,8 @@ def main() -> int:
             import json                        # rows there are not run again
             done = {json.loads(line)["mesh"] for line in open(a.json) if line.strip()}
         files = files[a.from_index:]           # a second worker can start mid-list
+        k, n = (int(x) for x in a.worker.split("/"))
+        files = files[k - 1::n]                # or take every n-th mesh (sizes spread evenly)
         a.meshes = [str(p) for p in files if p.name not in done]
     global SCOPE, NOISE
     SCOPE = a.remesh_scope

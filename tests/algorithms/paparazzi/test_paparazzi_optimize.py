@@ -200,6 +200,29 @@ def test_self_intersections_are_rolled_back_and_the_step_shrinks():
     assert is_manifold(last.F)
 
 
+def test_a_crossing_puts_back_only_the_surface_around_it():
+    # a thin slab; a dent in one end's top sheet is pushed through the bottom sheet, the other
+    # end's top sheet lifted a little (harmless progress): only the dent goes back
+    V, F = icosphere(3)
+    run = Paparazzi(V * [3.0, 1.0, 0.05], F, "guided", None, PaparazziParams(iterations=1))
+    before = run.V0
+    X = before.copy()
+    top = X[:, 2] > 0
+    crush = top & ((X[:, 0] - 0.7) ** 2 + X[:, 1] ** 2 < 0.15 ** 2)
+    lift = top & (X[:, 0] < -0.6)
+    assert crush.sum() >= 3 and lift.sum() >= 10
+    X[crush, 2] -= 0.06
+    X[lift, 2] += 0.002
+    spots = run._new_crossing_points(X, run.F0)
+    assert len(spots) and spots[:, 0].min() > 0.3          # crossings at the crushed end only
+    U = run._put_back(X, run.F0, before, spots)
+    assert U is not None and len(run._new_crossing_points(U, run.F0)) == 0
+    np.testing.assert_array_equal(U[crush], before[crush])
+    np.testing.assert_array_equal(U[lift], X[lift])       # the rest keeps its progress
+    # a put-back that cannot clear the crossings asks for the whole rollback
+    assert run._put_back(X, run.F0, X, spots) is None
+
+
 def test_remeshing_happens_only_when_the_edge_lengths_left_the_band():
     # a regular sphere: every edge within [4/5 h, 4/3 h], so the checks only look for crossings
     V, F = icosphere(3)
