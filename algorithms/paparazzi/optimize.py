@@ -243,6 +243,22 @@ def require_lowered(metrics: dict, spec: FilterSpec | None = None) -> None:
     except (KeyError, TypeError, ValueError):
         return
     if not e1 < e0:
+        probe, share = metrics.get("rough_probe"), metrics.get("rough_share")
+        if probe is not None and probe > 0 and share is not None and share < ROUGH_SHARE:
+            # the probe rose on a shape whose pictures are flat: a clean model at the filter's
+            # fixed point (docs/results/paparazzi.md "Rough probe on clean CAD models"), where
+            # more iterations or another step raise the energy just the same
+            name = getattr(spec, "name", "image")
+            pct = 100 * float(share)
+            noisy = "less than 1 %" if pct < 1 else f"only {pct:.0f} %"
+            raise EnergyNotLowered(
+                f"Paparazzi did not lower the {name} filter's energy ({e0:.4g} at the start, "
+                f"{e1:.4g} at the end), so nothing was changed: this shape's pictures are "
+                f"already close to what the filter makes (flat faces and sharp edges: "
+                f"{noisy} of its pixels are in the filter's noise range, and a first small "
+                f"step along the filter's pull raised its energy by {100 * float(probe):.0f} "
+                f"%). More iterations will not change that; another filter can still change "
+                f"the shape.")
         n = getattr(spec, "panel_iterations", 0)
         more = (f" (on a smooth shape the {spec.name} filter's energy rises before it falls: "
                 f"give it {n} or more)" if n else "")

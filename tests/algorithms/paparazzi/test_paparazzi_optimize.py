@@ -223,6 +223,29 @@ def test_a_crossing_puts_back_only_the_surface_around_it():
     assert run._put_back(X, run.F0, X, spots) is None
 
 
+def test_a_clean_box_at_the_guided_filters_fixed_point_is_refused_with_the_reason():
+    # a box's pictures are flat faces and sharp edges, what the guided filter makes: its pull
+    # raises the energy from the first step and the run finds no lower shape. The refusal says
+    # so (measured here: probe +139 %, 4 % of the pixels noisy; energy 0.0313 -> 0.0318) rather
+    # than advising more iterations, which raise it just the same
+    from algorithms.mesh import cube
+    from algorithms.paparazzi import EnergyNotLowered, require_lowered
+    from algorithms.paparazzi.optimize import ROUGH_SHARE
+
+    V, F = cube(8)
+    run = Paparazzi(V, F, "guided", None, PaparazziParams(iterations=60, monitor_every=10))
+    m = run_to_end(run.steps()).metrics
+    assert m["rough_probe"] > 0 and m["rough_share"] < ROUGH_SHARE and not m["rough_input"]
+    assert m["monitor_energy"] >= m["initial_monitor_energy"]
+    with pytest.raises(EnergyNotLowered, match="already close to what the filter makes") as e:
+        require_lowered(m, get_filter("guided"))
+    assert "More iterations will not" in str(e.value) and "guided filter" in str(e.value)
+    # a probe that fell, or a noisy shape's, keeps the general advice
+    for extra in ({"rough_probe": -0.1}, {"rough_share": ROUGH_SHARE}):
+        with pytest.raises(EnergyNotLowered, match="Try more iterations"):
+            require_lowered(dict(m, **extra), get_filter("guided"))
+
+
 def test_remeshing_happens_only_when_the_edge_lengths_left_the_band():
     # a regular sphere: every edge within [4/5 h, 4/3 h], so the checks only look for crossings
     V, F = icosphere(3)
