@@ -46,9 +46,8 @@ import numpy as np
 
 from algorithms.steps import Step
 
-#: Per-vertex fields the Cubic panel paints (names shared with its tools).
 #: below this largest move (fraction of the bounding-box diagonal) a result looks unchanged, and
-#: the methods that move vertices say why (smooth, cubic)
+#: the methods that move vertices say why (smooth, cubic, analogies)
 VISIBLE_MOVE = 0.005
 
 
@@ -68,6 +67,8 @@ def unchanged_words(moved: float) -> str:
     return ("The shape did not change: " if moved < 1e-9 else
             f"The shape changed little (at most {100 * moved:.2g} % of its size): ")
 
+
+#: Per-vertex fields the Cubic panel paints (names shared with its tools).
 LAMBDA_FIELD = "lambda_scale"
 FIXED_FIELD = "fixed"
 PLANE_FIELD = "plane"
