@@ -106,6 +106,7 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
     levels_used = list(getattr(last, "levels_used", ()) or [method_used] * int(params.levels))
     out = {"input": args.mesh, "output": args.output, "method": params.method,
            "method_used": method_used, "fallback": fallback, "levels_used": levels_used,
+           "fallback_reason": str(getattr(last, "fallback_reason", "") or ""),
            "levels": params.levels, "coarsen_first": params.coarsen_first,
            "vertices_in": int(len(data.V)), "faces_in": int(len(data.F)),
            "vertices": int(len(V)), "faces": int(len(F)), "seconds": dt, "note": note,
@@ -303,7 +304,7 @@ def add_parsers(sub) -> None:
     s.add_argument("--dense-input", choices=("guard", "loop", "scale", "off"),
                    help="neural: guard (the network, scaled to its training edge length on a "
                         "denser mesh; level by level its result is kept unless it is more than "
-                        "twice as bent as modified butterfly's, 1.25x on a denser mesh, or bends "
+                        "2.6x as bent as modified butterfly's, 1.4x on a denser mesh, or bends "
                         "flat sides; from there Loop subdivision makes the levels; where it "
                         "crosses itself, the level before is blended back in there; all said on "
                         "stderr and in --json levels_used), loop "

@@ -74,6 +74,8 @@ class MeshStep(Step):
     fallback: bool = False
     #: what made each level ("neural" / "loop" / the classic scheme), in order
     levels_used: tuple = ()
+    #: with ``fallback``: why the network was not used (one short clause)
+    fallback_reason: str = ""
 
 
 @dataclass
@@ -190,7 +192,7 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
         V, F = box["value"]
     levels = int(params.levels)
     note = ""
-    method_used, fallback = params.method, False
+    method_used, fallback, reason = params.method, False, ""
     levels_used = (params.method,) * levels
     metrics: dict = {}
     if params.method == "neural":
@@ -209,6 +211,7 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
         fallback = bool(getattr(last, "fallback", False))
         levels_used = tuple(last.levels_used) or (("loop" if fallback else "neural"),) * levels
         method_used = "+".join(dict.fromkeys(levels_used))   # neural, loop or neural+loop
+        reason = str(getattr(last, "fallback_reason", "")) if fallback else ""
     else:
         from algorithms.subdivision.baselines import subdivide_baseline
 
@@ -221,7 +224,7 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
     message = f"{len(F):,} triangles" + (f". {note}" if note else "")
     yield MeshStep(1, 1, np.asarray(V, dtype=np.float64), metrics, message,
                    F=np.asarray(F, dtype=np.int64), note=note, method_used=method_used,
-                   fallback=fallback, levels_used=levels_used)
+                   fallback=fallback, levels_used=levels_used, fallback_reason=reason)
 
 
 def method_words(method_used: str, fallback: bool, levels_used=()) -> str:
@@ -261,6 +264,8 @@ def _subdivision_outcome(last: Step) -> dict:
         out["fallback"] = bool(last.fallback)
         if getattr(last, "levels_used", ()):
             out["levels_used"] = list(last.levels_used)
+        if getattr(last, "fallback_reason", ""):
+            out["fallback_reason"] = str(last.fallback_reason)
     # the guard's local repair of crossings (said in the note too): the level before blended
     # back in where the network crossed itself
     count = int((last.metrics or {}).get("unsmoothed_vertices", 0))
