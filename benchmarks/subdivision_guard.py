@@ -7,7 +7,7 @@ each of ``--levels`` levels, four results are compared with the original mesh:
 * ``forced``    the network on every level (``dense="scale"``: scaled to its training edge
                 length when the coarse mesh is denser than its training meshes);
 * ``guard``     the product's default (``dense="guard"``): the network's levels up to the last
-                that is at most 2.6x (1.4x on a denser mesh) as bent as modified
+                that is at most 2.6x (1.25x on a denser mesh) as bent as modified
                 butterfly's (and keeps flat sides flat), Loop for the rest;
 * ``loop``, ``butterfly`` the classic schemes.
 

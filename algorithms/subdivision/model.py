@@ -86,7 +86,7 @@ class SubdivideParams:
                                      "vertices) and can leave dimples on denser ones. guard: "
                                      "run it (scaled to its training edge length) and, level by "
                                      "level, keep its result unless it is more than 2.6x as "
-                                     "bent as modified butterfly's (1.4x on a denser mesh) or "
+                                     "bent as modified butterfly's (1.25x on a denser mesh) or "
                                      "bends flat sides (where it crosses itself, the level "
                                      "before is blended back in there); "
                                      "from there Loop subdivision makes the "

@@ -304,7 +304,7 @@ def add_parsers(sub) -> None:
     s.add_argument("--dense-input", choices=("guard", "loop", "scale", "off"),
                    help="neural: guard (the network, scaled to its training edge length on a "
                         "denser mesh; level by level its result is kept unless it is more than "
-                        "2.6x as bent as modified butterfly's, 1.4x on a denser mesh, or bends "
+                        "2.6x as bent as modified butterfly's, 1.25x on a denser mesh, or bends "
                         "flat sides; from there Loop subdivision makes the levels; where it "
                         "crosses itself, the level before is blended back in there; all said on "
                         "stderr and in --json levels_used), loop "
