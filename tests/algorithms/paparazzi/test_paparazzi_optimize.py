@@ -316,6 +316,76 @@ def test_remeshing_moves_only_the_vertices_next_to_bad_elements_by_default():
     assert (d > 0).mean() > 0.9
 
 
+def test_a_remeshing_hands_the_remesher_only_the_triangles_next_to_bad_elements(monkeypatch):
+    """Issue 38 item 3 (El Topo changes only bad elements): with remesh_scope "bad" the core
+    gets the triangles with a vertex next to a bad element, not the whole mesh; every other
+    triangle comes out with the same three corner positions, bit for bit, the result is a
+    closed manifold of the same genus, and the drift check measured on the part agrees with
+    the one on the whole surfaces."""
+    import igl
+
+    from algorithms.paparazzi import optimize
+
+    V, F = icosphere(4)                             # 2,562 vertices, 5,120 triangles
+    V = V.copy()
+    a, b = igl.edges(F)[0]
+    V[a] = V[b] + 0.2 * (V[a] - V[b])
+    sizes = []
+    real = optimize._remesh_core
+
+    def counting(V_, F_, *rest):
+        sizes.append(len(F_))
+        return real(V_, F_, *rest)
+
+    monkeypatch.setattr(optimize, "_remesh_core", counting)
+    run = Paparazzi(V, F, "guided", None, PaparazziParams(iterations=1))
+    U, G = run._remesh(run.V0, run.F0, np.ones(len(run.V0), bool))
+    assert len(sizes) == 1 and 6 < sizes[0] < 60          # the patch, of 5,120
+    done = run.remeshed
+    assert done.start == len(run.V0) - len(done.moved) and len(done.old_faces) == sizes[0]
+
+    def corners(X, T):
+        return {tuple(np.sort(X[t], axis=0).ravel()) for t in T}
+    untouched = np.ones(len(run.F0), bool)
+    untouched[np.isin(run.F0, done.moved).any(axis=1)] = False
+    assert untouched.sum() >= len(run.F0) - 60
+    assert corners(run.V0, run.F0[untouched]) <= corners(U, G)
+    assert is_manifold(G) and euler_characteristic(G) == 2 and run._same_topology(run.V0, G)
+    np.testing.assert_array_equal(U[:done.start], np.delete(run.V0, done.moved, axis=0))
+    assert np.linalg.norm(U[G[:, 0]] - U[G[:, 1]], axis=1).min() > 0.45 * run.edge_length
+    part = run._drift_points(run.V0, run.F0, U, G)
+    run.remeshed = None                                    # the whole surfaces instead
+    whole = run._drift_points(run.V0, run.F0, U, G)
+    np.testing.assert_array_equal(np.sort(part, axis=0), np.sort(whole, axis=0))
+
+
+def test_a_part_remeshed_into_another_topology_is_rejected(monkeypatch):
+    """The topology check of a part (Paparazzi._same_topology) rejects what the whole-mesh
+    check would: a part that comes back with a hole (one of its triangles dropped), and one
+    with a triangle doubled (an edge of three triangles), without raising."""
+    import igl
+
+    from algorithms.paparazzi import optimize
+    from algorithms.paparazzi.optimize import _topology
+
+    V, F = icosphere(3)
+    V = V.copy()
+    a, b = igl.edges(F)[0]
+    V[a] = V[b] + 0.2 * (V[a] - V[b])
+    real = optimize._remesh_core
+    for damage in ("hole", "doubled"):
+        def damaging(*args, damage=damage):
+            U, G = real(*args)
+            return U, (G[1:] if damage == "hole" else np.vstack([G, G[:1]]))
+
+        monkeypatch.setattr(optimize, "_remesh_core", damaging)
+        run = Paparazzi(V, F, "guided", None, PaparazziParams(iterations=1))
+        U, G = run._remesh(run.V0, run.F0, np.ones(len(run.V0), bool))
+        assert run.remeshed.start > 0                      # a part was remeshed
+        assert (_topology(G) != run.topology) if damage == "hole" else not is_manifold(G)
+        assert not run._same_topology(run.V0, G)
+
+
 @pytest.mark.parametrize("name, iterations, factor", [
     # (guided: test_guided_lowers_its_energy_smooths_more_than_remeshing_and_keeps_fandisks_creases
     # below; on spot its 300-iteration effect is within 1 % of remeshing alone since remeshing
@@ -606,13 +676,22 @@ def test_a_remeshing_that_leaves_a_flat_triangle_is_held_there(monkeypatch):
     """The remesher can leave three collinear vertices (nefertiti of the corpus, remeshing
     alone: smallest angles of 2e-13 degrees, bending energy NaN). Here the first remeshing's
     output gets one triangle squashed onto its edge: the remeshing is tried again with the
-    surface held there, and the result has no such triangle (issue 38)."""
+    surface held there, and the result has no such triangle (issue 38). Two short edges on
+    opposite sides of a sphere make two bad spots; the triangle squashed is next to the first,
+    so the second attempt, with the surface there held, still remeshes the other."""
     import igl
 
     from algorithms.mesh import icosphere
     from algorithms.paparazzi import optimize
 
     V, F = icosphere(3)
+    V = V.copy()
+    E = igl.edges(F)
+    first = E[np.argmax(V[E[:, 0], 2] + V[E[:, 1], 2])]          # at the top
+    second = E[np.argmin(V[E[:, 0], 2] + V[E[:, 1], 2])]         # at the bottom
+    for a, b in (first, second):
+        V[a] = V[b] + 0.2 * (V[a] - V[b])
+    top = V[first].mean(axis=0)
     real = optimize._remesh_core
     calls = []
 
@@ -620,7 +699,7 @@ def test_a_remeshing_that_leaves_a_flat_triangle_is_held_there(monkeypatch):
         U, G = real(*args)
         calls.append(len(G))
         if len(calls) == 1:
-            a, b, c = G[len(G) // 2]
+            a, b, c = G[np.argmin(np.linalg.norm(U[G].mean(axis=1) - top, axis=1))]
             U = U.copy()
             # next to the midpoint of the opposite edge, a millionth of an edge off it: a
             # sliver, not an exact zero (which the exact crossing test flags on its own)
