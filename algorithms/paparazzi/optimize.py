@@ -26,8 +26,9 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   part comes back stitched into the rest along its unchanged border; the checks below
   (topology, drift) look at that part. After the first few remeshings that part is a few % of
   a scan's triangles: remeshing alone on the corpus skull (49,999 vertices, 1000 iterations)
-  took 16.5 s instead of 39.9 s with the whole mesh handed to the remesher. Re-placing every vertex ("all", the default before issue 23's
-  fourth pass, 26 November 2026) cost what the steps had won: one such remeshing of the
+  took 16.5 s instead of 39.9 s with the whole mesh handed to the remesher. Re-placing every
+  vertex ("all", the default before issue 23's fourth pass, 26 November 2026) cost what the
+  steps had won: one such remeshing of the
   pretzel sample raised its 16-view guided energy by 8 % (1.783 -> 1.929) and the
   1000-iteration run ended above its start (1.856); moving bad elements only, it falls
   (1.700; docs/results/paparazzi.md). A remeshing may also move the surface by at most
@@ -443,7 +444,7 @@ class Paparazzi:
         self.input_intersections = count_self_intersections(V0, F0)
         self._crossings_tree = None
         #: what the last remeshing changed (see :meth:`_remesh`)
-        self.remeshed: tuple | None = None
+        self.remeshed: _Remeshed | None = None
         if self.input_intersections:
             from scipy.spatial import cKDTree
 
