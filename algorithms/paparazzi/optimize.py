@@ -58,8 +58,7 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   edge lengths of its crossings fixed, and the remesher keeps them fixed for the rest of the run;
   after a rollback the optimizer holds the surface within 4 edge lengths of the crossings still
   for the rest of the run, and halves the learning rate only when the crossings were next to a
-  held part already and putting the surface back around them did not clear them (the whole
-  mesh went back; step shrinking; 11 halvings stop the run with a message). Halving at every
+  held part already (step shrinking; 11 halvings stop the run with a message). Halving at every
   rollback, as before, failed on camelhead (11,381 V, CLI defaults, guided): its lips are 3-4 %
   of an edge length apart, so every remeshing crossed them (all 33 rejected: nothing resampled
   the optimizer's noise), and the steps crossed the surface at two other spots (one the mirror
@@ -958,12 +957,7 @@ class Paparazzi:
                         message = ("self-intersection: put back the surface there and held "
                                    "it still")
                     hold = np.vstack([hold, spots])
-                    # the step of the whole shape is halved only when neither holding nor
-                    # putting back the surface around the crossings was enough. Halving at a
-                    # put-back too stopped quantize on the corpus counter (2,272 crossings of
-                    # its own; 11 halvings by iteration 719, 8 of them at put-backs); without,
-                    # 817.7 -> 519.4 in 1000 iterations, 9 halvings at whole rollbacks
-                    if shrink and U is None:
+                    if shrink:
                         lr_scale *= 0.5
                         message += "; halved the step"
                     if lr_scale < 1.0 / 1024:

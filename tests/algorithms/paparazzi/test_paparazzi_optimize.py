@@ -223,33 +223,6 @@ def test_a_crossing_puts_back_only_the_surface_around_it():
     assert run._put_back(X, run.F0, X, spots) is None
 
 
-def test_the_step_is_halved_only_when_putting_the_surface_back_was_not_enough(monkeypatch):
-    """Crossings next to a part held already: a put-back that clears them keeps the step; a
-    whole rollback (the put-back could not) halves it. Scripted: every check finds a crossing
-    at the same spot; the put-backs at iterations 3 and 6 clear it, the one at 9 cannot."""
-    V, F = icosphere(3)
-    name = "test-identity-halving"
-    register_filter(name, kind="iterative")(lambda image, params, ctx: image)
-    try:
-        run = Paparazzi(V, F, name, None, PaparazziParams(
-            iterations=12, resolution=32, remesh_every=3, monitor_every=0, learning_rate=1e-4))
-        spot = run.V0[:1].copy()
-        monkeypatch.setattr(run, "_new_crossing_points", lambda X, T: spot.copy())
-        script = iter([True, True, False, True])
-        monkeypatch.setattr(run, "_put_back",
-                            lambda X, T, before, spots: X.copy() if next(script) else None)
-        steps = list(run.steps())
-    finally:
-        unregister_filter(name)
-    rate = {s.iteration: s.metrics["learning_rate"] for s in steps}
-    said = {s.iteration: s.message for s in steps}
-    assert rate[4] == rate[7] == pytest.approx(1e-4)        # put back twice: the same step
-    assert "put back" in said[6] and "halved" not in said[6]
-    assert "rolled back" in said[9] and "halved the step" in said[9]
-    assert rate[10] == pytest.approx(0.5e-4)
-    assert steps[-1].metrics["rollbacks"] == 4 and steps[-1].metrics["rollbacks_whole"] == 1
-
-
 def test_a_clean_box_at_the_guided_filters_fixed_point_is_refused_with_the_reason():
     # a box's pictures are flat faces and sharp edges, what the guided filter makes: its pull
     # raises the energy from the first step and the run finds no lower shape. The refusal says
