@@ -32,10 +32,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-SAMPLES = ["resources/samples/blob.obj", "resources/samples/bumpy.obj",
-           "resources/samples/orange.obj", "resources/samples/pretzel.obj"]
-TRAINING = ["tests/data/armadillo.obj", "tests/data/bob.obj", "tests/data/spot_lowres.obj",
-            "tests/data/fandisk.off", "tests/data/rocker-arm.obj"]
+from subdivision_guard import TRAINED_ON  # noqa: E402  (the evaluation leaves these out)
+
+from algorithms.mesh.samples import SAMPLE_NAMES, sample_path  # noqa: E402
+
+SAMPLES = [str(sample_path(n).relative_to(ROOT)) for n in SAMPLE_NAMES]
+TRAINING = [f"tests/data/{n}" for n in sorted(TRAINED_ON)]
 
 
 #: the results that set the factors (see GUARD_BENDING_FACTOR): (mesh, vertices or None for

@@ -385,14 +385,16 @@ def _remesh_core(V, F, iterations: int, h: float, n_fixed: int, creases) -> tupl
 class _Remeshed:
     """What a remeshing of ``V`` changed: only the vertices ``moved`` of ``V`` may have moved
     or gone, and its triangles ``old_faces`` (indices of ``V``) became ``new_faces`` (indices of
-    the result); the result's vertices before ``start`` are ``V``'s others, in order, and those
-    from ``start`` on are new. A whole-mesh remeshing: all of them (``start`` 0)."""
+    the result); the result's vertices before ``start`` are ``V``'s others, in order
+    (``to_new``: each vertex of ``V``'s index in the result, -1 for ``moved``), and those from
+    ``start`` on are new. A whole-mesh remeshing: all of them (``start`` 0, no ``to_new``)."""
 
     V: np.ndarray
     moved: np.ndarray
     start: int
     old_faces: np.ndarray
     new_faces: np.ndarray
+    to_new: np.ndarray | None = None
 
 
 def _topology(F) -> tuple[int, int, bool]:
@@ -680,7 +682,7 @@ class Paparazzi:
                 [G[:, [0, 1]], G[:, [1, 2]], G[:, [2, 0]]]))).all():
             return None
         G = G.astype(np.int64)
-        self.remeshed = _Remeshed(V, moving, start, PF, G)
+        self.remeshed = _Remeshed(V, moving, start, PF, G, to_new)
         return np.concatenate([V[keep], U[len(fixed):]]), np.concatenate([to_new[rest], G])
 
     def near_bad(self, V, F) -> np.ndarray:
@@ -769,10 +771,6 @@ class Paparazzi:
         old, new = done.old_faces, done.new_faces
         if not len(old):
             return True
-        keep = np.ones(len(V), dtype=bool)
-        keep[done.moved] = False
-        to_new = np.full(len(V), -1, np.int64)
-        to_new[keep] = np.arange(done.start)
 
         def border(E):
             E = np.sort(E, axis=1)
@@ -783,7 +781,7 @@ class Paparazzi:
         if not is_edge_manifold(ring) or touched[nonmanifold_vertices(ring)].any():
             return False
         return (euler_characteristic(new) == euler_characteristic(old)
-                and border(boundary_edges(new)) == border(to_new[boundary_edges(old)]))
+                and border(boundary_edges(new)) == border(done.to_new[boundary_edges(old)]))
 
     @staticmethod
     def _degenerate_points(V, F, U, G) -> np.ndarray:
