@@ -13,7 +13,8 @@ import numpy as np
 from .. import offload
 
 __all__ = ["count_self_intersections", "crossings_away_from", "crossings_not_in_parents",
-           "intersecting_pairs", "intersecting_pairs_here", "new_crossing_pairs",
+           "intersecting_pairs", "intersecting_pairs_here", "intersecting_pairs_touching",
+           "intersecting_pairs_touching_here", "new_crossing_pairs",
            "new_crossings_away_from"]
 
 
@@ -31,6 +32,68 @@ def intersecting_pairs(V, F) -> np.ndarray:
     """:func:`intersecting_pairs_here`, in the desktop app's helper process (the same bits)."""
     return offload.call(intersecting_pairs_here, np.ascontiguousarray(V, np.float64),
                         np.ascontiguousarray(F, np.int64))
+
+
+def _aabb_neighbours(V, F, faces: np.ndarray) -> np.ndarray:
+    """(m,) bool: ``faces`` and every triangle whose bounding box may overlap the bounding box
+    of one of them (a superset). The boxes are binned on a grid of cells twice the 90th
+    percentile of the boxes' sizes: a box no larger than a cell covers at most 2 cells along
+    each axis (its corner cells), so two overlapping boxes share a covered cell; the few
+    larger boxes are always kept, and those among ``faces`` cover every cell in their range."""
+    T = V[F]
+    lo, hi = T.min(axis=1), T.max(axis=1)
+    ext = (hi - lo).max(axis=1)
+    size = 2.0 * float(np.quantile(ext, 0.9)) + 1e-300
+    big = ext > size / 1.01
+    origin = lo.min(axis=0)
+    clo = np.floor((lo - origin) / size).astype(np.int64)
+    chi = np.floor((hi - origin) / size).astype(np.int64)
+    dims = chi.max(axis=0) + 2
+
+    def key(c0, c1, c2):
+        return (c0 * dims[1] + c1) * dims[2] + c2
+
+    keys = np.empty((8, len(F)), np.int64)
+    for b in range(8):
+        c = [np.where((b >> a) & 1, chi[:, a], clo[:, a]) for a in range(3)]
+        keys[b] = key(*c)
+    cells = [keys[:, faces & ~big].ravel()]
+    count = 0
+    for f in np.flatnonzero(faces & big):
+        r = [np.arange(clo[f, a], chi[f, a] + 1) for a in range(3)]
+        count += len(r[0]) * len(r[1]) * len(r[2])
+        if count > 4 * len(F):          # huge query boxes: the whole mesh is as cheap
+            return np.ones(len(F), dtype=bool)
+        g = np.meshgrid(*r, indexing="ij")
+        cells.append(key(*(x.ravel() for x in g)))
+    marked = np.unique(np.concatenate(cells))
+    near = big | faces
+    if len(marked):
+        pos = np.minimum(np.searchsorted(marked, keys), len(marked) - 1)
+        near |= (marked[pos] == keys).any(axis=0)
+    return near
+
+
+def intersecting_pairs_touching_here(V, F, faces) -> np.ndarray:
+    """The pairs of :func:`intersecting_pairs_here` with at least one face among ``faces``
+    (indices or an (m,) bool mask), the same pairs, found on those triangles and the ones whose
+    bounding boxes may overlap theirs only (libigl's test on that part of the mesh: the same
+    vertex indices, so neighbours are told apart as on the whole mesh)."""
+    V = np.ascontiguousarray(V, dtype=np.float64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    mask = np.zeros(len(F), dtype=bool)
+    mask[faces] = True
+    if not mask.any():
+        return np.zeros((0, 2), np.int64)
+    part = np.flatnonzero(_aabb_neighbours(V, F, mask))
+    IF = part[intersecting_pairs_here(V, F[part])]
+    return IF[mask[IF].any(axis=1)] if len(IF) else IF
+
+
+def intersecting_pairs_touching(V, F, faces) -> np.ndarray:
+    """:func:`intersecting_pairs_touching_here`, in the desktop app's helper process."""
+    return offload.call(intersecting_pairs_touching_here, np.ascontiguousarray(V, np.float64),
+                        np.ascontiguousarray(F, np.int64), np.asarray(faces))
 
 
 def count_self_intersections(V, F) -> int:

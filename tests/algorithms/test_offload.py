@@ -64,10 +64,18 @@ def test_paparazzi_cores_give_the_same_bits_in_the_helper(helper):
     free[:5] = False                                # a few fixed vertices: the reordering path
     rng = np.random.default_rng(0)
     V = V + 0.3 * pz.edge_length * rng.standard_normal(V.shape)
-    there = pz._remesh(V, F, free), _intersecting_pairs(V, F)
+    from algorithms.paparazzi.optimize import _intersecting_pairs_touching
+
+    some = np.arange(0, len(F), 3)
+    there = (pz._remesh(V, F, free), _intersecting_pairs(V, F),
+             _intersecting_pairs_touching(V, F, some))
     assert helper.helper_pid() is not None
     helper.keep_lock_free(False)
-    here = pz._remesh(V, F, free), _intersecting_pairs(V, F)
+    here = (pz._remesh(V, F, free), _intersecting_pairs(V, F),
+            _intersecting_pairs_touching(V, F, some))
+    assert len(there[2]) > 0
+    np.testing.assert_array_equal(np.unique(np.sort(there[2], axis=1), axis=0),
+                                  np.unique(np.sort(here[2], axis=1), axis=0))
     assert len(there[1]) > 0                       # the noise made it cross itself somewhere
     np.testing.assert_array_equal(there[0][0], here[0][0])
     np.testing.assert_array_equal(there[0][1], here[0][1])

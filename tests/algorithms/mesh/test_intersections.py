@@ -39,3 +39,42 @@ def test_a_crossing_that_moves_is_not_a_new_one_and_a_crossing_elsewhere_is():
     # with no crossing before, every pair counts
     assert crossings_away_from(after2, T, np.zeros((0, 2), np.int64)) == len(after2)
     assert crossings_away_from(np.zeros((0, 2), np.int64), T, before) == 0
+
+
+def test_the_pairs_touching_some_triangles_are_the_whole_meshs_pairs_with_one_of_them():
+    """intersecting_pairs_touching_here looks at the given triangles and those whose bounding
+    boxes may overlap theirs only; its answer must be exactly the whole-mesh test's pairs with
+    a given triangle: for random sets, clustered sets, the empty set, every triangle, and with
+    a few triangles far larger than the others (the grid's cells are sized on the 90th
+    percentile: a large one is always looked at, and a large given one covers all its cells)."""
+    from algorithms.mesh.intersections import intersecting_pairs_touching_here
+
+    from algorithms.mesh import icosphere
+
+    rng = np.random.default_rng(3)
+    V, F = icosphere(4)
+    V = V.copy()
+    jitter = rng.random(len(V)) < 0.3
+    V[jitter] += rng.normal(scale=0.03, size=(jitter.sum(), 3))   # crossings here and there
+    P, T = _two_sheets(through=True)
+    # a long sliver through the sphere, and the two sheets far off to one side
+    V = np.vstack([V, P + [3.0, 0.0, 0.0], [[-1.5, 0.0, 0.01], [1.5, 0.0, 0.0], [1.5, 0.02, 0.0]]])
+    F = np.vstack([F, T + len(V) - len(P) - 3, [[len(V) - 3, len(V) - 2, len(V) - 1]]])
+    whole = intersecting_pairs_here(V, F)
+    assert len(whole) > 20 and (whole == len(F) - 1).any()     # the sliver crosses the sphere
+    m = len(F)
+    centre = V[F].mean(axis=1)
+    sets = [np.zeros(m, bool), np.ones(m, bool), rng.random(m) < 0.01, rng.random(m) < 0.2,
+            np.linalg.norm(centre - centre[7], axis=1) < 0.3,           # a clustered patch
+            np.arange(m) == m - 1,                                       # the sliver alone
+            np.isin(np.arange(m), whole[(whole == m - 1).any(axis=1)]) & (np.arange(m) < m - 1)]
+    # (the last: the sphere's triangles the sliver crosses, without it)
+    for mask in sets:
+        want = whole[mask[whole].any(axis=1)]
+        got = intersecting_pairs_touching_here(V, F, mask)
+        assert sorted(map(tuple, np.sort(got, 1).tolist())) == \
+            sorted(map(tuple, np.sort(want, 1).tolist()))
+        # indices instead of a mask: the same
+        got_i = intersecting_pairs_touching_here(V, F, np.flatnonzero(mask))
+        assert len(got_i) == len(got)
+    assert len(intersecting_pairs_touching_here(V, F, sets[1])) == len(whole)

@@ -198,6 +198,9 @@ def test_self_intersections_are_rolled_back_and_the_step_shrinks():
     assert last.metrics["rollbacks"] >= 1
     assert count_self_intersections(last.V, last.F) == 0
     assert is_manifold(last.F)
+    # the steps' crossings are put back before the remeshing, which is then judged by its own:
+    # no remeshing is lost to them (when the remeshing came first: 2 of 7 rejected, 6 retries)
+    assert last.metrics["remeshes"] >= 5 and last.metrics["remesh_rejected"] == 0
 
 
 def test_a_crossing_puts_back_only_the_surface_around_it():
@@ -221,6 +224,21 @@ def test_a_crossing_puts_back_only_the_surface_around_it():
     np.testing.assert_array_equal(U[lift], X[lift])       # the rest keeps its progress
     # a put-back that cannot clear the crossings asks for the whole rollback
     assert run._put_back(X, run.F0, X, spots) is None
+    # with X's pairs known only the triangles put back are tested again: the same answers,
+    # also where crossings are left among the triangles it did not touch (the other end
+    # crushed too, but only this end's spots given)
+    from algorithms.mesh.intersections import intersecting_pairs_here
+
+    pairs = intersecting_pairs_here(X, run.F0)
+    np.testing.assert_array_equal(run._put_back(X, run.F0, before, spots, pairs), U)
+    assert run._put_back(X, run.F0, X, spots, pairs) is None
+    both = top & ((np.abs(X[:, 0]) - 0.7) ** 2 + X[:, 1] ** 2 < 0.15 ** 2)
+    Y = before.copy()
+    Y[both, 2] -= 0.06
+    one_end = run._new_crossing_points(Y, run.F0)
+    one_end = one_end[one_end[:, 0] > 0]
+    assert run._put_back(Y, run.F0, before, one_end) is None
+    assert run._put_back(Y, run.F0, before, one_end, intersecting_pairs_here(Y, run.F0)) is None
 
 
 def test_a_clean_box_at_the_guided_filters_fixed_point_is_refused_with_the_reason():
@@ -354,6 +372,15 @@ def test_a_remeshing_hands_the_remesher_only_the_triangles_next_to_bad_elements(
     np.testing.assert_array_equal(U[:done.start], np.delete(run.V0, done.moved, axis=0))
     assert np.linalg.norm(U[G[:, 0]] - U[G[:, 1]], axis=1).min() > 0.45 * run.edge_length
     part = run._drift_points(run.V0, run.F0, U, G)
+    # crossings are looked for in the part only: the same as on the whole mesh, here with a
+    # vertex of the part pushed through the sphere to the other side
+    pushed = U.copy()
+    k = done.start + np.argmax(np.linalg.norm(U[done.start:], axis=1))
+    pushed[k] *= -1.5
+    found = run._remeshing_crossing_points(run.V0, pushed, G)
+    assert len(found) and len(found) == len(run._new_crossing_points(pushed, G))
+    np.testing.assert_array_equal(np.sort(found, axis=0),
+                                  np.sort(run._new_crossing_points(pushed, G), axis=0))
     run.remeshed = None                                    # the whole surfaces instead
     whole = run._drift_points(run.V0, run.F0, U, G)
     np.testing.assert_array_equal(np.sort(part, axis=0), np.sort(whole, axis=0))
@@ -628,9 +655,10 @@ def test_a_run_whose_energy_ends_above_its_start_returns_its_lowest_shape():
         # the end's check of the lowest (unchecked) shape finds a crossing
         n = 0
 
-        def _new_crossing_points(self, V, F):
+        def _new_crossing_points(self, V, F, IF=None):
             Poisoned.n += 1
-            return np.zeros((1, 3)) if Poisoned.n == 2 else super()._new_crossing_points(V, F)
+            return (np.zeros((1, 3)) if Poisoned.n == 2
+                    else super()._new_crossing_points(V, F, IF))
 
     def runs(cases):
         out = {}
