@@ -1060,7 +1060,8 @@ class _Guard:
         self.ratio = float(bent)
         if bent > self.factor:
             return (f"the network's result was {bent:.2f}x as bent as modified butterfly's "
-                    f"(dimples; more than {self.factor:g}x)" if np.isfinite(bent) else
+                    f"(bumps, dimples or creases that it has not; more than {self.factor:g}x)"
+                    if np.isfinite(bent) else
                     "the network's result was bent where modified butterfly's is flat")
         if self.planar is None:
             self.planar = planar_faces(self.V0, self.F0)

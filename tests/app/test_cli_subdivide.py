@@ -196,7 +196,7 @@ def test_what_ran_is_said_in_the_line_the_json_and_the_batch_report(tmp_path, ca
     (line,) = [x for x in cap.err.splitlines() if "fandisk.off (" in x]
     assert "then Loop instead of the network (level 2)" in line
     assert camel["fallback_reason"].startswith("at level 1 the network's result was 1.7")
-    assert "x as bent as modified butterfly's (dimples; more than 1.25x)" in \
+    assert "x as bent as modified butterfly's (bumps, dimples or creases that it has not; more than 1.25x)" in \
         camel["fallback_reason"]
 
 
