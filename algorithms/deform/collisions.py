@@ -17,8 +17,8 @@ new self-intersections on 13.
    input first) at which no new crossing touched them, found by bisection;
 3. the deformation runs again from its result with those vertices as hard constraints (the
    same energy, one more factorization), so the rest of the surface settles around them;
-4. while crossings are left, up to :data:`ROUNDS` times: the held set grows by the new
-   crossings' vertices, and all of it is put back at one iterate (constraints taken from
+4. while crossings are left, up to :data:`ROUNDS` times (a bound on the time): the held set
+   grows by the new crossings' vertices, and all of it is put back at one iterate (constraints taken from
    different iterates can disagree and tear the surface); the rounds go on while the held set
    grows, also after a round that did not lower the count (the next, larger set often does:
    on beast, twirl and cycloidal the first round changed nothing and the later ones removed
@@ -31,8 +31,9 @@ new self-intersections on 13.
 This is not El Topo's continuous collision handling: held regions stop where they were before
 they first crossed (less styled there), the rest is the method's own optimum with those
 constraints. Measured on the corpus (docs/results/corpus.md, every method at its defaults):
-cubic stylization made new crossings on 14 of 52 meshes and now leaves some on 1 (ogre: 1,768
--> 14), analogies on 18 and 4; camelhead's lips 136 -> 0 (cubic) in one round, keeping 97 % of
+cubic stylization made new crossings on 14 of 52 meshes, analogies on 18; with the rounds
+below both leave none (30 November 2026, fifth session; analogies' ogre: 2,586 -> 0 with
+31,288 of its 62,194 vertices held, beast 199 -> 0 with 4,365); camelhead's lips 136 -> 0 (cubic) in one round, keeping 97 % of
 the change of the L1 norm of the normals; the runs took up to 2.7x as long (nefertiti's
 analogy, 100k triangles: 4.4 -> 11.9 s; docs/results/cubic.md).
 """
@@ -63,8 +64,11 @@ CHECK_MAX_FACES = 200_000
 #: stride doubling when full), with the input first.
 CHECKPOINT_EVERY = 5
 MAX_CHECKPOINTS = 48
-#: Rounds of holding and running again.
-ROUNDS = 5
+#: Rounds of holding and running again: they go on while crossings are left and the held set
+#: grows, so this only bounds the time. 5 until 30 November 2026 (fifth session), when
+#: analogies on beast and ogre (corpus) ended with 7 and 36 crossings after 5 rounds and with
+#: none after their 6th (counter: 468 -> 0); no corpus or shared mesh needed more than 6.
+ROUNDS = 20
 #: Rounds of putting the surface back towards the input where crossings are still left, and
 #: over how many rings past the first the blend's weight falls off (1: 1, then 1/2). A wider
 #: falloff (3: 1, 3/4, 1/2, 1/4) ended the crossings of beast and counter (analogies), but only
