@@ -958,10 +958,14 @@ class Paparazzi:
                         lr_scale *= 0.5
                         message += "; halved the step"
                     if lr_scale < 1.0 / 1024:
+                        # the advice names a value: half the run's step let the corpus's
+                        # counter run (quantize, 818 -> 617) where 15 or 60 iterations between
+                        # remeshings instead of 30 did not (30 November 2026)
                         raise Stylize3DError(
-                            "Paparazzi could not keep the mesh free of self-intersections even "
-                            "with a 1000 times smaller step; try a smaller learning rate or a "
-                            "larger remeshing frequency.")
+                            f"Paparazzi could not keep the mesh free of self-intersections even "
+                            f"with a 1000 times smaller step. Run it again with half the "
+                            f"learning rate ({self.learning_rate / 2:g}; command line: "
+                            f"--learning-rate {self.learning_rate / 2:g}).")
                     free = movable(V, F)
                     m = np.zeros_like(V)
                     v = np.zeros_like(V)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from algorithms.errors import InvalidMeshError
+from algorithms.errors import InvalidMeshError, Stylize3DError
 from algorithms.mesh import icosphere, read_mesh, write_mesh
 from algorithms.mesh.topology import boundary_loops, euler_characteristic, is_manifold
 from algorithms.paparazzi import (FilterFailed, Paparazzi, PaparazziParams,
@@ -201,6 +201,25 @@ def test_self_intersections_are_rolled_back_and_the_step_shrinks():
     # the steps' crossings are put back before the remeshing, which is then judged by its own:
     # no remeshing is lost to them (when the remeshing came first: 2 of 7 rejected, 6 retries)
     assert last.metrics["remeshes"] >= 5 and last.metrics["remesh_rejected"] == 0
+
+
+def test_crossings_that_come_back_beside_held_parts_stop_the_run_with_a_value_to_try():
+    # every check finds a crossing at the same spot (next to the part held since the first):
+    # the step halves each time, and after 11 halvings the run stops with the learning rate to
+    # use instead, half of the run's (the corpus's counter ran with it: quantize 818 -> 617)
+    V, F = icosphere(2)
+
+    class Crossing(Paparazzi):
+        def _new_crossing_points(self, V, F, IF=None):
+            return V[:1].copy()
+
+    run = Crossing(V, F, "guided", None, PaparazziParams(
+        iterations=40, learning_rate=4e-4, resolution=16, remesh_every=1, monitor_every=0,
+        lowest_fallback=False))
+    with pytest.raises(Stylize3DError, match=r"half the learning rate \(0\.0002; command line: "
+                                             r"--learning-rate 0\.0002\)") as err:
+        run_to_end(run.steps())
+    assert "1000 times smaller step" in str(err.value)
 
 
 def test_a_crossing_puts_back_only_the_surface_around_it():
