@@ -43,9 +43,12 @@ def _aabb_neighbours(V, F, faces: np.ndarray) -> np.ndarray:
     T = V[F]
     lo, hi = T.min(axis=1), T.max(axis=1)
     ext = (hi - lo).max(axis=1)
-    size = 2.0 * float(np.quantile(ext, 0.9)) + 1e-300
-    big = ext > size / 1.01
+    size = 2.0 * float(np.quantile(ext, 0.9))
     origin = lo.min(axis=0)
+    span = (hi.max(axis=0) - origin) / size if size > 0 else np.full(3, np.inf)
+    if not np.isfinite(span).all() or float(np.prod(span + 2.0)) > 2.0 ** 60:
+        return np.ones(len(F), dtype=bool)   # flat boxes or cell keys past int64: look at all
+    big = ext > size / 1.01
     clo = np.floor((lo - origin) / size).astype(np.int64)
     chi = np.floor((hi - origin) / size).astype(np.int64)
     dims = chi.max(axis=0) + 2

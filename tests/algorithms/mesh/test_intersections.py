@@ -78,3 +78,23 @@ def test_the_pairs_touching_some_triangles_are_the_whole_meshs_pairs_with_one_of
         got_i = intersecting_pairs_touching_here(V, F, np.flatnonzero(mask))
         assert len(got_i) == len(got)
     assert len(intersecting_pairs_touching_here(V, F, sets[1])) == len(whole)
+
+
+def test_the_pairs_touching_some_triangles_on_degenerate_boxes_look_at_every_triangle():
+    # all corners on one point (boxes of size 0), or one far-off triangle that would make the
+    # grid's cell keys overflow: the whole mesh is looked at, and the answer is still the
+    # whole-mesh test's
+    from algorithms.mesh.intersections import (_aabb_neighbours,
+                                               intersecting_pairs_touching_here)
+
+    P, T = _two_sheets()
+    flat = np.zeros_like(P)
+    assert _aabb_neighbours(flat, T, np.arange(len(T)) == 0).all()
+    far = np.vstack([P, [[1e18, 0, 0], [1e18 + 1024, 0, 0], [1e18, 1, 0]]])
+    T2 = np.vstack([T, [[len(P), len(P) + 1, len(P) + 2]]])
+    mask = np.arange(len(T2)) < 10
+    assert _aabb_neighbours(far, T2, mask).all()
+    whole = intersecting_pairs_here(far, T2)
+    got = intersecting_pairs_touching_here(far, T2, mask)
+    assert sorted(map(tuple, np.sort(got, 1).tolist())) == \
+        sorted(map(tuple, np.sort(whole[mask[whole].any(axis=1)], 1).tolist()))
