@@ -69,12 +69,17 @@ def _aabb_neighbours(V, F, faces: np.ndarray) -> np.ndarray:
             return np.ones(len(F), dtype=bool)
         g = np.meshgrid(*r, indexing="ij")
         cells.append(key(*(x.ravel() for x in g)))
-    marked = np.unique(np.concatenate(cells))
+    marked = np.concatenate(cells)
     near = big | faces
-    if len(marked):
-        pos = np.minimum(np.searchsorted(marked, keys), len(marked) - 1)
-        near |= (marked[pos] == keys).any(axis=0)
-    return near
+    if not len(marked):
+        return near
+    if int(np.prod(dims)) <= 1 << 24:       # a table of the cells (at most 16 MB)
+        table = np.zeros(int(np.prod(dims)), dtype=bool)
+        table[marked] = True
+        return near | table[keys].any(axis=0)
+    marked = np.unique(marked)
+    pos = np.minimum(np.searchsorted(marked, keys), len(marked) - 1)
+    return near | (marked[pos] == keys).any(axis=0)
 
 
 def intersecting_pairs_touching_here(V, F, faces) -> np.ndarray:

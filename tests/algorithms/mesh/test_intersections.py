@@ -94,7 +94,15 @@ def test_the_pairs_touching_some_triangles_on_degenerate_boxes_look_at_every_tri
     T2 = np.vstack([T, [[len(P), len(P) + 1, len(P) + 2]]])
     mask = np.arange(len(T2)) < 10
     assert _aabb_neighbours(far, T2, mask).all()
-    whole = intersecting_pairs_here(far, T2)
-    got = intersecting_pairs_touching_here(far, T2, mask)
-    assert sorted(map(tuple, np.sort(got, 1).tolist())) == \
-        sorted(map(tuple, np.sort(whole[mask[whole].any(axis=1)], 1).tolist()))
+    # and a triangle far enough off that the grid has too many cells for a table (its cells
+    # are then looked up in the sorted list of the marked ones): still only the neighbours
+    mid = far.copy()
+    mid[len(P):] -= [1e18 - 1e6, 0, 0]
+    near = _aabb_neighbours(mid, T2, mask)
+    assert not near.all() and near[mask].all()
+    for X in (far, mid):
+        whole = intersecting_pairs_here(X, T2)
+        for m in (mask, ~mask):
+            got = intersecting_pairs_touching_here(X, T2, m)
+            assert sorted(map(tuple, np.sort(got, 1).tolist())) == \
+                sorted(map(tuple, np.sort(whole[m[whole].any(axis=1)], 1).tolist()))
