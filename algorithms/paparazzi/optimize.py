@@ -246,10 +246,14 @@ class EnergyNotLowered(Stylize3DError):
     exit_code = 6
 
 
-def require_lowered(metrics: dict, spec: FilterSpec | None = None) -> None:
+def require_lowered(metrics: dict, spec: FilterSpec | None = None,
+                    iterations: int | None = None) -> None:
     """Raise :class:`EnergyNotLowered` unless the last step's ``monitor_energy`` is below its
     ``initial_monitor_energy`` (a step without them, e.g. an empty run, passes); ``spec``, the
-    run's filter, adds its advice (``FilterSpec.panel_iterations``)."""
+    run's filter, adds its advice (``FilterSpec.panel_iterations``); ``iterations``, the run's
+    count, when known: a run of at least the command line's 1000 (and the filter's own count)
+    is not told to try more iterations or another step, which lowered the energy on none of the
+    corpus runs refused so (docs/results/paparazzi.md, 30 November 2026)."""
     try:
         e0, e1 = float(metrics["initial_monitor_energy"]), float(metrics["monitor_energy"])
     except (KeyError, TypeError, ValueError):
@@ -272,6 +276,15 @@ def require_lowered(metrics: dict, spec: FilterSpec | None = None) -> None:
                 f"%). More iterations will not change that; another filter can still change "
                 f"the shape.")
         n = getattr(spec, "panel_iterations", 0)
+        if iterations is not None and iterations >= max(n, PaparazziParams().iterations):
+            raise EnergyNotLowered(
+                f"Paparazzi did not lower the filter's energy (the mean over its fixed monitor "
+                f"views: {e0:.4g} at the start, {e1:.4g} at the end, and no usable shape "
+                f"measured on the way got below the start), so it did not converge and "
+                f"nothing was changed. In {iterations} iterations the energy never fell "
+                f"below its start; on shapes like this (some dense scans and CAD models) "
+                f"neither more iterations nor a smaller step lowered it. Another filter can "
+                f"still change the shape.")
         more = (f" (on a smooth shape the {spec.name} filter's energy rises before it falls: "
                 f"give it {n} or more)" if n else "")
         raise EnergyNotLowered(

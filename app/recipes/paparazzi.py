@@ -212,7 +212,7 @@ def paparazzi_steps(state, params, options: dict | None = None, cache: dict | No
     for last in run.steps():
         yield last
     if last is not None and run.params.lowest_fallback:
-        require_lowered(last.metrics, spec)
+        require_lowered(last.metrics, spec, run.params.iterations)
 
 
 def paparazzi_result(before, last: Step, options: dict | None = None):
