@@ -18,8 +18,9 @@ new self-intersections on 13.
 3. the deformation runs again from its result with those vertices as hard constraints (the
    same energy, one more factorization), so the rest of the surface settles around them;
 4. while crossings are left, up to :data:`ROUNDS` times (a bound on the time): the held set
-   grows by the new crossings' vertices, and all of it is put back at one iterate (constraints taken from
-   different iterates can disagree and tear the surface); the rounds go on while the held set
+   grows by the new crossings' vertices, and all of it is put back at one iterate
+   (constraints taken from different iterates can disagree and tear the surface); the rounds
+   go on while the held set
    grows, also after a round that did not lower the count (the next, larger set often does:
    on beast, twirl and cycloidal the first round changed nothing and the later ones removed
    34 of 34, 4 of 4 and 104 of 105 crossings), and the result with the fewest crossings is
@@ -33,9 +34,9 @@ they first crossed (less styled there), the rest is the method's own optimum wit
 constraints. Measured on the corpus (docs/results/corpus.md, every method at its defaults):
 cubic stylization made new crossings on 14 of 52 meshes, analogies on 18; with the rounds
 below both leave none (30 November 2026, fifth session; analogies' ogre: 2,586 -> 0 with
-31,288 of its 62,194 vertices held, beast 199 -> 0 with 4,365); camelhead's lips 136 -> 0 (cubic) in one round, keeping 97 % of
-the change of the L1 norm of the normals; the runs took up to 2.7x as long (nefertiti's
-analogy, 100k triangles: 4.4 -> 11.9 s; docs/results/cubic.md).
+31,288 of its 62,194 vertices held, beast 199 -> 0 with 4,365); camelhead's lips 136 -> 0
+(cubic) in one round, keeping 97 % of the change of the L1 norm of the normals; the runs took
+up to 2.7x as long (nefertiti's analogy, 100k triangles: 4.4 -> 11.9 s; docs/results/cubic.md).
 """
 
 from __future__ import annotations

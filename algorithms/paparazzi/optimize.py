@@ -281,10 +281,9 @@ def require_lowered(metrics: dict, spec: FilterSpec | None = None,
                 f"Paparazzi did not lower the filter's energy (the mean over its fixed monitor "
                 f"views: {e0:.4g} at the start, {e1:.4g} at the end, and no usable shape "
                 f"measured on the way got below the start), so it did not converge and "
-                f"nothing was changed. In {iterations} iterations the energy never fell "
-                f"below its start; on shapes like this (some dense scans and CAD models) "
-                f"neither more iterations nor a smaller step lowered it. Another filter can "
-                f"still change the shape.")
+                f"nothing was changed. That was a full run ({iterations} iterations): on "
+                f"shapes like this (some dense scans and CAD models) neither more iterations "
+                f"nor a smaller step lowered it. Another filter can still change the shape.")
         more = (f" (on a smooth shape the {spec.name} filter's energy rises before it falls: "
                 f"give it {n} or more)" if n else "")
         raise EnergyNotLowered(
