@@ -625,37 +625,46 @@ def _slic(image, params: SlicParams, ctx: FilterContext):
 def l0_smooth(image: np.ndarray, lam: float = 0.01, kappa: float = 2.0,
               beta_max: float = 1e5) -> np.ndarray:
     """Image smoothing via L0 gradient minimization (Xu, Lu, Xu, Jia 2011), the half-quadratic
-    splitting of their paper with periodic boundaries (FFT), as in the authors' MATLAB code."""
+    splitting of their paper with periodic boundaries (FFT), as in the authors' MATLAB code.
+
+    The iterations run in single precision (float32 planes, complex64 spectra; the result is
+    returned as float64): a forward and back FFT pair of three 256 x 256 planes takes 0.6 ms
+    instead of 2.1 ms, and with the compiled spatial step the filter takes 72 -> 23 ms a
+    picture; the result differs from float64's by at most 0.004 (under one 8-bit grey level) on
+    rendered views (docs/results/paparazzi.md). Each threshold ``lam / beta`` is rounded to
+    float32 once, so that the NumPy and compiled paths compare the same numbers (the same bits;
+    tested)."""
     from scipy import fft
 
-    img = np.asarray(image, dtype=np.float64)
+    img = np.asarray(image, dtype=np.float32)
     S = np.ascontiguousarray(np.moveaxis(img, -1, 0))      # (C, H, W): contiguous FFT planes
     H, W = S.shape[1:]
-    fx = np.zeros((H, W)); fx[0, 0], fx[0, -1] = -1.0, 1.0
-    fy = np.zeros((H, W)); fy[0, 0], fy[-1, 0] = -1.0, 1.0
+    fx = np.zeros((H, W), np.float32); fx[0, 0], fx[0, -1] = -1.0, 1.0
+    fy = np.zeros((H, W), np.float32); fy[0, 0], fy[-1, 0] = -1.0, 1.0
     denorm2 = np.abs(fft.rfft2(fx)) ** 2 + np.abs(fft.rfft2(fy)) ** 2
     normin1 = fft.rfft2(S)
     beta = 2.0 * lam
     kernels = _KERNELS.get()
-    if kernels is not None:
-        normin2 = np.empty_like(S)
-        while beta < beta_max:
-            kernels.l0_gradient_step(S, lam / beta, normin2)
-            FS = (normin1 + beta * fft.rfft2(normin2)) / (1.0 + beta * denorm2)
-            S = fft.irfft2(FS, s=(H, W))
-            beta *= kappa
-        return np.moveaxis(S, 0, -1)
+    normin2 = np.empty_like(S)
     while beta < beta_max:
-        h = np.roll(S, -1, axis=2) - S
-        v = np.roll(S, -1, axis=1) - S
-        t = (h * h + v * v).sum(axis=0) < lam / beta
-        h[:, t] = 0.0
-        v[:, t] = 0.0
-        normin2 = (np.roll(h, 1, axis=2) - h) + (np.roll(v, 1, axis=1) - v)
-        FS = (normin1 + beta * fft.rfft2(normin2)) / (1.0 + beta * denorm2)
+        thresh = np.float32(lam / beta)
+        if kernels is not None:
+            kernels.l0_gradient_step(S, thresh, normin2)
+        else:
+            h = np.roll(S, -1, axis=2) - S
+            v = np.roll(S, -1, axis=1) - S
+            t = (h * h + v * v).sum(axis=0) < thresh
+            h[:, t] = 0.0
+            v[:, t] = 0.0
+            normin2 = (np.roll(h, 1, axis=2) - h) + (np.roll(v, 1, axis=1) - v)
+        # (normin1 + beta F(normin2)) / (1 + beta |F(dx)|^2 + beta |F(dy)|^2), in place
+        FS = fft.rfft2(normin2)
+        FS *= np.float32(beta)
+        FS += normin1
+        FS *= np.float32(1.0) / (np.float32(1.0) + np.float32(beta) * denorm2)
         S = fft.irfft2(FS, s=(H, W))
         beta *= kappa
-    return np.moveaxis(S, 0, -1)
+    return np.moveaxis(S, 0, -1).astype(np.float64)
 
 
 @dataclass(frozen=True)

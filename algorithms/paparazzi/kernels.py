@@ -146,38 +146,40 @@ def l0_gradient_step(S, thresh, out):
     """The spatial half of one L0 smoothing iteration (Xu et al. 2011) of ``S (C, H, W)`` with
     periodic boundaries, into ``out (C, H, W)``: the forward differences h (along W) and v (along
     H), set to zero at the pixels where ``sum_c h^2 + v^2 < thresh``, then their divergence
-    ``(h[j-1] - h[j]) + (v[i-1] - v[i])``. The same arithmetic in the same order as the NumPy
-    code of :func:`algorithms.paparazzi.filters.l0_smooth` (so the same bits; tested), in a few
-    passes over rows (0.6 ms at 3 x 256 x 256; the filter as a whole 85 ms against 160 ms)."""
+    ``(h[j-1] - h[j]) + (v[i-1] - v[i])``, in ``S``'s precision (the filter's float32; ``thresh``
+    of the same type). The same arithmetic in the same order as the NumPy code of
+    :func:`algorithms.paparazzi.filters.l0_smooth` (so the same bits; tested), in two passes:
+    the per-pixel sum ``s`` (channels added in NumPy's order, ``((x0 + x1) + x2)``), then the
+    divergence, which recomputes the four differences it needs from ``S`` (a difference is the
+    same subtraction wherever it is made). 0.18 ms at 3 x 256 x 256 in float32 (three passes
+    with stored differences: 0.27 ms; measured inside the filter, where the FFTs are most of it)."""
     C, H, W = S.shape
-    h = np.empty((C, H, W))
-    v = np.empty((C, H, W))
-    s = np.empty((H, W))
-    for c in range(C):
-        for i in range(H):
-            i1 = i + 1 if i + 1 < H else 0
-            for j in range(W - 1):
-                h[c, i, j] = S[c, i, j + 1] - S[c, i, j]
-            h[c, i, W - 1] = S[c, i, 0] - S[c, i, W - 1]
+    s = np.empty((H, W), S.dtype)
+    for i in range(H):
+        i1 = i + 1 if i + 1 < H else 0
+        for c in range(C):
             for j in range(W):
-                v[c, i, j] = S[c, i1, j] - S[c, i, j]
-    # sum over the channels in NumPy's order: ((x0 + x1) + x2), x = h h + v v
+                h = S[c, i, j + 1 if j + 1 < W else 0] - S[c, i, j]
+                v = S[c, i1, j] - S[c, i, j]
+                if c == 0:
+                    s[i, j] = h * h + v * v
+                else:
+                    s[i, j] = s[i, j] + (h * h + v * v)
+    cut = np.empty((H, W), np.bool_)
     for i in range(H):
         for j in range(W):
-            s[i, j] = h[0, i, j] * h[0, i, j] + v[0, i, j] * v[0, i, j]
-    for c in range(1, C):
-        for i in range(H):
-            for j in range(W):
-                s[i, j] = s[i, j] + (h[c, i, j] * h[c, i, j] + v[c, i, j] * v[c, i, j])
-    for c in range(C):
-        for i in range(H):
-            for j in range(W):
-                if s[i, j] < thresh:
-                    h[c, i, j] = 0.0
-                    v[c, i, j] = 0.0
+            cut[i, j] = s[i, j] < thresh                 # (NaN: kept, as in NumPy)
+    zero = S.dtype.type(0.0)
     for c in range(C):
         for i in range(H):
             i0 = i - 1 if i > 0 else H - 1
-            out[c, i, 0] = (h[c, i, W - 1] - h[c, i, 0]) + (v[c, i0, 0] - v[c, i, 0])
-            for j in range(1, W):
-                out[c, i, j] = (h[c, i, j - 1] - h[c, i, j]) + (v[c, i0, j] - v[c, i, j])
+            i1 = i + 1 if i + 1 < H else 0
+            for j in range(W):
+                j0 = j - 1 if j > 0 else W - 1
+                j1 = j + 1 if j + 1 < W else 0
+                x = S[c, i, j]
+                h = zero if cut[i, j] else S[c, i, j1] - x
+                v = zero if cut[i, j] else S[c, i1, j] - x
+                hl = zero if cut[i, j0] else x - S[c, i, j0]
+                vu = zero if cut[i0, j] else x - S[c, i0, j]
+                out[c, i, j] = (hl - h) + (vu - v)
