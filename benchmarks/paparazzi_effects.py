@@ -162,7 +162,7 @@ def measure(name, run, V, F):
 def control_spec(spec):
     """The filter's control: the image itself, with the filter's resolution and remeshing."""
     return dataclasses.replace(spec, name=f"{spec.name}-control", kind="iterative",
-                               function=lambda image, params, ctx: image)
+                               function=lambda image, params, ctx: image, min_change=0.0)
 
 
 #: ``--remesh-scope``: PaparazziParams.remesh_scope of every run here
@@ -233,8 +233,8 @@ def contact_sheet(rows, path, title,
 
 def effects(a) -> int:
     from algorithms.mesh.topology import boundary_loops, euler_characteristic, is_manifold
-    from algorithms.paparazzi import (PaparazziParams, count_self_intersections, filter_names,
-                                      get_filter)
+    from algorithms.paparazzi import (NothingToFilter, PaparazziParams,
+                                      count_self_intersections, filter_names, get_filter)
     from algorithms.mesh.operators import signed_volume
     from algorithms.paparazzi.measures import crease_fraction, surface_distance
 
@@ -274,8 +274,10 @@ def effects(a) -> int:
                 run, last, sec, done = run_filter(V, F, spec, fparams, params, a.time_limit)
             except Exception as e:  # noqa: BLE001 - a refusal or failure is a row, not the end
                 why = f"{type(e).__name__}: {str(e).splitlines()[0][:160] if str(e) else ''}"
-                print(f"{Path(mesh).name:<16}{name:<13}failed: {why}", flush=True)
-                _record(a, mesh=Path(mesh).name, filter=name, kind="failed", why=why,
+                # a refusal before the first step, for the reason its message states
+                kind = "refused" if isinstance(e, NothingToFilter) else "failed"
+                print(f"{Path(mesh).name:<16}{name:<13}{kind}: {why}", flush=True)
+                _record(a, mesh=Path(mesh).name, filter=name, kind=kind, why=why,
                         vertices=len(V))
                 continue
             if last is None:
@@ -405,11 +407,14 @@ def summary(paths, markdown: bool = False) -> int:
         res = [r for r in rows if r["kind"] == "result"]
         falls = sum(r["falls"] for r in res)
         both = sum(r["falls"] and r["beats_control"] for r in res)
+        refused = sum(r["kind"] == "refused" for r in rows)
+        accepted = len(rows) - refused
         print(f"{name:<13} {len(rows)} meshes: {len(res)} results, "
               f"{sum(r['kind'] == 'over time' for r in rows)} over time, "
-              f"{sum(r['kind'] == 'failed' for r in rows)} failed; energy falls on {falls}, "
-              f"falls and ends below remeshing alone on {both} "
-              f"({100 * both / max(len(rows), 1):.0f} % of the {len(rows)} it was run on)")
+              f"{sum(r['kind'] == 'failed' for r in rows)} failed, {refused} refused before "
+              f"the first step; energy falls on {falls}, falls and ends below remeshing alone "
+              f"on {both} ({100 * both / max(len(rows), 1):.0f} % of the {len(rows)} it was "
+              f"run on, {100 * both / max(accepted, 1):.0f} % of the {accepted} it accepted)")
         for r in rows:
             if r["kind"] != "result" or not (r["falls"] and r["beats_control"]):
                 extra = (f"E16 {r['e16_before']:.4g} -> {r['e16_after']:.4g}, control "

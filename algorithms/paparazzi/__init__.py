@@ -6,8 +6,8 @@ from .filters import (FilterContext, FilterSpec, ImageReadError, NoParams, filte
                       get_filter, read_image, register_filter, unregister_filter)
 from .measures import bending_energy, palette_fraction, planar_area_fraction
 from .offset import OffsetSurface, monitor_cameras, offset_surface, sample_camera
-from .optimize import (EnergyNotLowered, FilterFailed, Paparazzi, PaparazziParams,
-                       PaparazziStep, count_self_intersections, paparazzi, paparazzi_iter,
+from .optimize import (EnergyNotLowered, FilterFailed, NothingToFilter, Paparazzi,
+                       PaparazziParams, PaparazziStep, count_self_intersections, paparazzi, paparazzi_iter,
                        require_lowered)
 from . import neural_style  # noqa: F401  (registers the neural-style filter; no heavy imports)
 
@@ -15,5 +15,5 @@ __all__ = ["FilterContext", "FilterSpec", "ImageReadError", "NoParams", "filter_
            "get_filter", "read_image", "register_filter", "unregister_filter", "bending_energy",
            "palette_fraction", "planar_area_fraction", "OffsetSurface", "offset_surface",
            "sample_camera", "monitor_cameras", "FilterFailed", "Paparazzi", "PaparazziParams",
-           "PaparazziStep", "EnergyNotLowered", "require_lowered",
+           "PaparazziStep", "EnergyNotLowered", "NothingToFilter", "require_lowered",
            "count_self_intersections", "paparazzi", "paparazzi_iter"]

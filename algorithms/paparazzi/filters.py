@@ -169,6 +169,15 @@ class FilterSpec:
     of this filter with. l0: 1000 -- on a smooth shape its energy rises before it falls (the
     blob sample: 29.9 -> 41 at iteration 175, back below its start from iteration 650, 20.1 at
     1000), so 300 iterations end above the start and the run fails (issue 23, sixth pass).
+
+    ``min_change`` (an iterative filter's; default one 8-bit grey level, 1/255; 0 = never):
+    when filtering the input's monitor views changes them by less than this (the root mean
+    square of ``f(R) - R`` per colour channel over their foreground pixels), the shape already
+    looks the way the filter makes pictures look and the run is refused before its first step
+    (:class:`~algorithms.paparazzi.optimize.NothingToFilter`): the filter asks for nothing a
+    person could see, and the optimizer's steps (about the learning rate each, whatever the
+    pull's size) only add noise. On the corpus every guided and l0 run that started below one
+    grey level raised its energy (docs/results/paparazzi.md, "Nothing to filter").
     """
 
     name: str
@@ -193,6 +202,7 @@ class FilterSpec:
     panel_iterations: int = 0
     shown_caption: str | Callable[[Any], str] = "Filtered"
     quick_look: dict = field(default_factory=dict, compare=False, hash=False)
+    min_change: float = 1.0 / 255.0
 
     def make_shading(self, params) -> Shading:
         return self.shading(params) if self.shading is not None else LambertianShading()

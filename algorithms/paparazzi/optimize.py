@@ -239,6 +239,13 @@ class FilterFailed(Stylize3DError):
     exit_code = 6
 
 
+class NothingToFilter(Stylize3DError):
+    """An iterative filter changes the input's pictures by less than its ``min_change``: there
+    is nothing for it to do, so the run is refused before its first step (nothing changed)."""
+
+    exit_code = 6
+
+
 class EnergyNotLowered(Stylize3DError):
     """The run ended without lowering its monitor energy: it did not converge, so nothing is
     changed (:func:`require_lowered`)."""
@@ -531,11 +538,44 @@ class Paparazzi:
                                np.random.default_rng([self.params.seed, 1]),
                                width=self.width, resolution=self.resolution)
 
-    def monitor_energy(self, V, F, cameras=None) -> float:
+    def monitor_energy(self, V, F, cameras=None, renders: list | None = None) -> float:
         """Mean energy of the monitor views for ``(V, F)`` in the optimizer's frame (``E`` of an
-        energy filter, ``1/2 |f(R) - R|^2`` over the foreground of an iterative one)."""
+        energy filter, ``1/2 |f(R) - R|^2`` over the foreground of an iterative one); the
+        views' renderings are appended to ``renders`` when given."""
         cams = self.monitor_cameras() if cameras is None else cameras
-        return float(np.mean([self.evaluate(V, F, c)[0] for c in cams]))
+        energies = []
+        for c in cams:
+            E, _, r, _ = self.evaluate(V, F, c)
+            if renders is not None:
+                renders.append(r)
+            energies.append(E)
+        return float(np.mean(energies))
+
+    @staticmethod
+    def change_per_pixel(energy: float, renders: list) -> float:
+        """An iterative filter's change of the views ``renders`` whose mean energy is
+        ``energy``: the root mean square of ``f(R) - R`` per colour channel over their
+        foreground pixels (``energy`` is ``1/2`` its sum of squares per view)."""
+        count = sum(int(r.mask.sum()) * r.image.shape[-1] for r in renders)
+        return float(np.sqrt(2.0 * energy * len(renders) / count)) if count else 0.0
+
+    def require_something_to_filter(self, energy: float, renders: list) -> None:
+        """Raise :class:`NothingToFilter` when an iterative filter changes the monitor views
+        ``renders`` (mean energy ``energy``) by less than its ``min_change``
+        (:class:`~algorithms.paparazzi.filters.FilterSpec`)."""
+        spec = self.spec
+        if spec.kind != "iterative" or not spec.min_change > 0:
+            return
+        change = self.change_per_pixel(energy, renders)
+        if change < spec.min_change:
+            grey = 255.0 * change
+            raise NothingToFilter(
+                f"Nothing was changed: this shape already looks the way the {spec.name} filter "
+                f"makes pictures look. Filtering its {len(renders)} monitor views changes them "
+                f"by {grey:.2g} of a grey level on average (less than "
+                f"{255.0 * spec.min_change:.2g}), so there is nothing visible for it to do, "
+                f"and its steps would only add noise. Another filter can still change the "
+                f"shape (quantize, which turns faces to 20 directions, does on such shapes).")
 
     def monitor_pull(self, V, F, cameras=None, renders: list | None = None
                      ) -> tuple[float, np.ndarray]:
@@ -886,8 +926,10 @@ class Paparazzi:
         tm = time.perf_counter()
         renders: list = []
         start = self.monitor_pull(V, F, monitor_cams, renders) if probing else None
-        monitor0 = monitor = start[0] if probing else self.monitor_energy(V, F, monitor_cams)
+        monitor0 = monitor = (start[0] if probing
+                              else self.monitor_energy(V, F, monitor_cams, renders))
         secs["monitor"] += time.perf_counter() - tm
+        self.require_something_to_filter(monitor0, renders)
         hold = np.zeros((0, 3))          # where steps made the surface cross itself
         remesh_hold = np.zeros((0, 3))   # where a remeshing did
 

@@ -251,3 +251,30 @@ def test_a_run_whose_energy_climbs_back_writes_its_lowest_shape_and_says_so(tmp_
                f"one's {rep['last_monitor_energy']:.4g})" in out
         np.testing.assert_array_equal(read_mesh(tmp_path / "a.obj").V,
                                       read_mesh(tmp_path / "b.obj").V)
+
+
+def test_a_shape_that_already_looks_filtered_is_refused_before_the_first_step(tmp_path, capsys):
+    # a box's pictures are flat faces: the l0 filter changes them by far less than one grey
+    # level, so there is nothing for it to do (on the corpus every such guided and l0 run raised
+    # its energy and was refused after a whole run). The command refuses at once with exit 6,
+    # says why and what else works, and leaves the output as it was
+    from algorithms.mesh.primitives import cube
+
+    V, F = cube(6)
+    box = tmp_path / "box.obj"
+    write_mesh(box, V, F)
+    out = tmp_path / "o.obj"
+    out.write_text("keep me")
+    for name in ("l0", "guided"):
+        assert main(["paparazzi", str(box), "-o", str(out), "--overwrite", "--filter",
+                     name]) == 6
+        err = capsys.readouterr().err
+        assert f"already looks the way the {name} filter makes pictures look" in err
+        assert "of a grey level on average (less than 1)" in err and "quantize" in err
+        assert "monitor energy" not in err          # no progress line: no step was taken
+        assert out.read_text() == "keep me"
+    # the advice works: quantize changes the box
+    assert main(["paparazzi", str(box), "-o", str(out), "--overwrite", "--filter", "quantize",
+                 "--iterations", "100", "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["final_monitor_energy"] < rep["initial_monitor_energy"]

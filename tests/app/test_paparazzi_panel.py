@@ -593,3 +593,29 @@ def test_defaults_and_quick_look_follow_the_filter(window, dialogs, qtbot):
         assert spin.value() == (1000 if name == "l0" else GUI_ITERATIONS), name
     # the preset list itself is the same whatever the filter
     assert list(panel.presets())[:3] == ["Defaults", "quick look", "thesis length"]
+
+
+def test_a_box_is_refused_at_once_with_the_reason_and_the_document_is_kept(window, dialogs,
+                                                                           qtbot, tmp_path):
+    # a box already looks the way l0 makes pictures look (changed by far less than a grey
+    # level): Run fails at once with a plain message that names another filter, the document
+    # is unchanged and there is nothing to undo
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.primitives import cube
+
+    V, F = cube(6)
+    write_mesh(tmp_path / "box.obj", V, F)
+    assert window.open_path(tmp_path / "box.obj")
+    panel = window.panels["Paparazzi"]
+    panel.raise_()
+    doc = window.document
+    V0, F0 = np.array(doc.V), np.array(doc.F)
+    panel.set_filter("l0")
+    with qtbot.waitSignal(window.runner.failed, timeout=60000):
+        panel.run_button.click()
+    title, text = dialogs.errors[-1]
+    assert "already looks the way the l0 filter makes pictures look" in text
+    assert "Nothing was changed" in text and "quantize" in text
+    np.testing.assert_array_equal(doc.V, V0)
+    np.testing.assert_array_equal(doc.F, F0)
+    assert window.undo_stack.count() == 0

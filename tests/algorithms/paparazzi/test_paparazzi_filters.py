@@ -306,7 +306,7 @@ def test_slic_at_its_defaults_flattens_spot_beyond_remeshing_alone():
     last = run_to_end(paparazzi_iter(V, F, "slic", None, pp))
     spec = get_filter("slic")
     register_filter("test-identity-planar", kind="iterative", resolution=spec.resolution,
-                    width=spec.width, crease_angle=spec.crease_angle)(
+                    width=spec.width, crease_angle=spec.crease_angle, min_change=0.0)(
         lambda image, params, ctx: image)
     try:
         control = run_to_end(paparazzi_iter(V, F, "test-identity-planar", None, pp))

@@ -4,6 +4,7 @@ benchmarks/paparazzi.py)."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -260,6 +261,44 @@ def test_a_crossing_puts_back_only_the_surface_around_it():
     assert run._put_back(Y, run.F0, before, one_end, intersecting_pairs_here(Y, run.F0)) is None
 
 
+def test_a_shape_whose_pictures_the_filter_leaves_as_they_are_is_refused_before_a_step():
+    # FilterSpec.min_change: an iterative filter that changes the input's monitor views by less
+    # than one grey level (rms per channel over the foreground) has nothing to do; the run is
+    # refused before its first step, with the figure, and nothing is yielded
+    from algorithms.mesh import cube
+    from algorithms.paparazzi import NothingToFilter
+    from algorithms.render import render
+
+    V, F = cube(8)
+    for name in ("guided", "l0"):
+        run = Paparazzi(V, F, name, None, PaparazziParams(iterations=5))
+        steps = run.steps()
+        with pytest.raises(NothingToFilter, match=rf"the way the {name} filter.*of a grey "
+                                                  r"level on average \(less than 1\)"):
+            next(steps)
+        # the figure: the rms of f(R) - R per channel over the views' foreground pixels
+        d2 = n = 0.0
+        for c in run.monitor_cameras():
+            r = render(run.V0, run.F0, c, run.shading)
+            f = run.spec.function(r.image, run.filter_params, run._context(r, c))
+            d2 += float(((f - r.image)[r.mask] ** 2).sum())
+            n += int(r.mask.sum()) * r.image.shape[-1]
+        renders: list = []
+        e = run.monitor_energy(run.V0, run.F0, renders=renders)
+        assert len(renders) == 16
+        assert run.change_per_pixel(e, renders) == pytest.approx(np.sqrt(d2 / n), rel=1e-9)
+        assert run.change_per_pixel(e, renders) < 1.0 / 255.0
+    # a smooth shape gives the filter something to do: it runs
+    W, G = icosphere(3)
+    run = Paparazzi(W * [1.0, 0.7, 0.5], G, "l0", None, PaparazziParams(iterations=2,
+                                                                        monitor_every=0))
+    assert run_to_end(run.steps()).iteration == 2
+    # min_change 0 never refuses (remeshing alone, the benchmarks' control, is an identity)
+    quiet = dataclasses.replace(get_filter("l0"), min_change=0.0)
+    assert run_to_end(Paparazzi(V, F, quiet, None, PaparazziParams(
+        iterations=2, monitor_every=0)).steps()).iteration == 2
+
+
 def test_a_clean_box_at_the_guided_filters_fixed_point_is_refused_with_the_reason():
     # a box's pictures are flat faces and sharp edges, what the guided filter makes: its pull
     # raises the energy from the first step and the run finds no lower shape. The refusal says
@@ -270,7 +309,11 @@ def test_a_clean_box_at_the_guided_filters_fixed_point_is_refused_with_the_reaso
     from algorithms.paparazzi.optimize import ROUGH_SHARE
 
     V, F = cube(8)
-    run = Paparazzi(V, F, "guided", None, PaparazziParams(iterations=60, monitor_every=10))
+    pp = PaparazziParams(iterations=60, monitor_every=10)
+    # at the defaults the box is refused before the first step, its pictures already being
+    # the filter's (NothingToFilter, below); the refusal after a run is for the shapes just
+    # above that line, so it is tested here with the early refusal switched off
+    run = Paparazzi(V, F, dataclasses.replace(get_filter("guided"), min_change=0.0), None, pp)
     m = run_to_end(run.steps()).metrics
     assert m["rough_probe"] > 0 and m["rough_share"] < ROUGH_SHARE and not m["rough_input"]
     assert m["monitor_energy"] >= m["initial_monitor_energy"]
@@ -546,7 +589,7 @@ def test_piecewise_planar_filters_keep_creases_through_remeshing(monkeypatch):
 
     def run(angle):
         name = f"test-identity-{int(angle)}"
-        register_filter(name, kind="iterative", crease_angle=angle)(
+        register_filter(name, kind="iterative", crease_angle=angle, min_change=0.0)(
             lambda image, params, ctx: image)
         try:
             last = run_to_end(paparazzi_iter(V, F, name, None, PaparazziParams(
@@ -621,7 +664,8 @@ def test_guided_lowers_its_energy_smooths_more_than_remeshing_and_keeps_fandisks
     spec = get_filter("guided")
     last = run_to_end(paparazzi_iter(d.V, d.F, spec, None, pp))
     control = run_to_end(paparazzi_iter(d.V, d.F, dataclasses.replace(
-        spec, name="guided-control", function=lambda image, params, ctx: image), None, pp))
+        spec, name="guided-control", function=lambda image, params, ctx: image,
+        min_change=0.0), None, pp))
     m = last.metrics
     assert m["monitor_views"] == 16
     assert m["monitor_energy"] < 0.99 * m["initial_monitor_energy"], m
@@ -767,7 +811,8 @@ def test_a_remeshing_that_leaves_a_flat_triangle_is_held_there(monkeypatch):
         monkeypatch.setattr(optimize, "DEGENERATE_ANGLE", angle)
         calls.clear()
         name = "test-identity-flat"
-        register_filter(name, kind="iterative")(lambda image, params, ctx: image)
+        register_filter(name, kind="iterative", min_change=0.0)(
+            lambda image, params, ctx: image)
         try:
             return run_to_end(paparazzi_iter(V, F, name, None, PaparazziParams(
                 iterations=31, resolution=32, remesh_every=30, monitor_every=0)))
