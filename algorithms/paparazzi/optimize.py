@@ -135,6 +135,12 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   the run with :class:`EnergyNotLowered`, changing nothing. A run whose energy ends below its
   start runs bit for bit as without the option. Measured (docs/results/paparazzi.md): l0 on the
   noisy fandisk fell to 19.6 and climbed back above its start (23.55 -> 25.33 at iteration 1000).
+* Nothing to filter (issue 38): an iterative filter that changes the input's monitor views by
+  less than its ``FilterSpec.min_change`` (one 8-bit grey level: the rms of ``f(R) - R`` per
+  channel over the views' foreground, :meth:`Paparazzi.change_per_pixel`) is refused before
+  the first step with :class:`NothingToFilter`, changing nothing: the shape already looks the
+  way the filter makes pictures look (CAD parts of flat faces under guided and l0), and every
+  such corpus run raised its energy over a whole run instead (docs/results/paparazzi.md).
 * Boundary vertices do not move (their gradient is zeroed), so a boundary loop stays where it is.
 * Monitor energy (thesis 353-356, made multi-view): the thesis watches one fixed camera; one
   view sees a sixth of the shape at most and its energy can rise while the rest falls (issue
