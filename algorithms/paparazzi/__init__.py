@@ -7,8 +7,8 @@ from .filters import (FilterContext, FilterSpec, ImageReadError, NoParams, filte
 from .measures import bending_energy, palette_fraction, planar_area_fraction
 from .offset import OffsetSurface, monitor_cameras, offset_surface, sample_camera
 from .optimize import (EnergyNotLowered, FilterFailed, NothingToFilter, Paparazzi,
-                       PaparazziParams, PaparazziStep, count_self_intersections, paparazzi, paparazzi_iter,
-                       require_lowered)
+                       PaparazziParams, PaparazziStep, count_self_intersections, paparazzi,
+                       paparazzi_iter, require_lowered)
 from . import neural_style  # noqa: F401  (registers the neural-style filter; no heavy imports)
 
 __all__ = ["FilterContext", "FilterSpec", "ImageReadError", "NoParams", "filter_names",
