@@ -548,14 +548,22 @@ class Paparazzi:
         """Mean energy of the monitor views for ``(V, F)`` in the optimizer's frame (``E`` of an
         energy filter, ``1/2 |f(R) - R|^2`` over the foreground of an iterative one); the
         views' renderings are appended to ``renders`` when given."""
+        return self._monitor_pass(V, F, cameras, renders, pull=False)[0]
+
+    def _monitor_pass(self, V, F, cameras, renders: list | None, pull: bool):
+        """(mean energy over the monitor views, with ``pull`` the summed image derivative with
+        respect to ``V`` else None); the renderings are appended to ``renders`` when given."""
         cams = self.monitor_cameras() if cameras is None else cameras
+        g = np.zeros_like(V) if pull else None
         energies = []
         for c in cams:
-            E, _, r, _ = self.evaluate(V, F, c)
+            E, G, r, _ = self.evaluate(V, F, c)
             if renders is not None:
                 renders.append(r)
             energies.append(E)
-        return float(np.mean(energies))
+            if pull:
+                g += image_vjp(V, F, r, G)
+        return float(np.mean(energies)), g
 
     @staticmethod
     def change_per_pixel(energy: float, renders: list) -> float:
@@ -588,16 +596,7 @@ class Paparazzi:
         """(:meth:`monitor_energy`, the filter's pull summed over the same views): the mean
         energy and its full-batch gradient with respect to ``V``, from one pass over the views
         (whose renderings are appended to ``renders`` when given)."""
-        cams = self.monitor_cameras() if cameras is None else cameras
-        g = np.zeros_like(V)
-        energies = []
-        for c in cams:
-            E, G, r, _ = self.evaluate(V, F, c)
-            if renders is not None:
-                renders.append(r)
-            energies.append(E)
-            g += image_vjp(V, F, r, G)
-        return float(np.mean(energies)), g
+        return self._monitor_pass(V, F, cameras, renders, pull=True)
 
     def rough_probe(self, V, F, cameras=None, free=None, start=None) -> float:
         """Relative change of the monitor energy after one small step along the filter's own
