@@ -178,6 +178,12 @@ class FilterSpec:
     person could see, and the optimizer's steps (about the learning rate each, whatever the
     pull's size) only add noise. On the corpus every guided and l0 run that started below one
     grey level raised its energy (docs/results/paparazzi.md, "Nothing to filter").
+
+    ``step_follows_edge`` (l0): the default step (``learning_rate``, when the run's is on auto)
+    shrinks in proportion to the mesh's mean edge below ``optimize.ROUGH_EDGE``, as the rough
+    step does: a step is about the learning rate per coordinate, so a fixed one is a larger
+    share of a shorter edge, and l0 folded dense scans (docs/results/paparazzi.md, "l0's step
+    on dense scans").
     """
 
     name: str
@@ -203,6 +209,7 @@ class FilterSpec:
     shown_caption: str | Callable[[Any], str] = "Filtered"
     quick_look: dict = field(default_factory=dict, compare=False, hash=False)
     min_change: float = 1.0 / 255.0
+    step_follows_edge: bool = False
 
     def make_shading(self, params) -> Shading:
         return self.shading(params) if self.shading is not None else LambertianShading()
@@ -687,7 +694,7 @@ class L0Params:
 
 
 @register_filter("l0", kind="iterative", crease_angle=45.0, params=L0Params, resolution=256,
-                 panel_iterations=1000, quick_look={"iterations": 1000},
+                 panel_iterations=1000, step_follows_edge=True, quick_look={"iterations": 1000},
                  description="L0 gradient smoothing: piecewise-constant images, planar shapes")
 def _l0(image, params: L0Params, ctx: FilterContext):
     return l0_smooth(image, params.l0_lambda, params.kappa)

@@ -486,7 +486,7 @@ class Paparazzi:
         self.resolution = p.resolution or self.spec.resolution
         self.width = p.view_width or self.spec.width
         self.sigma = p.sigma or self.spec.sigma
-        self.learning_rate = p.learning_rate or self.spec.step(self.filter_params)
+        self.learning_rate = p.learning_rate or self.default_step()
         self.rough: float | None = None     # rough_probe's value at the start of steps()
         self.rough_share: float | None = None   # noise_share's value, where the probe rose
         self.single_view = self.spec.is_single_view(self.filter_params)
@@ -572,6 +572,15 @@ class Paparazzi:
         foreground pixels (``energy`` is ``1/2`` its sum of squares per view)."""
         count = sum(int(r.mask.sum()) * r.image.shape[-1] for r in renders)
         return float(np.sqrt(2.0 * energy * len(renders) / count)) if count else 0.0
+
+    def default_step(self) -> float:
+        """The filter's step for this mesh (the run's learning rate on auto): its
+        ``learning_rate``, shrunk in proportion to the mean edge below ``ROUGH_EDGE`` for a
+        filter with ``step_follows_edge`` (l0)."""
+        lr = self.spec.step(self.filter_params)
+        if self.spec.step_follows_edge:
+            lr *= min(1.0, self.edge_length / ROUGH_EDGE)
+        return lr
 
     def require_something_to_filter(self, energy: float, renders: list) -> None:
         """Raise :class:`NothingToFilter` when an iterative filter changes the monitor views
@@ -945,7 +954,7 @@ class Paparazzi:
 
         counts["held_vertices"] = 0
         free = movable(V, F)
-        self.learning_rate = p.learning_rate or self.spec.step(self.filter_params)
+        self.learning_rate = p.learning_rate or self.default_step()
         self.rough = self.rough_share = None
         first_message = ""
         if probing:

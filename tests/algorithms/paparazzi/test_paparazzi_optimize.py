@@ -827,3 +827,21 @@ def test_a_remeshing_that_leaves_a_flat_triangle_is_held_there(monkeypatch):
     last = run(0.0)  # the check off: the squashed triangle is kept
     assert len(calls) == 1 and last.metrics["remesh_degenerate_holds"] == 0
     assert np.degrees(np.asarray(igl.internal_angles(last.V, last.F))).min() < 1e-3
+
+
+def test_l0s_step_shrinks_with_the_edge_on_fine_meshes_and_a_set_step_is_kept(monkeypatch):
+    # FilterSpec.step_follows_edge (l0): the step on auto is the filter's learning rate times
+    # min(1, mean edge / ROUGH_EDGE), as the rough step; other filters and a step the run sets
+    # are left as they are. (ROUGH_EDGE is raised here so that a small sphere counts as fine.)
+    from algorithms.paparazzi import optimize
+
+    V, F = icosphere(2)
+    coarse = Paparazzi(V, F, "l0")
+    assert coarse.edge_length > optimize.ROUGH_EDGE and coarse.learning_rate == 2e-4
+    monkeypatch.setattr(optimize, "ROUGH_EDGE", 1.0)
+    run = Paparazzi(V, F, "l0", None, PaparazziParams(iterations=20, monitor_every=0))
+    assert run.learning_rate == pytest.approx(2e-4 * run.edge_length)
+    first = next(run.steps())             # (the last tenth of a run takes a smaller step)
+    assert first.metrics["learning_rate"] == pytest.approx(2e-4 * run.edge_length)
+    assert Paparazzi(V, F, "quantize").learning_rate == 2e-4
+    assert Paparazzi(V, F, "l0", None, PaparazziParams(learning_rate=3e-4)).learning_rate == 3e-4
