@@ -111,7 +111,10 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   the cube of side 2, is 0.0226-0.04; on a finer mesh it shrinks in proportion below
   ``ROUGH_EDGE`` = 0.02 (a step is about ``lr`` per coordinate, so a fixed one is a larger share
   of a shorter edge and of its noise: a 155,813-vertex noisy scan at 2e-4 crossed itself, 7
-  rollbacks, and its energy rose; issue 23, sixth pass).
+  rollbacks, and its energy rose; issue 23, sixth pass). l0's own step does the same
+  (``FilterSpec.step_follows_edge``; issue 38: its fixed step folded dense scans, hippo 2.67 %
+  of the edges by more than 90 degrees, 0.81 % with the shrunk step; the first Step's message
+  and the command line say "fine mesh").
   *A smaller step when the energy climbs* (``plateau_step``, an option; issue 23, fifth
   pass): every ``PLATEAU_EVERY`` = 50 iterations the monitor energy is checked (the command
   line's monitor schedule, every 25, evaluates it then anyway; the panel's, every 50, too); once
@@ -315,7 +318,9 @@ class PaparazziParams:
                                  log_scale=True, decimals=7,
                                  tooltip="NAdam step size (in units of the shape normalized to "
                                          "a cube of side 2). 0 = the filter's default (2e-4; "
-                                         "guided 1e-5, slic 6e-5, neural-style 1e-3). Larger "
+                                         "guided 1e-5, slic 6e-5, neural-style 1e-3; l0's is "
+                                         "smaller on a mesh whose edges are shorter than a "
+                                         "100th of its size). Larger "
                                          "moves faster but adds noise and "
                                          "may need more self-intersection rollbacks.")
     rough_step: bool = param(True, label="Larger step on rough scans", advanced=True,
@@ -581,6 +586,12 @@ class Paparazzi:
         if self.spec.step_follows_edge:
             lr *= min(1.0, self.edge_length / ROUGH_EDGE)
         return lr
+
+    @property
+    def fine_step(self) -> bool:
+        """Whether this run's step on auto was shrunk for a fine mesh (:meth:`default_step`)."""
+        return (not self.params.learning_rate and not self.rough_input
+                and self.learning_rate < self.spec.step(self.filter_params))
 
     def require_something_to_filter(self, energy: float, renders: list) -> None:
         """Raise :class:`NothingToFilter` when an iterative filter changes the monitor views
@@ -957,6 +968,10 @@ class Paparazzi:
         self.learning_rate = p.learning_rate or self.default_step()
         self.rough = self.rough_share = None
         first_message = ""
+        if self.fine_step:
+            first_message = (f"Fine mesh: its edges are shorter than a 100th of its size, so "
+                             f"the {self.spec.name} filter's step is {self.learning_rate:.2g} "
+                             f"instead of {self.spec.step(self.filter_params):g}.")
         if probing:
             tm = time.perf_counter()
             self.rough = self.rough_probe(V, F, monitor_cams, free, start)

@@ -242,6 +242,7 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
                                       ("render", "filter", "derivative", "remesh")},
             "learning_rate_used": run.learning_rate,
             "rough_input": run.rough_input,
+            "fine_step": run.fine_step,
             "rough_probe": run.rough, "rough_share": run.rough_share,
             "initial_monitor_energy": outcome["initial_monitor_energy"],
             "final_monitor_energy": outcome["monitor_energy"],
@@ -265,6 +266,7 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
         print(f"Paparazzi '{options['filter']}' on {args.mesh}: {it} iterations in "
               f"{seconds:.1f} s; monitor energy {outcome['initial_monitor_energy']:.4g} -> "
               f"{outcome['monitor_energy']:.4g}{kept}; step {run.learning_rate:g}"
-              f"{' (rough surface)' if run.rough_input else ''}; "
+              f"{' (rough surface)' if run.rough_input else ''}"
+              f"{' (fine mesh)' if run.fine_step else ''}; "
               f"{len(after.V)} vertices; wrote {args.output}.")
     return 0

@@ -378,6 +378,9 @@ class PaparazziPanel(MethodPanel):
                                                              True):
                 # PaparazziParams.rough_step; smaller on a fine mesh (optimize.ROUGH_EDGE)
                 text = f"auto ({value:g}; rough up to {rough:g})"
+            elif name == "learning_rate" and getattr(spec, "step_follows_edge", False):
+                # FilterSpec.step_follows_edge (l0): smaller on a mesh finer than ROUGH_EDGE
+                text = f"auto ({value:g}; smaller on fine meshes)"
             editor.spin.setSpecialValueText(text)
             wide = editor.spin.fontMetrics().horizontalAdvance(text + "  ") + 34  # + arrows
             editor.spin.setMinimumWidth(max(editor.spin.minimumWidth(), wide))

@@ -843,5 +843,8 @@ def test_l0s_step_shrinks_with_the_edge_on_fine_meshes_and_a_set_step_is_kept(mo
     assert run.learning_rate == pytest.approx(2e-4 * run.edge_length)
     first = next(run.steps())             # (the last tenth of a run takes a smaller step)
     assert first.metrics["learning_rate"] == pytest.approx(2e-4 * run.edge_length)
+    assert run.fine_step and first.message.startswith("Fine mesh: its edges are shorter")
+    assert f"step is {run.learning_rate:.2g} instead of 0.0002" in first.message
+    assert not coarse.fine_step
     assert Paparazzi(V, F, "quantize").learning_rate == 2e-4
     assert Paparazzi(V, F, "l0", None, PaparazziParams(learning_rate=3e-4)).learning_rate == 3e-4
