@@ -583,9 +583,12 @@ class Paparazzi:
         ``learning_rate``, shrunk in proportion to the mean edge below ``ROUGH_EDGE`` for a
         filter with ``step_follows_edge`` (l0)."""
         lr = self.spec.step(self.filter_params)
-        if self.spec.step_follows_edge:
-            lr *= min(1.0, self.edge_length / ROUGH_EDGE)
-        return lr
+        return lr * self.edge_factor() if self.spec.step_follows_edge else lr
+
+    def edge_factor(self) -> float:
+        """``min(1, mean edge / ROUGH_EDGE)``: what a step on auto is scaled by on a fine mesh
+        (l0's own step, and every filter's rough step)."""
+        return min(1.0, self.edge_length / ROUGH_EDGE)
 
     @property
     def fine_step(self) -> bool:
@@ -979,8 +982,7 @@ class Paparazzi:
                 self.rough_share = self.noise_share(V, F, monitor_cams, renders)
             secs["monitor"] += time.perf_counter() - tm
             if self.rough_input:
-                self.learning_rate = self.spec.rough_learning_rate * min(
-                    1.0, self.edge_length / ROUGH_EDGE)
+                self.learning_rate = self.spec.rough_learning_rate * self.edge_factor()
                 first_message = (f"Rough surface: the {self.spec.name} filter's pull first "
                                  f"raises its energy here, so the step is "
                                  f"{self.learning_rate:g} instead of "
