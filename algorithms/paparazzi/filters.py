@@ -184,6 +184,13 @@ class FilterSpec:
     step does: a step is about the learning rate per coordinate, so a fixed one is a larger
     share of a shorter edge, and l0 folded dense scans (docs/results/paparazzi.md, "l0's step
     on dense scans").
+
+    ``parallel_views`` (default False): the filter may run on several pictures at once, one per
+    Python thread (it keeps no state between calls and its compiled or library code releases
+    Python's lock), so :meth:`~algorithms.paparazzi.optimize.Paparazzi.monitor_energy` filters
+    the monitor views side by side when the run has more than one thread. True for the
+    built-in image filters; False for neural-style, whose Gram energy runs PyTorch with one
+    thread set per call (a process-wide setting that two calls at once would race on).
     """
 
     name: str
@@ -210,6 +217,7 @@ class FilterSpec:
     quick_look: dict = field(default_factory=dict, compare=False, hash=False)
     min_change: float = 1.0 / 255.0
     step_follows_edge: bool = False
+    parallel_views: bool = False
 
     def make_shading(self, params) -> Shading:
         return self.shading(params) if self.shading is not None else LambertianShading()
@@ -484,7 +492,7 @@ def guided_noise_pixels(image: np.ndarray, mask: np.ndarray, params: GuidedParam
 @register_filter("guided", kind="iterative", params=GuidedParams, resolution=128,
                  learning_rate=GUIDED_LEARNING_RATE, crease_angle=45.0,
                  rough_learning_rate=GUIDED_ROUGH_LEARNING_RATE,
-                 noise_pixels=guided_noise_pixels,
+                 noise_pixels=guided_noise_pixels, parallel_views=True,
                  description="Guided filter: edge-preserving smoothing")
 def _guided(image, params: GuidedParams, ctx: FilterContext):
     """Self-guided filter (He et al. 2010; He and Sun 2015 with ``subsample`` > 1) of the
@@ -544,6 +552,7 @@ def _world_shading(params) -> Shading:
 
 
 @register_filter("quantize", kind="iterative", resolution=256, shading=_world_shading,
+                 parallel_views=True,
                  description="Quantize normals (world frame) to the 20 icosahedron face normals")
 def _quantize(image, params, ctx: FilterContext):
     palette = icosahedron_face_normals()
@@ -568,8 +577,28 @@ class SlicParams:
                                                        "lower ones follow colour more.")
 
 
+_EMPTY_CLUSTER = "One of the clusters is empty"
+
+
+def _quiet_empty_cluster_warning() -> None:
+    """Silence one harmless warning for good: scikit-image places the masked superpixels' first
+    centres with SciPy's k-means, which warns when one of its clusters ends up empty (it keeps
+    that centre where it was); seen in the wide views of 1000-iteration runs, and not the user's
+    business. A filter installed once, matching that message only: ``warnings.catch_warnings``
+    around each call (as before) swaps the process's filter list and is not safe when two
+    pictures are filtered at once in two threads (``FilterSpec.parallel_views``). Looked up
+    each time, since a caller (pytest, for one) may reset the list between runs."""
+    import warnings
+
+    for action, message, *_ in warnings.filters:
+        if action == "ignore" and message is not None and message.pattern == _EMPTY_CLUSTER:
+            return
+    warnings.filterwarnings("ignore", message=_EMPTY_CLUSTER, category=UserWarning)
+
+
 @register_filter("slic", kind="iterative", params=SlicParams, resolution=256, width=1.0,
                  learning_rate=6e-5, crease_angle=45.0, quick_look={"iterations": 300},
+                 parallel_views=True,
                  description="SLIC superpixels: each superpixel takes its mean colour")
 def _slic(image, params: SlicParams, ctx: FilterContext):
     """SLIC superpixels of the foreground, each painted with its mean colour (thesis 414-418).
@@ -610,8 +639,6 @@ def _slic(image, params: SlicParams, ctx: FilterContext):
       at 2.0. Painting each superpixel with its normalized mean normal instead of its mean
       colour did not help (spot, 300 iterations, 1.0 wide: 0.418).
     """
-    import warnings
-
     from skimage.segmentation import slic
 
     mask = ctx.mask
@@ -620,14 +647,9 @@ def _slic(image, params: SlicParams, ctx: FilterContext):
         return image
     img = np.clip(image, 0.0, 1.0)
     n = max(1, int(round(params.segments * share)))
-    with warnings.catch_warnings():
-        # scikit-image places the masked superpixels' first centres with SciPy's k-means, which
-        # warns when one of its clusters ends up empty (it keeps that centre where it was); seen
-        # in the wide views of 1000-iteration runs, harmless, and not the user's business
-        warnings.filterwarnings("ignore", message="One of the clusters is empty",
-                                category=UserWarning)
-        lab = slic(img, n_segments=n, compactness=params.compactness, mask=mask, start_label=1,
-                   channel_axis=-1)
+    _quiet_empty_cluster_warning()
+    lab = slic(img, n_segments=n, compactness=params.compactness, mask=mask, start_label=1,
+               channel_axis=-1)
     out = image.copy()
     m = lab > 0
     L = lab[m]
@@ -695,6 +717,7 @@ class L0Params:
 
 @register_filter("l0", kind="iterative", crease_angle=45.0, params=L0Params, resolution=256,
                  panel_iterations=1000, step_follows_edge=True, quick_look={"iterations": 1000},
+                 parallel_views=True,
                  description="L0 gradient smoothing: piecewise-constant images, planar shapes")
 def _l0(image, params: L0Params, ctx: FilterContext):
     return l0_smooth(image, params.l0_lambda, params.kappa)
@@ -714,6 +737,7 @@ def _prepare_target_image(params: TargetImageParams, info: dict):
 
 @register_filter("target-image", kind="energy", params=TargetImageParams,
                  prepare=_prepare_target_image, single_view=True, resolution=128,
+                 parallel_views=True,
                  description="L2 distance to a target image from one fixed view")
 def _target_image(image, params, ctx: FilterContext):
     d = image - ctx.state
@@ -743,7 +767,7 @@ def _prepare_target_mesh(params: TargetMeshParams, info: dict):
 
 @register_filter("target-mesh", kind="energy", params=TargetMeshParams,
                  prepare=_prepare_target_mesh, single_view=lambda p: p.single_view,
-                 resolution=128,
+                 resolution=128, parallel_views=True,
                  description="L2 distance to renderings of another mesh (detail transfer)")
 def _target_mesh(image, params, ctx: FilterContext):
     VT, FT = ctx.state
