@@ -762,7 +762,12 @@ class Paparazzi:
         local = np.full(n, -1, np.int64)
         local[fixed] = np.arange(len(fixed))
         local[moving] = len(fixed) + np.arange(len(moving))
-        creases = self._creases(V, F)
+        # the creases among the patch's vertices, found on the triangles that touch them (an
+        # edge between two of them has both its triangles there): the same edges, in the same
+        # order, as on the whole mesh, at the cost of the part
+        touch = np.zeros(n, dtype=bool)
+        touch[verts] = True
+        creases = self._creases(V, F[touch[F].any(axis=1)])
         if len(creases):
             creases = local[creases]
             creases = creases[(creases >= 0).all(axis=1)]
@@ -805,8 +810,11 @@ class Paparazzi:
         lo, hi = BAD_EDGE_BAND
         bad = np.zeros(len(V), dtype=bool)
         bad[E[(L < lo * self.edge_length) | (L > hi * self.edge_length)].ravel()] = True
-        angles = np.asarray(igl.internal_angles(V, F))
-        bad[F[~(np.degrees(angles).min(axis=1) >= BAD_ANGLE)].ravel()] = True   # NaN: bad
+        smallest = np.degrees(np.asarray(igl.internal_angles(V, F))).min(axis=1)
+        bad[F[~(smallest >= BAD_ANGLE)].ravel()] = True   # NaN: bad
+        # the mesh's smallest angle, for the remeshing's check that follows (NaN: 0)
+        self._smallest_angle = (V, F, float(np.where(np.isfinite(smallest), smallest, 0.0).min())
+                                if len(smallest) else 0.0)
         ring = bad.copy()
         ring[F[bad[F].any(axis=1)].ravel()] = True
         return ring
@@ -894,18 +902,18 @@ class Paparazzi:
             return True
 
         def border(E):
-            E = np.sort(E, axis=1)
-            return set(map(tuple, E.tolist()))
+            E = np.sort(np.asarray(E, np.int64).reshape(-1, 2), axis=1)
+            return np.unique(E[:, 0] * (int(G.max()) + 1) + E[:, 1])
         touched = np.zeros(int(G.max()) + 1, dtype=bool)
         touched[new.ravel()] = True
         ring = G[touched[G].any(axis=1)]       # the part and the rest's triangles touching it
         if not is_edge_manifold(ring) or touched[nonmanifold_vertices(ring)].any():
             return False
         return (euler_characteristic(new) == euler_characteristic(old)
-                and border(boundary_edges(new)) == border(done.to_new[boundary_edges(old)]))
+                and np.array_equal(border(boundary_edges(new)),
+                                   border(done.to_new[boundary_edges(old)])))
 
-    @staticmethod
-    def _degenerate_points(V, F, U, G) -> np.ndarray:
+    def _degenerate_points(self, V, F, U, G) -> np.ndarray:
         """The centroids of the triangles of the remeshed (U, G) whose smallest angle is below
         :data:`DEGENERATE_ANGLE` degrees and below the smallest of the mesh before it (V, F): the
         remesher can leave three nearly collinear vertices (nefertiti of the corpus, remeshing
@@ -918,9 +926,18 @@ class Paparazzi:
             a = np.degrees(np.asarray(igl.internal_angles(X, T))).min(axis=1)
             return np.where(np.isfinite(a), a, 0.0)
 
-        floor = min(DEGENERATE_ANGLE, float(smallest(V, F).min()))
-        bad = smallest(U, G) < floor
-        return U[G[bad]].mean(axis=1) if bad.any() else np.zeros((0, 3))
+        known = getattr(self, "_smallest_angle", None)      # near_bad's, of this (V, F)
+        low = (known[2] if known is not None and known[0] is V and known[1] is F
+               else float(smallest(V, F).min()) if len(F) else 0.0)
+        floor = min(DEGENERATE_ANGLE, low)
+        # after a remeshing of a part (self.remeshed) the other triangles are V's own, whose
+        # angles are all at least the floor: only the part's new ones (G's last rows) can fail
+        done = self.remeshed
+        T = G
+        if done is not None and done.V is V and done.start > 0:
+            T = G[len(G) - len(done.new_faces):]
+        bad = smallest(U, T) < floor
+        return U[T[bad]].mean(axis=1) if bad.any() else np.zeros((0, 3))
 
     def _put_back(self, V, F, before, spots, pairs=None) -> np.ndarray | None:
         """``V`` with the vertices within :data:`HOLD_RADIUS` target edge lengths of ``spots``
@@ -944,8 +961,14 @@ class Paparazzi:
             return np.zeros(len(V), dtype=bool)
         from scipy.spatial import cKDTree
 
-        d, _ = cKDTree(spots).query(V, distance_upper_bound=HOLD_RADIUS * self.edge_length)
-        return np.isfinite(d)
+        r = HOLD_RADIUS * self.edge_length
+        # only the vertices in the spots' bounding box grown by the radius can be that close
+        box = np.all((V >= spots.min(axis=0) - r) & (V <= spots.max(axis=0) + r), axis=1)
+        near = np.zeros(len(V), dtype=bool)
+        if box.any():
+            d, _ = cKDTree(spots).query(V[box], distance_upper_bound=r)
+            near[box] = np.isfinite(d)
+        return near
 
     def new_self_intersections(self, V, F) -> int:
         """:meth:`_new_crossings` of a result in the input's coordinates (``PaparazziStep.V``)."""
