@@ -117,11 +117,12 @@ def test_slics_warning_filter_is_installed_once_and_narrowly():
 _RUN = """
 import sys, numpy as np
 from algorithms.mesh import icosphere, write_mesh
-from algorithms.paparazzi import PaparazziParams, paparazzi
+from algorithms.paparazzi import Paparazzi, PaparazziParams, paparazzi
 V, F = icosphere(3)
 V = V * (1.0 + 0.03 * np.random.default_rng(3).standard_normal((len(V), 1)))
-out = paparazzi(V, F, sys.argv[1], params=PaparazziParams(iterations=40, remesh_every=20,
-                monitor_every=10, resolution=64))
+params = PaparazziParams(iterations=40, remesh_every=20, monitor_every=10, resolution=64)
+print(Paparazzi(V, F, sys.argv[1], params=params).view_threads(16))
+out = paparazzi(V, F, sys.argv[1], params=params)
 write_mesh(sys.argv[2], *out)
 """
 
@@ -137,6 +138,7 @@ def test_fresh_processes_with_one_or_two_threads_write_the_same_mesh(tmp_path):
         res = subprocess.run([sys.executable, "-c", _RUN, "l0", str(path)], cwd=ROOT, env=env,
                              capture_output=True, text=True, timeout=600)
         assert res.returncode == 0, res.stderr[-2000:]
+        assert res.stdout.split()[-1] == n           # views side by side with two threads
         outs.append(read_mesh(str(path)))
     assert np.array_equal(outs[0].F, outs[1].F)
     assert np.array_equal(outs[0].V, outs[1].V)
