@@ -42,6 +42,33 @@ def test_measures_see_dimples():
     assert e > 1e-4 and bending_energy(Vd * 3.0, FL) == pytest.approx(e)
 
 
+
+def test_normal_error_against_the_original():
+    """0 for the original itself; for a grid with one vertex pushed in, the area-weighted mean
+    tilt of its triangles against the flat original's normal (computed here exactly, without
+    sampling), within the sampling's error; the same for any size; a kept crease (the
+    original's own fold) costs nothing."""
+    from algorithms.mesh.primitives import grid
+    from algorithms.subdivision.metrics import normal_error
+
+    V, F = grid(12, 12)
+    assert normal_error(V, F, V, F, samples=20_000) < 1e-6
+    Vd = V.copy()
+    centre = np.argmin(((V[:, :2] - V[:, :2].mean(0)) ** 2).sum(1))
+    Vd[centre, 2] -= 0.05
+    n = np.cross(Vd[F[:, 1]] - Vd[F[:, 0]], Vd[F[:, 2]] - Vd[F[:, 0]])
+    area = np.linalg.norm(n, axis=1)
+    tilt = np.degrees(np.arccos(np.abs(n[:, 2]) / area))
+    exact = float((tilt * area).sum() / area.sum())
+    got = normal_error(Vd, F, V, F, samples=200_000)
+    assert exact > 0.1 and got == pytest.approx(exact, rel=0.03)
+    assert normal_error(Vd * 3.0, F, V * 3.0, F, samples=200_000) == pytest.approx(got)
+    # the original folded along x = middle: the same fold in the result is no error
+    Vf = V.copy()
+    Vf[:, 2] = 0.3 * np.abs(V[:, 0] - V[:, 0].mean())
+    assert normal_error(Vf, F, Vf, F, samples=20_000) < 1e-6
+    assert normal_error(V, F, Vf, F, samples=20_000) > 10.0       # rounding it off is
+
 def _default_run(path, levels):
     m = read_mesh(path)
     r = run("subdivide", MeshState.make(m.V, m.F), {"method": "neural", "levels": levels}, {})
