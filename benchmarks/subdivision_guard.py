@@ -104,9 +104,16 @@ def measure(path: str, size: int, levels: list[int], samples: int, weights: str 
             for scheme in ("loop", "butterfly"):
                 results[scheme] = subdivide_baseline(Vc, Fc, lv, scheme)
             for key, (Vs, Fs) in results.items():
-                if key == "guard" and row["levels_used"] == ["neural"] * lv:
-                    row["methods"][key] = dict(row["methods"]["forced"])  # the same mesh
-                    continue
+                # the guard's result is the forced one only where it is the same mesh: with the
+                # network on every level it may still differ (the level before blended in where
+                # the network's result crossed itself), so it is compared, not assumed
+                Vf, Ff = results["forced"]
+                if key == "guard":
+                    row["guard_is_forced"] = bool(np.array_equal(Fs, Ff)
+                                                  and np.array_equal(Vs, Vf))
+                    if row["guard_is_forced"]:
+                        row["methods"][key] = dict(row["methods"]["forced"])  # the same mesh
+                        continue
                 d = surface_distances(Vs, Fs, V, F, samples=samples)
                 row["methods"][key] = {"H": d["hausdorff"], "M": d["mean_distance"],
                                        "bending": bending_energy(Vs, Fs),
