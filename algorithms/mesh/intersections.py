@@ -11,6 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 from .. import offload
+from ..compiled import KernelModule
+
+_KERNELS = KernelModule("algorithms.mesh.intersection_kernels")
 
 __all__ = ["count_self_intersections", "crossings_away_from", "crossings_not_in_parents",
            "intersecting_pairs", "intersecting_pairs_here", "intersecting_pairs_touching",
@@ -40,15 +43,30 @@ def _aabb_neighbours(V, F, faces: np.ndarray) -> np.ndarray:
     percentile of the boxes' sizes: a box no larger than a cell covers at most 2 cells along
     each axis (its corner cells), so two overlapping boxes share a covered cell; the few
     larger boxes are always kept, and those among ``faces`` cover every cell in their range."""
-    T = V[F]
-    lo, hi = T.min(axis=1), T.max(axis=1)
-    ext = (hi - lo).max(axis=1)
+    kern = _KERNELS.get() if len(F) else None
+    if kern is not None:
+        V = np.ascontiguousarray(V, dtype=np.float64)
+        F = np.ascontiguousarray(F, dtype=np.int64)
+        lo, hi, ext = np.empty((len(F), 3)), np.empty((len(F), 3)), np.empty(len(F))
+        kern.face_boxes(V, F, lo, hi, ext)
+    else:
+        T = V[F]
+        lo, hi = T.min(axis=1), T.max(axis=1)
+        ext = (hi - lo).max(axis=1)
     size = 2.0 * float(np.quantile(ext, 0.9))
     origin = lo.min(axis=0)
     span = (hi.max(axis=0) - origin) / size if size > 0 else np.full(3, np.inf)
     if not np.isfinite(span).all() or float(np.prod(span + 2.0)) > 2.0 ** 60:
         return np.ones(len(F), dtype=bool)   # flat boxes or cell keys past int64: look at all
     big = ext > size / 1.01
+    if kern is not None:
+        status, near = kern.near_cells(lo, hi, np.ascontiguousarray(origin), size, big,
+                                       np.ascontiguousarray(faces, dtype=np.bool_), 1 << 24,
+                                       4 * len(F))
+        if status == 0:
+            return near
+        if status == 2:                  # huge query boxes: the whole mesh is as cheap
+            return np.ones(len(F), dtype=bool)
     clo = np.floor((lo - origin) / size).astype(np.int64)
     chi = np.floor((hi - origin) / size).astype(np.int64)
     dims = chi.max(axis=0) + 2

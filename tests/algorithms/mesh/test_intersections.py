@@ -106,3 +106,44 @@ def test_the_pairs_touching_some_triangles_on_degenerate_boxes_look_at_every_tri
             got = intersecting_pairs_touching_here(X, T2, m)
             assert sorted(map(tuple, np.sort(got, 1).tolist())) == \
                 sorted(map(tuple, np.sort(whole[m[whole].any(axis=1)], 1).tolist()))
+
+
+def test_the_compiled_box_test_marks_the_same_triangles_as_the_numpy_one():
+    """Random sets of triangles (a few, many, a ball-shaped patch) of a real mesh, with and
+    without a huge triangle, and the degenerate cases above: the compiled cells give the same
+    mask as the NumPy code, bit for bit (it is a superset filter; the same one is what keeps
+    Paparazzi's runs the same)."""
+    import pytest
+
+    from algorithms.mesh import intersections as I
+    from algorithms.mesh import read_mesh
+    from tests.conftest import ROOT
+
+    if I._KERNELS.get() is None:
+        pytest.skip("Numba is not available")
+    m = read_mesh(str(ROOT / "tests" / "data" / "camelhead.off"))
+    V, F = m.V, m.F
+    rng = np.random.default_rng(7)
+    C = V[F].mean(axis=1)
+    masks = [np.isin(np.arange(len(F)), rng.choice(len(F), k, replace=False))
+             for k in (1, 40, len(F) // 3)]
+    masks.append(np.linalg.norm(C - C[len(F) // 2], axis=1) < 0.1 * np.ptp(V, axis=0).max())
+    huge = V.copy()
+    huge[F[5, 0]] += 0.7 * np.ptp(V, axis=0)        # one big triangle, among the queries or not
+    P, T = _two_sheets()
+    far = np.vstack([P, [[1e18, 0, 0], [1e18 + 1024, 0, 0], [1e18, 1, 0]]])
+    T2 = np.vstack([T, [[len(P), len(P) + 1, len(P) + 2]]])
+    mid = far.copy()
+    mid[len(P):] -= [1e18 - 1e6, 0, 0]
+    cases = [(X, F, mk) for X in (V, huge) for mk in masks + [~masks[0]]]
+    cases += [(np.zeros_like(P), T, np.arange(len(T)) == 0),
+              (far, T2, np.arange(len(T2)) < 10), (mid, T2, np.arange(len(T2)) < 10)]
+    for X, G, mk in cases:
+        before = I._KERNELS.set(False)
+        try:
+            want = I._aabb_neighbours(X, G, mk)
+        finally:
+            I._KERNELS.set(before)
+        got = I._aabb_neighbours(X, G, mk)
+        assert np.array_equal(got, want)
+        assert got[mk].all()
