@@ -966,7 +966,11 @@ class Paparazzi:
         box = np.all((V >= spots.min(axis=0) - r) & (V <= spots.max(axis=0) + r), axis=1)
         near = np.zeros(len(V), dtype=bool)
         if box.any():
-            d, _ = cKDTree(spots).query(V[box], distance_upper_bound=r)
+            from ..compiled import thread_count
+
+            # the queries split over the run's threads (the same answers)
+            d, _ = cKDTree(spots).query(V[box], distance_upper_bound=r,
+                                        workers=max(1, int(thread_count())))
             near[box] = np.isfinite(d)
         return near
 
