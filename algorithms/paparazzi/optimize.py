@@ -426,7 +426,9 @@ class _Remeshed:
     or gone, and its triangles ``old_faces`` (indices of ``V``) became ``new_faces`` (indices of
     the result); the result's vertices before ``start`` are ``V``'s others, in order
     (``to_new``: each vertex of ``V``'s index in the result, -1 for ``moved``), and those from
-    ``start`` on are new. A whole-mesh remeshing: all of them (``start`` 0, no ``to_new``)."""
+    ``start`` on are new. A whole-mesh remeshing: all of them (``start`` 0, no ``to_new``).
+    ``smallest_angle``: the smallest angle (degrees) of ``V``'s triangles, where the search for
+    bad elements measured it (None: not measured)."""
 
     V: np.ndarray
     moved: np.ndarray
@@ -434,6 +436,7 @@ class _Remeshed:
     old_faces: np.ndarray
     new_faces: np.ndarray
     to_new: np.ndarray | None = None
+    smallest_angle: float | None = None
 
 
 def _topology(F) -> tuple[int, int, bool]:
@@ -708,16 +711,20 @@ class Paparazzi:
         ``self.remeshed`` says what changed (:class:`_Remeshed`), for the checks that follow to
         look there only."""
         n = len(V)
+        low = None
         if self.params.remesh_scope == "bad":
-            free = free & self.near_bad(V, F)
+            near, low = self._bad_elements(V, F)
+            free = free & near
             if not free.any():
-                self.remeshed = _Remeshed(V, np.zeros(0, np.int64), n, F[:0], F[:0])
+                self.remeshed = _Remeshed(V, np.zeros(0, np.int64), n, F[:0], F[:0],
+                                          smallest_angle=low)
                 return V, F
             patch = self._remesh_patch(V, F, free)
             if patch is not None:
+                self.remeshed.smallest_angle = low
                 return patch
         U, G = self._remesh_core_call(V, F, free)
-        self.remeshed = _Remeshed(V, np.flatnonzero(free[:n]), 0, F, G)
+        self.remeshed = _Remeshed(V, np.flatnonzero(free[:n]), 0, F, G, smallest_angle=low)
         return U, G
 
     def _creases(self, V, F) -> np.ndarray:
@@ -801,6 +808,11 @@ class Paparazzi:
     def near_bad(self, V, F) -> np.ndarray:
         """Vertices within one ring of a bad element: an edge outside ``BAD_EDGE_BAND`` times the
         target edge length, or a triangle with an angle below ``BAD_ANGLE`` degrees."""
+        return self._bad_elements(V, F)[0]
+
+    def _bad_elements(self, V, F) -> tuple[np.ndarray, float]:
+        """(:meth:`near_bad`, the smallest angle of the triangles in degrees, NaN counted as 0:
+        the floor of the remeshing's check for nearly flat triangles, from the same angles)."""
         import igl
 
         V = np.asarray(V, np.float64)
@@ -812,12 +824,10 @@ class Paparazzi:
         bad[E[(L < lo * self.edge_length) | (L > hi * self.edge_length)].ravel()] = True
         smallest = np.degrees(np.asarray(igl.internal_angles(V, F))).min(axis=1)
         bad[F[~(smallest >= BAD_ANGLE)].ravel()] = True   # NaN: bad
-        # the mesh's smallest angle, for the remeshing's check that follows (NaN: 0)
-        self._smallest_angle = (V, F, float(np.where(np.isfinite(smallest), smallest, 0.0).min())
-                                if len(smallest) else 0.0)
         ring = bad.copy()
         ring[F[bad[F].any(axis=1)].ravel()] = True
-        return ring
+        low = float(np.where(np.isfinite(smallest), smallest, 0.0).min()) if len(F) else 0.0
+        return ring, low
 
     def band_fraction(self, V, F) -> float:
         """Share of the edges outside ``[4/5 h, 4/3 h]`` (the ones remeshing would change)."""
@@ -926,15 +936,15 @@ class Paparazzi:
             a = np.degrees(np.asarray(igl.internal_angles(X, T))).min(axis=1)
             return np.where(np.isfinite(a), a, 0.0)
 
-        known = getattr(self, "_smallest_angle", None)      # near_bad's, of this (V, F)
-        low = (known[2] if known is not None and known[0] is V and known[1] is F
+        done = self.remeshed
+        mine = done is not None and done.V is V      # the record of this remeshing of (V, F)
+        low = (done.smallest_angle if mine and done.smallest_angle is not None
                else float(smallest(V, F).min()) if len(F) else 0.0)
         floor = min(DEGENERATE_ANGLE, low)
         # after a remeshing of a part (self.remeshed) the other triangles are V's own, whose
         # angles are all at least the floor: only the part's new ones (G's last rows) can fail
-        done = self.remeshed
         T = G
-        if done is not None and done.V is V and done.start > 0:
+        if mine and done.start > 0:
             T = G[len(G) - len(done.new_faces):]
         bad = smallest(U, T) < floor
         return U[T[bad]].mean(axis=1) if bad.any() else np.zeros((0, 3))

@@ -71,8 +71,8 @@ def test_only_filters_that_allow_it_run_side_by_side():
         ns = get_filter("neural-style")
         assert not ns.parallel_views
         plain = dataclasses.replace(get_filter("l0"), name="l0-serial", parallel_views=False)
-        for spec in (plain,):
-            assert Paparazzi(V, F, spec, spec.params(), PaparazziParams()).view_threads(16) == 1
+        assert Paparazzi(V, F, plain, plain.params(), PaparazziParams()).view_threads(16) == 1
+        assert Paparazzi(V, F, ns, ns.params(), PaparazziParams()).view_threads(16) == 1
         l0 = get_filter("l0")
         run = Paparazzi(V, F, l0, l0.params(), PaparazziParams())
         assert run.view_threads(1) == 1               # one view: nothing to share
