@@ -79,7 +79,13 @@ def test_single_view_l2_to_another_shape_reproduces_it_in_that_view(tmp_path):
 
 
 @pytest.mark.parametrize("name", ["spot_lowres.obj"])
-def test_remeshing_keeps_a_manifold_with_the_input_topology_and_no_self_intersections(name):
+def test_remeshing_keeps_a_manifold_with_the_input_topology_and_no_self_intersections(
+        name, monkeypatch):
+    from algorithms.paparazzi import optimize
+
+    # every bad element remeshed, as if the steps had made each one worse than the input had
+    # it (WORSE_FACTOR infinite: the plain rule), so that these 90 iterations remesh
+    monkeypatch.setattr(optimize, "WORSE_FACTOR", np.inf)
     d = read_mesh(shared_mesh(name))
     before = palette_fraction(d.V, d.F)
     steps = list(paparazzi_iter(d.V, d.F, "quantize", None, PaparazziParams(
@@ -586,6 +592,9 @@ def test_piecewise_planar_filters_keep_creases_through_remeshing(monkeypatch):
     V, F = cube(subdivisions=5)
     assert len(crease_edges(V, F, 45.0)) == 12 * 6          # 12 edges of 6 segments
     V = V * [3.0, 1.0, 1.0]    # a box of stretched triangles: the remeshing splits and flips
+    # ... all of them, as if the steps had made them so (WORSE_FACTOR infinite: the plain rule;
+    # an identity filter spoils nothing, and the input's own bad triangles are left alone)
+    monkeypatch.setattr(optimize, "WORSE_FACTOR", np.inf)
 
     def run(angle):
         name = f"test-identity-{int(angle)}"
@@ -793,6 +802,9 @@ def test_a_remeshing_that_leaves_a_flat_triangle_is_held_there(monkeypatch):
     for a, b in (first, second):
         V[a] = V[b] + 0.2 * (V[a] - V[b])
     top = V[first].mean(axis=0)
+    # the short edges count as the run's (WORSE_FACTOR infinite: the plain rule), as if the
+    # steps had made them; the identity filter below spoils nothing itself
+    monkeypatch.setattr(optimize, "WORSE_FACTOR", np.inf)
     real = optimize._remesh_core
     calls = []
 
