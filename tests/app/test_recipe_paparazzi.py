@@ -294,11 +294,13 @@ def test_a_run_that_does_not_lower_its_energy_fails_after_its_last_step(sphere):
         assert res.outcome["monitor_energy"] > res.outcome["initial_monitor_energy"]
 
 
-@pytest.mark.parametrize("sample, name", [("pretzel.obj", "slic"), ("blob.obj", "l0")])
+@pytest.mark.parametrize("sample, name", [("blob.obj", "l0")])
 def test_the_quick_look_of_a_filter_whose_energy_rises_first_lowers_it(sample, name):
     # issue 23, seventh pass: 100 iterations at 64 px end above the start on these (the run
     # fails); the filter's quick look (FilterSpec.quick_look: slic 300, l0 1000 iterations)
-    # ends below (measured: pretzel slic 9.76 -> 9.54, blob l0 1.90 -> 1.27)
+    # ends below (measured: blob l0 1.90 -> 1.27). The pretzel with slic was the other case
+    # until the remeshing changed only what the run made worse (issue 38): its 100 iterations
+    # now lower the energy too (test below)
     import dataclasses
 
     from algorithms.mesh import read_mesh
@@ -316,3 +318,21 @@ def test_the_quick_look_of_a_filter_whose_energy_rises_first_lowers_it(sample, n
                                                               "filter_params": {}}))
     m = steps[-1].metrics
     assert m["monitor_energy"] < m["initial_monitor_energy"], m
+
+
+def test_slics_short_run_lowers_the_pretzels_energy_now_that_remeshing_leaves_its_triangles():
+    """100 iterations at 64 px of slic on the pretzel sample ended above the start while every
+    remeshing re-placed the pretzel's own bad triangles; with the remeshing changing only what
+    the run made worse (WORSE_FACTOR) they end below it (measured 9.757 -> 9.546)."""
+    import dataclasses
+
+    from algorithms.mesh import read_mesh
+    from app.panels.paparazzi import PaparazziPanelParams
+    from tests.conftest import ROOT
+
+    d = read_mesh(ROOT / "resources" / "samples" / "pretzel.obj")
+    generic = dataclasses.replace(PaparazziPanelParams(), iterations=100, resolution=64)
+    res = run("Paparazzi", MeshState(V=d.V, F=d.F), generic, {"filter": "slic",
+                                                            "filter_params": {}})
+    o = res.outcome
+    assert o["monitor_energy"] < 0.99 * o["initial_monitor_energy"], o
