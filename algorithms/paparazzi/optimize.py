@@ -24,7 +24,8 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   below 20 degrees -- may move; the others stay fixed, as El Topo (the thesis's remesher)
   changes bad elements only. An element counts as bad only where the run has made it worse
   (by ``WORSE_FACTOR``) than it was when it was made, in the input or by a remeshing
-  (:attr:`Paparazzi.baseline`): a CAD model's own slivers stay as they came. Only the triangles with such a vertex go to the remesher, and the
+  (:attr:`Paparazzi.baseline`): a CAD model's own slivers stay as they came. Only the
+  triangles with such a vertex go to the remesher, and the
   part comes back stitched into the rest along its unchanged border; the checks below
   (topology, drift) look at that part. After the first few remeshings that part is a few % of
   a scan's triangles: remeshing alone on the corpus skull (49,999 vertices, 1000 iterations)
