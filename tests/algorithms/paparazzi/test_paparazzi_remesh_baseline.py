@@ -132,3 +132,6 @@ def test_a_run_with_remeshing_on_input_slivers_ends_manifold_and_checked():
                                                      monitor_every=0, resolution=64)))
     assert is_manifold(last.F) and euler_characteristic(last.F) == 2
     assert count_self_intersections(last.V, last.F) == 0
+    assert last.metrics["remeshes"] == 5
+    moved = (np.abs(last.V - V).max() if len(last.V) == len(V) else np.inf)
+    assert moved > 1e-3                                     # the steps did move it (0.005)
