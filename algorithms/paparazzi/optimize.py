@@ -393,6 +393,13 @@ class PaparazziParams:
                                       "made worse than it was, as El Topo, the thesis's "
                                       "remesher, changes only bad elements; "
                                       "'all': every vertex (the whole surface re-placed).")
+    remesh_spoiled_only: bool = param(True, label="Only what the run spoiled", advanced=True,
+                                      tooltip="With 'bad': a triangle counts as bad only once "
+                                              "the run has made it worse than it was when it "
+                                              "was made (in your mesh or by a remeshing), so "
+                                              "your own long thin triangles (a CAD model's) "
+                                              "stay as they came. Off: every bad triangle is "
+                                              "remade, your own too (before 30 November 2026).")
     remesh_iterations: int = param(1, label="Remesh passes", minimum=1, maximum=20, advanced=True,
                                    tooltip="Split/collapse/flip/relax passes per remeshing.")
     monitor_every: int = param(25, label="Monitor every", minimum=0, maximum=10000,
@@ -736,7 +743,8 @@ class Paparazzi:
         low = None
         if self.params.remesh_scope == "bad":
             near, low = self._bad_elements(V, F, self.baseline if (
-                self.baseline is not None and len(self.baseline) == len(F)) else None)
+                self.params.remesh_spoiled_only and self.baseline is not None
+                and len(self.baseline) == len(F)) else None)
             free = free & near
             if not free.any():
                 self.remeshed = _Remeshed(V, np.zeros(0, np.int64), n, F[:0], F[:0],

@@ -18,7 +18,8 @@ def test_a_log_older_than_remesh_scope_replays_with_the_whole_surface_remeshed()
     from app.document import MeshState
 
     assert ADDED_FIELDS["Paparazzi"] == {"remesh_scope": "all", "rough_step": False,
-                                         "plateau_step": False, "lowest_fallback": False}
+                                         "plateau_step": False, "lowest_fallback": False,
+                                         "remesh_spoiled_only": False}
     assert "Paparazzi" in app.recipes.recipes()
     old = params_to_dict(PaparazziParams(iterations=12, resolution=32, remesh_every=6,
                                          monitor_every=0))
@@ -136,3 +137,38 @@ def test_a_cubic_or_analogy_log_older_than_hold_crossings_replays_without_holdin
         del old["hold_crossings"]              # what a log written before the field holds
         assert logged_params(name, old) == {**old, "hold_crossings": False}
         assert logged_params(name, {**old, "hold_crossings": True})["hold_crossings"] is True
+
+
+def test_a_log_older_than_remesh_spoiled_only_remeshes_the_inputs_own_bad_triangles():
+    """A Paparazzi run logged before ``remesh_spoiled_only`` (issue 38) remeshed every bad
+    element, the input's own too: its replay does so again. On a CAD-like cylinder (every
+    triangle bad) remeshing alone re-places the triangles with the old rule and leaves them
+    with today's."""
+    import app.recipes
+    from algorithms.paparazzi import (PaparazziParams, get_filter, register_filter,
+                                      unregister_filter)
+    from app.document import MeshState
+    from tests.algorithms.paparazzi.test_paparazzi_remesh_baseline import cylinder
+
+    old = params_to_dict(PaparazziParams(iterations=12, resolution=32, remesh_every=6,
+                                         monitor_every=0, lowest_fallback=False))
+    del old["remesh_spoiled_only"]
+    assert logged_params("Paparazzi", old)["remesh_spoiled_only"] is False
+    assert logged_params("Paparazzi", {**old, "remesh_spoiled_only": True})[
+        "remesh_spoiled_only"] is True
+    V, F = cylinder()
+    spec = get_filter("guided")
+    register_filter("test-identity-replay", kind="iterative", resolution=32, width=spec.width,
+                    crease_angle=spec.crease_angle, min_change=0.0)(
+        lambda image, params, ctx: image)
+    try:
+        results = {}
+        for flag in (False, True):
+            res = app.recipes.run("Paparazzi", MeshState(V=V, F=F), logged_params(
+                "Paparazzi", {**old, "remesh_spoiled_only": flag}),
+                {"filter": "test-identity-replay", "filter_params": {}})
+            results[flag] = res.state
+    finally:
+        unregister_filter("test-identity-replay")
+    np.testing.assert_array_equal(results[True].F, F)
+    assert results[False].F.shape != F.shape or not np.array_equal(results[False].F, F)
