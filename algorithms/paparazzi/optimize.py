@@ -205,8 +205,8 @@ BAD_ANGLE = 20.0
 #: it every remeshing re-placed a CAD model's long thin triangles whatever the filter did, and
 #: the triangles a remeshing made beside them, bad too, were re-placed at the next one, and so
 #: on across the part: guided's remeshing alone turned casting's curved faces jagged and
-#: raised guided's energy by 6-21 % on four corpus CAD parts, more than the filter's steps
-#: lowered it (issue 38, 30 November 2026)
+#: raised guided's energy by 6-21 % on three corpus CAD parts (tree, casting, chair_model),
+#: more than the filter's steps lowered it (issue 38, 30 November 2026)
 WORSE_FACTOR = 0.8
 #: remeshing attempts per check (each one holding the surface where the last one crossed it)
 REMESH_ATTEMPTS = 3
@@ -882,8 +882,7 @@ class Paparazzi:
         if baseline is not None:
             short &= L < WORSE_FACTOR * baseline[:, :3]
             long_ &= L * WORSE_FACTOR > baseline[:, :3]
-            small &= (~(smallest >= WORSE_FACTOR * baseline[:, 3])
-                      | ~(smallest >= DEGENERATE_ANGLE))
+            small &= ~(smallest >= WORSE_FACTOR * baseline[:, 3]) | (smallest < DEGENERATE_ANGLE)
         bad = np.zeros(len(V), dtype=bool)
         edge = short | long_
         for k in range(3):
@@ -1062,7 +1061,8 @@ class Paparazzi:
         monitor_cams = self.monitor_cameras()
         V, F = self.V0.copy(), self.F0.copy()
         good = (V.copy(), F.copy())
-        self.baseline = self.face_shape(V, F)
+        self.baseline = (self.face_shape(V, F) if p.remesh_spoiled_only
+                         and p.remesh_scope == "bad" else None)
         m = np.zeros_like(V)
         v = np.zeros_like(V)
         t_adam = 0
