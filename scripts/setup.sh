@@ -63,12 +63,15 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
 fi
 
 if [ "$mode" = app ]; then
-  mesh="${1:-resources/samples/blob.obj}"
+  # the mesh is the first argument unless that is an option (app --screenshot FILE opens the
+  # sample too, instead of taking "--screenshot" for a mesh)
+  mesh=resources/samples/blob.obj
+  if [ $# -gt 0 ] && [ "${1#-}" = "$1" ]; then mesh="$1"; shift; fi
   if [ -z "${DISPLAY:-}" ] && [ -z "${WAYLAND_DISPLAY:-}" ] && command -v xvfb-run >/dev/null; then
     echo ">> no display found: running on a virtual X server (xvfb-run)"
-    exec xvfb-run -a -s "-screen 0 1600x1000x24" .venv/bin/stylize3d "$mesh" "${@:2}"
+    exec xvfb-run -a -s "-screen 0 1600x1000x24" .venv/bin/stylize3d "$mesh" "$@"
   fi
-  exec .venv/bin/stylize3d "$mesh" "${@:2}"
+  exec .venv/bin/stylize3d "$mesh" "$@"
 else
   # pytest-xvfb starts a virtual X server for the viewport tests; without Xvfb they skip, saying why.
   unset DISPLAY WAYLAND_DISPLAY
