@@ -183,7 +183,11 @@ class FilterSpec:
     shrinks in proportion to the mesh's mean edge below ``optimize.ROUGH_EDGE``, as the rough
     step does: a step is about the learning rate per coordinate, so a fixed one is a larger
     share of a shorter edge, and l0 folded dense scans (docs/results/paparazzi.md, "l0's step
-    on dense scans").
+    on dense scans"); and at each vertex in proportion to its thinnest triangle's altitude
+    below that of an equilateral triangle of that edge (:meth:`~algorithms.paparazzi.optimize.
+    Paparazzi.thin_factors`): a step turns a sliver's normal by far more than a regular
+    triangle's, and l0's energy rose from the first steps on sliver-laden CAD parts
+    (docs/results/paparazzi.md, "l0's step on thin triangles").
 
     ``parallel_views`` (default False): the filter may run on several pictures at once, one per
     Python thread (it keeps no state between calls and its compiled or library code releases

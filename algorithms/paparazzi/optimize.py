@@ -336,7 +336,7 @@ class PaparazziParams:
                                          "a cube of side 2). 0 = the filter's default (2e-4; "
                                          "guided 1e-5, slic 6e-5, neural-style 1e-3; l0's is "
                                          "smaller on a mesh whose edges are shorter than a "
-                                         "100th of its size). Larger "
+                                         "100th of its size, and at thin triangles). Larger "
                                          "moves faster but adds noise and "
                                          "may need more self-intersection rollbacks.")
     rough_step: bool = param(True, label="Larger step on rough scans", advanced=True,
@@ -637,6 +637,33 @@ class Paparazzi:
         filter with ``step_follows_edge`` (l0)."""
         lr = self.spec.step(self.filter_params)
         return lr * self.edge_factor() if self.spec.step_follows_edge else lr
+
+    def thin_factors(self, V, F) -> np.ndarray:
+        """Per vertex, what a step on auto of a filter with ``step_follows_edge`` (l0) is
+        scaled by beyond :meth:`edge_factor`: ``min(1, a / (sqrt(3)/2 min(ROUGH_EDGE, mean
+        edge)))``, ``a`` the smallest altitude of the vertex's triangles (0 for a degenerate
+        one: its vertex stays). A triangle's normal turns by about a step over its altitude, so
+        a step that suits an equilateral triangle of the mesh's mean edge (or of ``ROUGH_EDGE``,
+        where :meth:`edge_factor` shrank the step) turns a sliver's normal by far more: NAdam
+        moves every vertex by about the learning rate whatever its pull, and on sliver-laden CAD
+        parts l0's energy rose from the first steps (conrod +24 % in 25 steps at a tenth of the
+        step) and the run failed. With this factor no vertex's triangles turn faster than an
+        equilateral one's (issue 38; docs/results/paparazzi.md, "l0's step on thin
+        triangles"). A vertex of no triangle keeps the full step."""
+        V = np.asarray(V, dtype=np.float64)
+        F = np.asarray(F, dtype=np.int64)
+        a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+        longest = np.maximum(np.maximum(np.linalg.norm(b - c, axis=1),
+                                        np.linalg.norm(c - a, axis=1)),
+                             np.linalg.norm(a - b, axis=1))
+        twice_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        altitude = np.divide(twice_area, longest, out=np.zeros_like(twice_area),
+                             where=longest > 0)
+        smallest = np.full(len(V), np.inf)
+        for k in range(3):
+            np.minimum.at(smallest, F[:, k], altitude)
+        scale = 0.5 * np.sqrt(3.0) * min(ROUGH_EDGE, self.edge_length)
+        return np.minimum(1.0, smallest / scale)
 
     def edge_factor(self) -> float:
         """``min(1, mean edge / ROUGH_EDGE)``: what a step on auto is scaled by on a fine mesh
@@ -1094,6 +1121,12 @@ class Paparazzi:
         counts["held_vertices"] = 0
         free = movable(V, F)
         self.learning_rate = p.learning_rate or self.default_step()
+        # FilterSpec.step_follows_edge: the step on auto is also smaller at the vertices of
+        # thin triangles (thin_factors), updated at each crossing check (remeshing, rollback)
+        thin = bool(self.spec.step_follows_edge and not p.learning_rate)
+        scale = self.thin_factors(V, F)[:, None] if thin else None
+        if thin:
+            counts["thin_step_share"] = float(np.mean(scale < 1.0))
         self.rough = self.rough_share = None
         first_message = ""
         if self.fine_step:
@@ -1137,7 +1170,8 @@ class Paparazzi:
             secs["derivative"] += t3 - t2
             t_adam += 1
             lr = self.learning_rate * lr_scale * plateau * (0.2 if it > 0.9 * N else 1.0)
-            V = V - nadam_step(g, m, v, t_adam, lr)
+            d = nadam_step(g, m, v, t_adam, lr)
+            V = V - (d if scale is None else d * scale)
             t4 = time.perf_counter()
             secs["derivative"] += t4 - t3
             message = first_message if it == 1 else ""
@@ -1213,6 +1247,8 @@ class Paparazzi:
                     if not accepted:
                         counts["remesh_rejected"] += 1
                 good = (V.copy(), F.copy())
+                if thin:
+                    scale = self.thin_factors(V, F)[:, None]
                 secs["remesh"] += time.perf_counter() - tr
             check = (p.plateau_step and self.spec.halve_on_climb and it % PLATEAU_EVERY == 0
                      and it < N)

@@ -379,8 +379,9 @@ class PaparazziPanel(MethodPanel):
                 # PaparazziParams.rough_step; smaller on a fine mesh (optimize.ROUGH_EDGE)
                 text = f"auto ({value:g}; rough up to {rough:g})"
             elif name == "learning_rate" and getattr(spec, "step_follows_edge", False):
-                # FilterSpec.step_follows_edge (l0): smaller on a mesh finer than ROUGH_EDGE
-                text = f"auto ({value:g}; smaller on fine meshes)"
+                # FilterSpec.step_follows_edge (l0): smaller on a mesh finer than ROUGH_EDGE,
+                # and at the vertices of thin triangles (Paparazzi.thin_factors)
+                text = f"auto ({value:g}; smaller on fine meshes and thin triangles)"
             editor.spin.setSpecialValueText(text)
             wide = editor.spin.fontMetrics().horizontalAdvance(text + "  ") + 34  # + arrows
             editor.spin.setMinimumWidth(max(editor.spin.minimumWidth(), wide))
