@@ -8,13 +8,14 @@ coarsening or subdivision does not stall. Running it again is cheap.
 
 :func:`exercise` runs every kernel family (deform and its progressive replay, decimation,
 self-parameterization, multigrid relaxation, the renderer with its Lambertian and
-spherical-harmonics derivatives, Paparazzi's guided filter, spectral coarsening, neural
-subdivision's half-flap kernels) on meshes big enough that the parallel kernels run where there
-are threads, and returns a digest of each family's results. ``--digest`` prints them as JSON:
-the kernels give the same bits for any thread count and cache state, so two processes must
-print the same digests (results of BLAS products, whose last bits follow OpenBLAS's thread
-count, are left out) (``tests/algorithms/test_numba_cache.py`` checks it across fresh
-processes, thread counts and concurrent first compiles).
+spherical-harmonics derivatives, Paparazzi's guided filter, its SLIC superpixels, spectral
+coarsening, neural subdivision's half-flap kernels) on meshes big enough that the parallel
+kernels run where there are threads (the SLIC, which has none, on a small picture), and
+returns a digest of each family's results. ``--digest`` prints them as JSON: the kernels give
+the same bits for any thread count and cache state, so two processes must print the same
+digests (results of BLAS products, whose last bits follow OpenBLAS's thread count, are left
+out) (``tests/algorithms/test_numba_cache.py`` checks it across fresh processes, thread
+counts and concurrent first compiles).
 """
 
 from __future__ import annotations
@@ -113,6 +114,15 @@ def exercise(families: tuple[str, ...] | None = None) -> dict[str, str]:
         out["paparazzi"] = _digest(guided_filter(img, img, 15, 1e-4, 1),
                                    guided_filter(img, img, 15, 1e-8, 4),
                                    _aabb_neighbours(V5, F5, np.arange(len(F5)) % 7 == 0))
+    if "slic" in wanted:   # Paparazzi's slic filter: seeds' k-means, both passes, connectivity
+        from .paparazzi.slic import slic_labels
+
+        rng = np.random.default_rng(0)
+        y, x = np.mgrid[:72, :90]
+        img = np.clip(np.stack([y / 72.0, x / 90.0, 0.5 + 0.1 * np.sin(x / 7.0)], -1)
+                      + 0.05 * rng.random((72, 90, 3)), 0.0, 1.0)
+        mask = ((y - 36) ** 2 + (x - 40) ** 2 < 30 ** 2) | ((y > 60) & (x > 70))
+        out["slic"] = _digest(slic_labels(img, mask, 40), slic_labels(img, mask, 6))
     if "spectral" in wanted:
         from .mesh.operators import cotangent_laplacian, mass_matrix
         from .spectral.coarsen import CoarsenParams, coarsen
@@ -143,7 +153,7 @@ def exercise(families: tuple[str, ...] | None = None) -> dict[str, str]:
 
 
 FAMILIES = ("deform", "progressive", "decimate", "selfparam", "multigrid", "render",
-            "paparazzi", "spectral", "subdivision")
+            "paparazzi", "slic", "spectral", "subdivision")
 """The kernel families :func:`exercise` runs (one per compiled kernel module)."""
 
 
