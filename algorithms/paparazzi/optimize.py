@@ -347,6 +347,13 @@ class PaparazziParams:
                                      "instead of 1e-5, smaller in proportion on a mesh whose "
                                      "edges are shorter than a 100th of its size), which "
                                      "carries the surface past that rise to a smooth one.")
+    thin_step: bool = param(True, label="Smaller step at thin triangles", advanced=True,
+                            tooltip="With the learning rate on auto, for l0: a vertex of a thin "
+                                    "triangle takes a step in proportion to the triangle's "
+                                    "thinness, so that no facet tilts faster than an "
+                                    "equilateral one (on CAD parts full of slivers l0's "
+                                    "energy otherwise rises from the start). Off: every "
+                                    "vertex takes the same step (before 1 December 2026).")
     plateau_step: bool = param(False, label="Smaller step when the energy climbs", advanced=True,
                                tooltip="Every 50 iterations the monitor energy is checked; once "
                                        "the run has lowered it, a rise of more than 2 % above "
@@ -1121,9 +1128,10 @@ class Paparazzi:
         counts["held_vertices"] = 0
         free = movable(V, F)
         self.learning_rate = p.learning_rate or self.default_step()
-        # FilterSpec.step_follows_edge: the step on auto is also smaller at the vertices of
-        # thin triangles (thin_factors), updated at each crossing check (remeshing, rollback)
-        thin = bool(self.spec.step_follows_edge and not p.learning_rate)
+        # FilterSpec.step_follows_edge and PaparazziParams.thin_step: the step on auto is also
+        # smaller at the vertices of thin triangles (thin_factors), updated at each crossing
+        # check (remeshing, rollback)
+        thin = bool(p.thin_step and self.spec.step_follows_edge and not p.learning_rate)
         scale = self.thin_factors(V, F)[:, None] if thin else None
         if thin:
             counts["thin_step_share"] = float(np.mean(scale < 1.0))

@@ -105,9 +105,12 @@ def test_a_sliver_moves_in_proportion_to_its_thinness_the_rest_as_before(redder)
     assert moved[list(sliver)].max() > 1.9 * lr * f[sliver[0]] * 0.5
     thick = pulled & (f == 1.0)
     assert np.allclose(moved[thick].max(1), 1.9 * lr, rtol=1e-6)
-    # a step the user sets is the step: the sliver takes it too
+    # a step the user sets is the step, and so is every step with thin_step off: the sliver
+    # takes it too
     _, moved_set = first_move(learning_rate=2e-4)
     assert moved_set[list(sliver)].max() == pytest.approx(1.9 * 2e-4, rel=1e-6)
+    _, moved_off = first_move(thin_step=False)
+    assert moved_off[list(sliver)].max() == pytest.approx(1.9 * 2e-4, rel=1e-6)
     # and the run says how many vertices took a smaller step
     run = Paparazzi(V, F, redder, None, PaparazziParams(**params))
     last = None

@@ -19,7 +19,7 @@ def test_a_log_older_than_remesh_scope_replays_with_the_whole_surface_remeshed()
 
     assert ADDED_FIELDS["Paparazzi"] == {"remesh_scope": "all", "rough_step": False,
                                          "plateau_step": False, "lowest_fallback": False,
-                                         "remesh_spoiled_only": False}
+                                         "remesh_spoiled_only": False, "thin_step": False}
     assert "Paparazzi" in app.recipes.recipes()
     old = params_to_dict(PaparazziParams(iterations=12, resolution=32, remesh_every=6,
                                          monitor_every=0))
@@ -172,3 +172,25 @@ def test_a_log_older_than_remesh_spoiled_only_remeshes_the_inputs_own_bad_triang
         unregister_filter("test-identity-replay")
     np.testing.assert_array_equal(results[True].F, F)
     assert results[False].F.shape != F.shape or not np.array_equal(results[False].F, F)
+
+
+def test_a_log_older_than_thin_step_replays_l0_with_one_step_for_every_vertex():
+    """A Paparazzi run logged before ``thin_step`` (issue 38): every vertex of an l0 run took
+    the same step, a sliver's too; its replay does so again."""
+    import app.recipes
+    from algorithms.paparazzi import PaparazziParams
+    from app.document import MeshState
+    from tests.algorithms.paparazzi.test_paparazzi_thin_step import sphere_with_a_sliver
+
+    old = params_to_dict(PaparazziParams(iterations=60, resolution=32, remesh_every=0,
+                                         monitor_every=0, lowest_fallback=False))
+    del old["thin_step"]
+    assert logged_params("Paparazzi", old)["thin_step"] is False
+    assert logged_params("Paparazzi", {**old, "thin_step": True})["thin_step"] is True
+    V, F, sliver, _ = sphere_with_a_sliver()
+    moved = {}
+    for flag in (False, True):
+        res = app.recipes.run("Paparazzi", MeshState(V=V, F=F), logged_params(
+            "Paparazzi", {**old, "thin_step": flag}), {"filter": "l0", "filter_params": {}})
+        moved[flag] = np.abs(res.state.V - V)[list(sliver)].max()
+    assert 0.0 < moved[True] < 0.2 * moved[False]
