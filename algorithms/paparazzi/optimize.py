@@ -1212,12 +1212,18 @@ class Paparazzi:
                     if lr_scale < 1.0 / 1024:
                         # the advice names a value: half the run's step let the corpus's
                         # counter run (quantize, 818 -> 617) where 15 or 60 iterations between
-                        # remeshings instead of 30 did not (30 November 2026)
+                        # remeshings instead of 30 did not (30 November 2026). On a noisy scan
+                        # whose sheets lie closer than an edge it does not (the sliver scan,
+                        # neural-style: 1e-3, 5e-4, 2.5e-4 all stop here), but smoothing it
+                        # first does (1188 -> 868; 1 December 2026)
                         raise Stylize3DError(
                             f"Paparazzi could not keep the mesh free of self-intersections even "
                             f"with a 1000 times smaller step. Run it again with half the "
                             f"learning rate ({self.learning_rate / 2:g}; command line: "
-                            f"--learning-rate {self.learning_rate / 2:g}).")
+                            f"--learning-rate {self.learning_rate / 2:g}). If it stops here "
+                            f"again, smooth the mesh first (the Smooth panel; command line: "
+                            f"stylize3d smooth): on a noisy scan the surface's sheets lie too "
+                            f"close for any step.")
                     free = movable(V, F)
                     m = np.zeros_like(V)
                     v = np.zeros_like(V)

@@ -227,6 +227,7 @@ def test_crossings_that_come_back_beside_held_parts_stop_the_run_with_a_value_to
                                              r"--learning-rate 0\.0002\)") as err:
         run_to_end(run.steps())
     assert "1000 times smaller step" in str(err.value)
+    assert "smooth the mesh first" in str(err.value)
 
 
 def test_a_crossing_puts_back_only_the_surface_around_it():
