@@ -363,6 +363,12 @@ class PaparazziPanel(MethodPanel):
             return
         if getattr(self, "filtered_caption", None) is not None:
             self.filtered_caption.setText(spec.shown(self.filter_params()))
+        thin = self.form.editors.get("thin_step")
+        if thin is not None:
+            # PaparazziParams.thin_step acts on a filter with step_follows_edge (l0) only
+            follows = bool(getattr(spec, "step_follows_edge", False))
+            for w in (thin, self.form.labels["thin_step"]):
+                w.setEnabled(follows)
         for name, attr in (("resolution", "resolution"), ("sigma", "sigma"),
                            ("view_width", "width"), ("learning_rate", "learning_rate")):
             editor = self.form.editors.get(name)
@@ -380,8 +386,10 @@ class PaparazziPanel(MethodPanel):
                 text = f"auto ({value:g}; rough up to {rough:g})"
             elif name == "learning_rate" and getattr(spec, "step_follows_edge", False):
                 # FilterSpec.step_follows_edge (l0): smaller on a mesh finer than ROUGH_EDGE,
-                # and at the vertices of thin triangles (Paparazzi.thin_factors)
-                text = f"auto ({value:g}; smaller on fine meshes and thin triangles)"
+                # and at the vertices of thin triangles (Paparazzi.thin_factors, thin_step)
+                text = (f"auto ({value:g}; smaller on fine meshes and thin triangles)"
+                        if getattr(self.form.params(), "thin_step", True)
+                        else f"auto ({value:g}; smaller on fine meshes)")
             editor.spin.setSpecialValueText(text)
             wide = editor.spin.fontMetrics().horizontalAdvance(text + "  ") + 34  # + arrows
             editor.spin.setMinimumWidth(max(editor.spin.minimumWidth(), wide))

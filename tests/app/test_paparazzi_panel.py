@@ -619,3 +619,23 @@ def test_a_box_is_refused_at_once_with_the_reason_and_the_document_is_kept(windo
     np.testing.assert_array_equal(doc.V, V0)
     np.testing.assert_array_equal(doc.F, F0)
     assert window.undo_stack.count() == 0
+
+
+def test_the_thin_triangle_step_is_l0s_and_its_auto_step_says_so(window, dialogs, qtbot):
+    # PaparazziParams.thin_step acts on l0 (FilterSpec.step_follows_edge) only: greyed out for
+    # the other filters; with it off, l0's auto step no longer says "thin triangles"
+    panel = open_panel(window)
+    thin = panel.form.editors["thin_step"]
+    lr = panel.form.editors["learning_rate"].spin
+    panel.set_filter("guided")
+    assert not thin.isEnabled() and not panel.form.labels["thin_step"].isEnabled()
+    panel.set_filter("l0")
+    assert thin.isEnabled() and thin.isChecked()
+    assert lr.text() == "auto (0.0002; smaller on fine meshes and thin triangles)"
+    panel.form.advanced_box.button.setChecked(True)
+    thin.setFocus()
+    qtbot.keyClick(thin, Qt.Key.Key_Space)             # a person unticks it
+    assert panel.form.params().thin_step is False
+    assert lr.text() == "auto (0.0002; smaller on fine meshes)"
+    qtbot.keyClick(thin, Qt.Key.Key_Space)
+    assert panel.form.params().thin_step is True and "thin triangles" in lr.text()
