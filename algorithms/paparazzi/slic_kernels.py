@@ -33,7 +33,7 @@ bound of their distance over the tile (the spatial part at the tile's point near
 centre: rounding is monotone), and skips every segment whose bound exceeds the largest distance
 its pixels already have. With windows four steps wide, a pixel of a 256 x 256 view with 100
 segments is looked at by about 3 segments a round (5 with colour) instead of about 16, in loops
-over whole tiles that the compiler vectorizes; in k-means' ``vq`` (every code a candidate) by
+over the rows of a tile; in k-means' ``vq`` (every code a candidate) by
 about 3 codes instead of all 100. The Z loop and the spacing products (``1 * v``) are gone, the
 coordinate sums are sums of whole numbers (exact in any order), the colour sums run in raster
 order along runs of one label, the mean colours of the first (colourless) pass are taken once
@@ -149,26 +149,6 @@ def _claim(best, bk, k, y0, x0, ry0, ry1, rx0, rx1, c_y, c_x, w, colour, L, A, B
 
 
 @njit(**_OPTS)
-def _claim_full(best, bk, k, y0, x0, c_y, c_x, w, L, A, B, c0, c1, c2, colour):
-    """:func:`_claim` on the whole tile, in one loop over its pixels (for the vectorizer)."""
-    T = TILE
-    for i in range(T * T):
-        t = c_y - float(y0 + (i // T))
-        u = c_x - float(x0 + (i % T))
-        d = (t * t + u * u) * w
-        if colour:
-            t0 = L[i] - c0
-            t1 = A[i] - c1
-            t2 = B[i] - c2
-            d = d + ((t0 * t0 + t1 * t1) + t2 * t2)
-        b = best[i]
-        kb = bk[i]
-        up = (d < b) | ((d == b) & (k < kb))
-        best[i] = d if up else b
-        bk[i] = k if up else kb
-
-
-@njit(**_OPTS)
 def _largest(bits):
     """The largest of the tile's distances, as the int64 bits of a float64: monotone for
     non-negative floats, and the -1 off the mask is a negative integer."""
@@ -268,8 +248,8 @@ def _assign(planes, start, has, H, W, cy, cx, cc, live, ymin, ymax, xmin, xmax, 
                 rx1 = min(x1, xmax[k])
                 if ry0 == y0 and ry1 == y1 and rx0 == x0 and rx1 == x1:
                     # the whole tile (its pixels outside the picture take no segment)
-                    _claim_full(best, bk, k, y0, x0, cy[k], cx[k], w, L, A, B, cc[k, 0],
-                                cc[k, 1], cc[k, 2], colour)
+                    _claim(best, bk, k, y0, x0, 0, y1 - y0, 0, x1 - x0, cy[k], cx[k], w,
+                           colour, L, A, B, cc[k, 0], cc[k, 1], cc[k, 2])
                     M = _largest(bits)
                 else:
                     _claim(best, bk, k, y0, x0, ry0 - y0, ry1 - y0, rx0 - x0, rx1 - x0, cy[k],
