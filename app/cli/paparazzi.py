@@ -261,7 +261,7 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
             "rollbacks": int(outcome["rollbacks"]),
             **{k: int(outcome.get(k, 0))
                for k in ("rollbacks_whole", "remesh_rejected", "remesh_retries",
-                         "held_vertices", "step_halvings")}})
+                         "held_vertices", "put_back_vertices", "step_halvings")}})
     else:
         k = int(outcome.get("kept_iteration", it))
         kept = (f" (the shape of iteration {k}, the lowest; the last one's "

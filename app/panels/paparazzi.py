@@ -92,8 +92,8 @@ PLAIN = {
     "view_width": "How wide a piece of the shape one picture shows (orthographic camera).",
     "remesh_every": "Remeshing: triangles that got too thin, too long or too short while the "
                     "shape moved are remade (the rest of the surface stays as the steps shaped "
-                    "it). If the steps made the surface cross itself, they are undone and the "
-                    "surface there is held still.",
+                    "it). If the steps made the surface cross itself, the crossing triangles are "
+                    "put back where they were at the last check.",
     "monitor_every": "Monitor views: 16 fixed cameras all around the shape whose pictures are "
                      "filtered now and then; their mean energy (plotted below) says how far the "
                      "shape still is from what the filter wants. It should go down.",
@@ -632,9 +632,12 @@ class PaparazziPanel(MethodPanel):
             extra.append(f"{len(step.V):,} vertices, {len(F):,} triangles")
         if m.get("rollbacks"):
             held = int(m.get("held_vertices") or 0)
+            back = int(m.get("put_back_vertices") or 0)
+            notes = ([f"{plural(back, 'corner')} of crossing triangles put back"] if back
+                     else []) + ([f"{plural(held, 'vertex', 'vertices')} near the crossings "
+                                  f"held still"] if held else [])
             extra.append(plural(int(m["rollbacks"]), "self-intersection rollback")
-                         + (f" ({plural(held, 'vertex', 'vertices')} near the crossings held "
-                            "still)" if held else ""))
+                         + (f" ({'; '.join(notes)})" if notes else ""))
         if m.get("rough_input"):
             extra.append(f"rough surface: the filter's larger step "
                          f"({m.get('base_learning_rate', 0):g}) was used")

@@ -85,13 +85,16 @@ class ReplayReport:
 #: its ``lowest_fallback`` (sixth pass): before it a run returned its last shape whatever its
 #: energy (False). Its ``remesh_spoiled_only`` (issue 38, 30 November 2026): before it every
 #: bad element was remeshed, the input's own too (False); its ``thin_step`` (issue 38, 1 December
-#: 2026): before it every vertex of an l0 run took the same step (False). Cubic's, Analogies', Smooth's and
+#: 2026): before it every vertex of an l0 run took the same step (False); its
+#: ``put_back_crossing_only`` (issue 38, 1 December 2026, tenth session): before it the steps'
+#: crossings put back and held the surface within 4 edge lengths (False). Cubic's, Analogies', Smooth's and
 #: the multigrid flow's ``hold_crossings`` (issue 38): before it a run kept whatever crossings
 #: the style or the flow made (False).
 ADDED_FIELDS: dict[str, dict] = {"Paparazzi": {"remesh_scope": "all", "rough_step": False,
                                                "plateau_step": False, "lowest_fallback": False,
                                                "remesh_spoiled_only": False,
-                                               "thin_step": False},
+                                               "thin_step": False,
+                                               "put_back_crossing_only": False},
                                  "Cubic": {"hold_crossings": False},
                                  "Analogies": {"hold_crossings": False},
                                  "Smooth": {"hold_crossings": False},

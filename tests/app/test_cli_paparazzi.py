@@ -37,7 +37,8 @@ def test_json_output_and_same_seed_same_result(sphere, tmp_path, capsys):
     assert set(rep["seconds_split"]) == {"render", "filter", "derivative", "remesh", "monitor"}
     assert rep["manifold"] is True and rep["self_intersections"] is False
     assert rep["same_topology"] is True and rep["remeshes"] == 1
-    assert rep["rollbacks"] == rep["rollbacks_whole"] == 0
+    assert rep["rollbacks"] == rep["rollbacks_whole"] == rep["put_back_vertices"] == 0
+    assert rep["params"]["put_back_crossing_only"] is True
     assert np.isfinite(rep["final_monitor_energy"]) and np.isfinite(rep["initial_monitor_energy"])
     assert main(["paparazzi", str(sphere), "-o", str(out2), "--filter", "quantize", "--quiet",
                  "--seed", "5", *FAST]) == 0

@@ -639,3 +639,45 @@ def test_the_thin_triangle_step_is_l0s_and_its_auto_step_says_so(window, dialogs
     assert lr.text() == "auto (0.0002; smaller on fine meshes)"
     qtbot.keyClick(thin, Qt.Key.Key_Space)
     assert panel.form.params().thin_step is True and "thin triangles" in lr.text()
+
+
+def test_crossings_put_back_say_how_many_corners_went_back(window, qtbot, tmp_path):
+    # PaparazziParams.put_back_crossing_only: a thin slab pushed into itself; the status line
+    # counts the rollbacks and the corners put back (no part held still), the box under
+    # Advanced is on with a tooltip, and a key press on it turns it off
+    from algorithms.mesh import icosphere, write_mesh
+    from algorithms.mesh.intersections import count_self_intersections
+
+    V, F = icosphere(2)
+    write_mesh(tmp_path / "slab.obj", V * [1.0, 1.0, 0.04], F)
+
+    @register_filter("test-crush-panel", kind="energy")
+    def crush(image, params, ctx):
+        G = np.zeros_like(image)
+        G[..., 2] = ctx.mask * -50.0
+        return float(image[..., 2].sum()), G
+
+    try:
+        assert window.open_path(tmp_path / "slab.obj")
+        panel = window.panels["Paparazzi"]
+        panel.raise_()
+        panel.set_filter("test-crush-panel")
+        p = panel.form.params()
+        assert p.put_back_crossing_only is True
+        panel.form.set_params(p.__class__(iterations=40, learning_rate=0.02, resolution=32,
+                                          remesh_every=5, sigma=0.1, monitor_every=0,
+                                          lowest_fallback=False))
+        with qtbot.waitSignal(window.job_committed, timeout=120000):
+            qtbot.mouseClick(panel.run_button, Qt.MouseButton.LeftButton)
+        text = panel.status_label.text()
+        assert "self-intersection rollback" in text, text
+        assert "of crossing triangles put back" in text and "held still" not in text, text
+        assert count_self_intersections(window.document.V, window.document.F) == 0
+        box = panel.form.editors["put_back_crossing_only"]
+        assert box.toolTip() or panel.form.labels["put_back_crossing_only"].toolTip()
+        panel.form.advanced_box.button.setChecked(True)
+        box.setFocus()
+        qtbot.keyClick(box, Qt.Key.Key_Space)
+        assert panel.form.params().put_back_crossing_only is False
+    finally:
+        unregister_filter("test-crush-panel")

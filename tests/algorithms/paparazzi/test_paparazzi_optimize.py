@@ -185,7 +185,8 @@ def test_an_unreadable_target_image_is_refused_before_running(tmp_path):
         Paparazzi(V, F, "target-image", get_filter("target-image").params(image=str(bad)))
 
 
-def test_self_intersections_are_rolled_back_and_the_step_shrinks():
+@pytest.mark.parametrize("narrow", [True, False])
+def test_self_intersections_are_rolled_back_and_the_step_shrinks(narrow):
     # an energy that pushes two close sheets of a thin shape into each other
     V, F = icosphere(2)
     V = V * [1.0, 1.0, 0.04]
@@ -199,10 +200,17 @@ def test_self_intersections_are_rolled_back_and_the_step_shrinks():
     try:
         last = run_to_end(paparazzi_iter(V, F, "test-crush", None, PaparazziParams(
             iterations=40, learning_rate=0.02, resolution=32, remesh_every=5, sigma=0.1,
-            monitor_every=0)))
+            monitor_every=0, put_back_crossing_only=narrow)))
     finally:
         unregister_filter("test-crush")
     assert last.metrics["rollbacks"] >= 1
+    if narrow:   # PaparazziParams.put_back_crossing_only: the crossing corners only, none held
+        assert last.metrics["put_back_vertices"] >= 1
+        # not halved either: the last tenth of the iterations takes a fifth of the step
+        assert last.metrics["held_vertices"] == 0
+        assert last.metrics["learning_rate"] == pytest.approx(0.02 * 0.2)
+    else:        # the surface around the crossings held still
+        assert last.metrics["put_back_vertices"] == 0 and last.metrics["held_vertices"] >= 1
     assert count_self_intersections(last.V, last.F) == 0
     assert is_manifold(last.F)
     # the steps' crossings are put back before the remeshing, which is then judged by its own:
@@ -222,7 +230,7 @@ def test_crossings_that_come_back_beside_held_parts_stop_the_run_with_a_value_to
 
     run = Crossing(V, F, "guided", None, PaparazziParams(
         iterations=40, learning_rate=4e-4, resolution=16, remesh_every=1, monitor_every=0,
-        lowest_fallback=False))
+        lowest_fallback=False, put_back_crossing_only=False))
     with pytest.raises(Stylize3DError, match=r"half the learning rate \(0\.0002; command line: "
                                              r"--learning-rate 0\.0002\)") as err:
         run_to_end(run.steps())
@@ -266,6 +274,42 @@ def test_a_crossing_puts_back_only_the_surface_around_it():
     one_end = one_end[one_end[:, 0] > 0]
     assert run._put_back(Y, run.F0, before, one_end) is None
     assert run._put_back(Y, run.F0, before, one_end, intersecting_pairs_here(Y, run.F0)) is None
+
+
+def test_a_crossing_puts_back_only_the_corners_of_the_crossing_triangles():
+    # PaparazziParams.put_back_crossing_only: the slab of the test above, its dent pushed
+    # through the bottom sheet; only the corners of the triangles that cross go back (then
+    # those of any that still cross), far fewer than within 4 edge lengths, and the rest,
+    # the dent's own uncrossed vertices too, keeps its progress
+    from algorithms.mesh.intersections import intersecting_pairs_here
+
+    V, F = icosphere(3)
+    run = Paparazzi(V * [3.0, 1.0, 0.05], F, "guided", None, PaparazziParams(iterations=1))
+    before, F = run.V0, run.F0
+    X = before.copy()
+    top = X[:, 2] > 0
+    crush = top & ((X[:, 0] - 0.7) ** 2 + X[:, 1] ** 2 < 0.15 ** 2)
+    lift = top & (X[:, 0] < -0.6)
+    X[crush, 2] -= 0.06
+    X[lift, 2] += 0.002
+    pairs = intersecting_pairs_here(X, F)
+    U, back = run._put_back_crossing(X, F, before, pairs)
+    assert U is not None and len(run._new_crossing_points(U, F)) == 0
+    corners = np.unique(F[pairs].ravel())
+    assert back[corners].all()                              # at least the crossing corners
+    np.testing.assert_array_equal(U[back], before[back])
+    np.testing.assert_array_equal(U[~back], X[~back])       # nothing else
+    assert not back[lift].any()
+    spots = run._new_crossing_points(X, F)
+    wide = run._near(X, spots) | run._near(before, spots)      # what _put_back puts back
+    assert 0 < back.sum() < wide.sum() / 3
+    # put back where it already was (nothing to go back to): crossings stay, and the caller
+    # falls back to the wide put-back (None)
+    assert run._put_back_crossing(X, F, X, pairs)[0] is None
+    # a surface with no new crossings is returned as it is
+    U2, back2 = run._put_back_crossing(before, F, before, intersecting_pairs_here(before, F))
+    assert not back2.any()
+    np.testing.assert_array_equal(U2, before)
 
 
 def test_a_shape_whose_pictures_the_filter_leaves_as_they_are_is_refused_before_a_step():

@@ -19,7 +19,8 @@ def test_a_log_older_than_remesh_scope_replays_with_the_whole_surface_remeshed()
 
     assert ADDED_FIELDS["Paparazzi"] == {"remesh_scope": "all", "rough_step": False,
                                          "plateau_step": False, "lowest_fallback": False,
-                                         "remesh_spoiled_only": False, "thin_step": False}
+                                         "remesh_spoiled_only": False, "thin_step": False,
+                                         "put_back_crossing_only": False}
     assert "Paparazzi" in app.recipes.recipes()
     old = params_to_dict(PaparazziParams(iterations=12, resolution=32, remesh_every=6,
                                          monitor_every=0))
@@ -194,3 +195,41 @@ def test_a_log_older_than_thin_step_replays_l0_with_one_step_for_every_vertex():
             "Paparazzi", {**old, "thin_step": flag}), {"filter": "l0", "filter_params": {}})
         moved[flag] = np.abs(res.state.V - V)[list(sliver)].max()
     assert 0.0 < moved[True] < 0.2 * moved[False]
+
+
+def test_a_log_older_than_put_back_crossing_only_replays_with_the_wide_put_back_and_hold():
+    """A Paparazzi run logged before ``put_back_crossing_only`` (issue 38, 1 December 2026):
+    the steps' crossings put back and held the surface within 4 edge lengths; its replay does
+    so again (the thin slab of the optimizer's rollback test, pushed into itself)."""
+    import app.recipes
+    from algorithms.paparazzi import PaparazziParams
+    from algorithms.paparazzi.filters import register_filter, unregister_filter
+    from app.document import MeshState
+
+    old = params_to_dict(PaparazziParams(iterations=40, learning_rate=0.02, resolution=32,
+                                         remesh_every=5, sigma=0.1, monitor_every=0,
+                                         lowest_fallback=False))
+    del old["put_back_crossing_only"]
+    assert logged_params("Paparazzi", old)["put_back_crossing_only"] is False
+    assert logged_params("Paparazzi", {**old, "put_back_crossing_only": True})[
+        "put_back_crossing_only"] is True
+
+    @register_filter("test-crush-replay", kind="energy")
+    def crush(image, params, ctx):
+        G = np.zeros_like(image)
+        G[..., 2] = ctx.mask * -50.0
+        return float(image[..., 2].sum()), G
+
+    V, F = icosphere(2)
+    V = V * [1.0, 1.0, 0.04]
+    out = {}
+    try:
+        for flag in (False, True):
+            res = app.recipes.run("Paparazzi", MeshState(V=V, F=F), logged_params(
+                "Paparazzi", {**old, "put_back_crossing_only": flag}),
+                {"filter": "test-crush-replay", "filter_params": {}})
+            out[flag] = res.state
+    finally:
+        unregister_filter("test-crush-replay")
+    a, b = out[False], out[True]
+    assert a.V.shape != b.V.shape or not np.array_equal(a.V, b.V)
