@@ -300,7 +300,7 @@ def _learning_rate(params: NeuralStyleParams) -> float:
 
 @register_filter("neural-style", kind="energy", params=NeuralStyleParams, prepare=_prepare,
                  shading=neural_style_shading, resolution=128, width=0.1, sigma=0.02,
-                 learning_rate=_learning_rate, halve_on_climb=False,
+                 learning_rate=_learning_rate, halve_on_climb=False, step_follows_edge=True,
                  shown_caption=lambda p: "Style" if p.energy == "gram" else "Filtered",
                  quick_look={"resolution": 0},
                  file_readers={"style_image": read_style_image},

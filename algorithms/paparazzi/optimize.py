@@ -127,7 +127,10 @@ Choices (written down here, tested in tests/algorithms/paparazzi/)
   rollbacks, and its energy rose; issue 23, sixth pass). l0's own step does the same
   (``FilterSpec.step_follows_edge``; issue 38: its fixed step folded dense scans, hippo 2.67 %
   of the edges by more than 90 degrees, 0.81 % with the shrunk step; the first Step's message
-  and the command line say "fine mesh").
+  and the command line say "fine mesh"), and so does neural-style's since 1 December 2026
+  (tenth session): with the crossings put back narrowly instead of held, its fixed 1e-3 (a
+  fifth of an edge a step on the sliver scan, whose views are 0.1 wide) raised its energy on
+  dense scans (lato000 1620 -> 1833, nefertiti 968 -> 1108; docs/results/paparazzi.md).
   *A smaller step when the energy climbs* (``plateau_step``, an option; issue 23, fifth
   pass): every ``PLATEAU_EVERY`` = 50 iterations the monitor energy is checked (the command
   line's monitor schedule, every 25, evaluates it then anyway; the panel's, every 50, too); once
@@ -347,9 +350,10 @@ class PaparazziParams:
                                  log_scale=True, decimals=7,
                                  tooltip="NAdam step size (in units of the shape normalized to "
                                          "a cube of side 2). 0 = the filter's default (2e-4; "
-                                         "guided 1e-5, slic 6e-5, neural-style 1e-3; l0's is "
-                                         "smaller on a mesh whose edges are shorter than a "
-                                         "100th of its size, and at thin triangles). Larger "
+                                         "guided 1e-5, slic 6e-5, neural-style 1e-3; l0's and "
+                                         "neural-style's are smaller on a mesh whose edges "
+                                         "are shorter than a 100th of its size, and at thin "
+                                         "triangles). Larger "
                                          "moves faster but adds noise and "
                                          "may need more self-intersection rollbacks.")
     rough_step: bool = param(True, label="Larger step on rough scans", advanced=True,
@@ -361,7 +365,8 @@ class PaparazziParams:
                                      "edges are shorter than a 100th of its size), which "
                                      "carries the surface past that rise to a smooth one.")
     thin_step: bool = param(True, label="Smaller step at thin triangles", advanced=True,
-                            tooltip="With the learning rate on auto, for l0: a vertex of a thin "
+                            tooltip="With the learning rate on auto, for l0 and neural-style: a "
+                                    "vertex of a thin "
                                     "triangle takes a step in proportion to the triangle's "
                                     "thinness, so that no facet tilts faster than an "
                                     "equilateral one (on CAD parts full of slivers l0's "
@@ -662,12 +667,13 @@ class Paparazzi:
     def default_step(self) -> float:
         """The filter's step for this mesh (the run's learning rate on auto): its
         ``learning_rate``, shrunk in proportion to the mean edge below ``ROUGH_EDGE`` for a
-        filter with ``step_follows_edge`` (l0)."""
+        filter with ``step_follows_edge`` (l0, neural-style)."""
         lr = self.spec.step(self.filter_params)
         return lr * self.edge_factor() if self.spec.step_follows_edge else lr
 
     def thin_factors(self, V, F) -> np.ndarray:
-        """Per vertex, what a step on auto of a filter with ``step_follows_edge`` (l0) is
+        """Per vertex, what a step on auto of a filter with ``step_follows_edge`` (l0,
+        neural-style) is
         scaled by beyond :meth:`edge_factor`: ``min(1, a / (sqrt(3)/2 min(ROUGH_EDGE, mean
         edge)))``, ``a`` the smallest altitude of the vertex's triangles (0 for a degenerate
         one: its vertex stays). A triangle's normal turns by about a step over its altitude, so
@@ -695,7 +701,7 @@ class Paparazzi:
 
     def edge_factor(self) -> float:
         """``min(1, mean edge / ROUGH_EDGE)``: what a step on auto is scaled by on a fine mesh
-        (l0's own step, and every filter's rough step)."""
+        (l0's and neural-style's own step, and every filter's rough step)."""
         return min(1.0, self.edge_length / ROUGH_EDGE)
 
     @property
@@ -1099,16 +1105,26 @@ class Paparazzi:
         were clean after one round)."""
         back = np.zeros(len(V), dtype=bool)
         back[F[self._new_pairs(V, F, pairs)].ravel()] = True
+        U = V.copy()
+        added = back.copy()
+        # the intersecting pairs of U with a triangle whose corners went back: only those can be
+        # new (V's new pairs all have one; a pair of triangles that kept their corners is as in
+        # V), and each round re-tests only the triangles whose corners it moved
+        touching = np.zeros((0, 2), dtype=np.int64)
         for _ in range(PUT_BACK_ROUNDS):
-            U = V.copy()
-            U[back] = before[back]
-            moved = back[F].any(axis=1)
-            kept = pairs[~moved[pairs].any(axis=1)] if len(pairs) else pairs
-            new = self._new_pairs(U, F, np.concatenate(
-                [kept, _intersecting_pairs_touching(U, F, moved)]))
+            U[added] = before[added]
+            moved = added[F].any(axis=1)
+            touching = np.concatenate([touching[~moved[touching].any(axis=1)],
+                                       _intersecting_pairs_touching(U, F, moved)])
+            new = self._new_pairs(U, F, touching)
             if not len(new):
                 return U, back
-            back[F[new].ravel()] = True
+            added = np.zeros(len(V), dtype=bool)
+            added[F[new].ravel()] = True
+            added &= ~back
+            if not added.any():          # every corner is back already: nothing left to try
+                break
+            back |= added
         return None, back
 
     def _near(self, V, spots) -> np.ndarray:

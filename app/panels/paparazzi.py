@@ -365,7 +365,8 @@ class PaparazziPanel(MethodPanel):
             self.filtered_caption.setText(spec.shown(self.filter_params()))
         thin = self.form.editors.get("thin_step")
         if thin is not None:
-            # PaparazziParams.thin_step acts on a filter with step_follows_edge (l0) only
+            # PaparazziParams.thin_step acts on a filter with step_follows_edge (l0,
+            # neural-style) only
             follows = bool(getattr(spec, "step_follows_edge", False))
             for w in (thin, self.form.labels["thin_step"]):
                 w.setEnabled(follows)
@@ -385,7 +386,8 @@ class PaparazziPanel(MethodPanel):
                 # PaparazziParams.rough_step; smaller on a fine mesh (optimize.ROUGH_EDGE)
                 text = f"auto ({value:g}; rough up to {rough:g})"
             elif name == "learning_rate" and getattr(spec, "step_follows_edge", False):
-                # FilterSpec.step_follows_edge (l0): smaller on a mesh finer than ROUGH_EDGE,
+                # FilterSpec.step_follows_edge (l0, neural-style): smaller on a mesh finer
+                # than ROUGH_EDGE,
                 # and at the vertices of thin triangles (Paparazzi.thin_factors, thin_step)
                 text = (f"auto ({value:g}; smaller on fine meshes and thin triangles)"
                         if getattr(self.form.params(), "thin_step", True)

@@ -67,6 +67,26 @@ def test_registered_with_the_thesis_settings():
     np.testing.assert_allclose(cols[:, 0], [1.0, 0.0, 0.5], atol=1e-12)
 
 
+def test_the_step_on_auto_follows_the_edge_on_fine_meshes(monkeypatch):
+    # FilterSpec.step_follows_edge, as l0's (1 December 2026): with the crossings put back
+    # narrowly instead of held, the fixed 1e-3 raised the energy on dense scans; on a mesh
+    # finer than ROUGH_EDGE the step is 1e-3 (5e-4 with the network energy) times mean edge /
+    # ROUGH_EDGE, and a step the run sets is kept. (ROUGH_EDGE raised: the sphere counts as fine.)
+    from algorithms.paparazzi import optimize
+
+    spec = get_filter("neural-style")
+    assert spec.step_follows_edge
+    V, F = icosphere(2)
+    monkeypatch.setattr(optimize, "ROUGH_EDGE", 1.0)
+    for energy, lr in (("gram", 1e-3), ("network", 5e-4)):
+        run = Paparazzi(V, F, spec, NeuralStyleParams(energy=energy),
+                        PaparazziParams(iterations=1, resolution=32))
+        assert run.learning_rate == pytest.approx(lr * run.edge_length) and run.fine_step
+    run = Paparazzi(V, F, spec, NeuralStyleParams(), PaparazziParams(iterations=1,
+                                                                     learning_rate=3e-4))
+    assert run.learning_rate == 3e-4
+
+
 def _view(bumpy_sphere, resolution=64):
     V, F = bumpy_sphere
     spec = get_filter("neural-style")
