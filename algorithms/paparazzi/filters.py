@@ -180,7 +180,8 @@ class FilterSpec:
     pull's size) only add noise. On the corpus every guided and l0 run that started below one
     grey level raised its energy (docs/results/paparazzi.md, "Nothing to filter").
 
-    ``step_follows_edge`` (l0, neural-style): the default step (``learning_rate``, when the run's is on auto)
+    ``step_follows_edge`` (l0, neural-style): the default step (``learning_rate``, when the
+    run's is on auto)
     shrinks in proportion to the mesh's mean edge below ``optimize.ROUGH_EDGE``, as the rough
     step does: a step is about the learning rate per coordinate, so a fixed one is a larger
     share of a shorter edge, and l0 folded dense scans (docs/results/paparazzi.md, "l0's step

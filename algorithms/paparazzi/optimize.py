@@ -204,7 +204,8 @@ __all__ = ["PaparazziParams", "PaparazziStep", "Paparazzi", "paparazzi_iter", "p
 #: many target edge lengths of the crossing still (see the module docstring)
 HOLD_RADIUS = 4.0
 #: ``PaparazziParams.put_back_crossing_only``: how many times the put-back grows by the
-#: corners of the triangles that still cross before it gives up (:meth:`Paparazzi._put_back_crossing`)
+#: corners of the triangles that still cross before it gives up
+#: (:meth:`Paparazzi._put_back_crossing`)
 PUT_BACK_ROUNDS = 8
 #: ``PaparazziParams.remesh_scope``: "bad" lets a remeshing move only the vertices within one
 #: ring of a bad element -- an edge outside ``BAD_EDGE_BAND`` times the target length ``h`` or a

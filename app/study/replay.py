@@ -87,7 +87,8 @@ class ReplayReport:
 #: bad element was remeshed, the input's own too (False); its ``thin_step`` (issue 38, 1 December
 #: 2026): before it every vertex of an l0 run took the same step (False); its
 #: ``put_back_crossing_only`` (issue 38, 1 December 2026, tenth session): before it the steps'
-#: crossings put back and held the surface within 4 edge lengths (False). Cubic's, Analogies', Smooth's and
+#: crossings put back and held the surface within 4 edge lengths (False). Cubic's,
+#: Analogies', Smooth's and
 #: the multigrid flow's ``hold_crossings`` (issue 38): before it a run kept whatever crossings
 #: the style or the flow made (False).
 ADDED_FIELDS: dict[str, dict] = {"Paparazzi": {"remesh_scope": "all", "rough_step": False,
@@ -128,6 +129,23 @@ def logged_params(recipe_name: str, values: dict | None) -> dict:
     for k, v in ADDED_FIELDS.get(recipe_name, {}).items():
         values.setdefault(k, v)
     return values
+
+
+def logged_step(recipe_name: str, values: dict, raw: dict, options: dict) -> dict:
+    """``values`` (:func:`logged_params`) with the learning rate a neural-style run logged
+    before 1 December 2026 (tenth session; its log has no ``put_back_crossing_only``) took on
+    auto: the filter's own, on every mesh and vertex. Since then neural-style's step on auto
+    follows the mesh's edge and thin triangles (``FilterSpec.step_follows_edge``), which is
+    no setting a log could hold; a fixed step set to the same value runs as it ran."""
+    if (recipe_name != "Paparazzi" or options.get("filter") != "neural-style"
+            or "put_back_crossing_only" in raw or values.get("learning_rate")):
+        return values
+    from algorithms.paparazzi import get_filter
+    from algorithms.params import params_from_dict
+
+    spec = get_filter("neural-style")
+    fp = params_from_dict(spec.params, dict(options.get("filter_params") or {}))
+    return {**values, "learning_rate": spec.step(fp)}
 
 
 def files_dir(log_path) -> Path:
@@ -226,7 +244,8 @@ class _Replayer:
             before = load_state(src)
             options = logged_options(name, run.get("options", {}) or {})
             _load_blobs(self.base, options)
-            params = recipe.make_params(logged_params(name, run.get("params", {})))
+            params = recipe.make_params(logged_step(name, logged_params(
+                name, run.get("params", {})), run.get("params", {}) or {}, options))
             last = None
             for last in recipe.steps(before, params, options, {}):
                 pass

@@ -144,7 +144,8 @@ def test_neural_style_takes_a_painting_of_any_shape_and_runs_without_one(window,
     assert panel._path_edits["style_image"].placeholderText().startswith("optional")
     # its learning rate left at 0 is the filter's own, shown as such; it follows the energy
     lr = panel.form.editors["learning_rate"].spin
-    assert lr.value() == 0 and lr.text() == lr.specialValueText() == "auto (0.001)"
+    assert lr.value() == 0 and lr.text() == lr.specialValueText() == (
+        "auto (0.001; smaller on fine meshes and thin triangles)")
     energy = panel.filter_form.editors["energy"]
     strength = panel.filter_form.editors["strength"]
     assert energy.currentText() == "gram" and "Gram (style) energy" in energy.toolTip()
@@ -155,10 +156,11 @@ def test_neural_style_takes_a_painting_of_any_shape_and_runs_without_one(window,
     energy.setFocus()
     qtbot.keyClick(energy, Qt.Key.Key_Down)           # a person picks the other energy
     assert panel.filter_params().energy == "network" and strength.isEnabled()
-    assert lr.text() == lr.specialValueText() == "auto (0.0005)"
+    assert lr.text() == lr.specialValueText() == (
+        "auto (0.0005; smaller on fine meshes and thin triangles)")
     assert panel.filtered_caption.text() == "Filtered"
     qtbot.keyClick(energy, Qt.Key.Key_Up)
-    assert panel.filter_params().energy == "gram" and lr.text() == "auto (0.001)"
+    assert panel.filter_params().energy == "gram" and lr.text().startswith("auto (0.001;")
     assert not strength.isEnabled() and panel.filtered_caption.text() == "Style"
     panel.set_filter("quantize")
     assert panel.filtered_caption.text() == "Filtered"

@@ -145,10 +145,8 @@ def test_a_log_older_than_remesh_spoiled_only_remeshes_the_inputs_own_bad_triang
     element, the input's own too: its replay does so again. On a CAD-like cylinder (every
     triangle bad) remeshing alone re-places the triangles with the old rule and leaves them
     with today's."""
-    import app.recipes
     from algorithms.paparazzi import (PaparazziParams, get_filter, register_filter,
                                       unregister_filter)
-    from app.document import MeshState
     from tests.algorithms.paparazzi.test_paparazzi_remesh_baseline import cylinder
 
     old = params_to_dict(PaparazziParams(iterations=12, resolution=32, remesh_every=6,
@@ -163,12 +161,7 @@ def test_a_log_older_than_remesh_spoiled_only_remeshes_the_inputs_own_bad_triang
                     crease_angle=spec.crease_angle, min_change=0.0)(
         lambda image, params, ctx: image)
     try:
-        results = {}
-        for flag in (False, True):
-            res = app.recipes.run("Paparazzi", MeshState(V=V, F=F), logged_params(
-                "Paparazzi", {**old, "remesh_spoiled_only": flag}),
-                {"filter": "test-identity-replay", "filter_params": {}})
-            results[flag] = res.state
+        results = _replay_both(old, "remesh_spoiled_only", "test-identity-replay", V, F)
     finally:
         unregister_filter("test-identity-replay")
     np.testing.assert_array_equal(results[True].F, F)
@@ -201,10 +194,8 @@ def test_a_log_older_than_put_back_crossing_only_replays_with_the_wide_put_back_
     """A Paparazzi run logged before ``put_back_crossing_only`` (issue 38, 1 December 2026):
     the steps' crossings put back and held the surface within 4 edge lengths; its replay does
     so again (the thin slab of the optimizer's rollback test, pushed into itself)."""
-    import app.recipes
     from algorithms.paparazzi import PaparazziParams
     from algorithms.paparazzi.filters import register_filter, unregister_filter
-    from app.document import MeshState
 
     old = params_to_dict(PaparazziParams(iterations=40, learning_rate=0.02, resolution=32,
                                          remesh_every=5, sigma=0.1, monitor_every=0,
@@ -222,14 +213,53 @@ def test_a_log_older_than_put_back_crossing_only_replays_with_the_wide_put_back_
 
     V, F = icosphere(2)
     V = V * [1.0, 1.0, 0.04]
-    out = {}
     try:
-        for flag in (False, True):
-            res = app.recipes.run("Paparazzi", MeshState(V=V, F=F), logged_params(
-                "Paparazzi", {**old, "put_back_crossing_only": flag}),
-                {"filter": "test-crush-replay", "filter_params": {}})
-            out[flag] = res.state
+        out = _replay_both(old, "put_back_crossing_only", "test-crush-replay", V, F)
     finally:
         unregister_filter("test-crush-replay")
     a, b = out[False], out[True]
     assert a.V.shape != b.V.shape or not np.array_equal(a.V, b.V)
+
+
+def _replay_both(old: dict, field: str, filter_name: str, V, F) -> dict:
+    """The replayed Paparazzi results of the log ``old`` with the boolean ``field`` off and on
+    (``{False: state, True: state}``), run with the filter ``filter_name``."""
+    import app.recipes
+    from app.document import MeshState
+
+    return {flag: app.recipes.run("Paparazzi", MeshState(V=V, F=F), logged_params(
+        "Paparazzi", {**old, field: flag}), {"filter": filter_name, "filter_params": {}}).state
+        for flag in (False, True)}
+
+
+def test_a_neural_style_log_older_than_its_edge_step_replays_with_the_filters_own_step():
+    """Neural-style's step on auto follows the edge and thin triangles since 1 December 2026
+    (tenth session), a FilterSpec rule no log holds: a run logged before (no
+    ``put_back_crossing_only``) with the step on auto replays with the filter's own step set,
+    which runs as it ran (one step, every mesh, every vertex); newer logs, other filters and a
+    step the participant set are left alone."""
+    from algorithms.paparazzi import Paparazzi, PaparazziParams
+    from algorithms.paparazzi.neural_style import NeuralStyleParams
+    from app.study.replay import logged_step
+
+    new = params_to_dict(PaparazziParams())
+    old = dict(new)
+    del old["put_back_crossing_only"]
+    ns = {"filter": "neural-style", "filter_params": {}}
+    assert logged_step("Paparazzi", logged_params("Paparazzi", old), old, ns)[
+        "learning_rate"] == 1e-3
+    net = {"filter": "neural-style", "filter_params": {"energy": "network"}}
+    assert logged_step("Paparazzi", logged_params("Paparazzi", old), old, net)[
+        "learning_rate"] == 5e-4
+    assert logged_step("Paparazzi", logged_params("Paparazzi", new), new, ns)[
+        "learning_rate"] == 0.0
+    assert logged_step("Paparazzi", logged_params("Paparazzi", old), old, {
+        "filter": "l0", "filter_params": {}})["learning_rate"] == 0.0
+    set_by_hand = {**old, "learning_rate": 3e-4}
+    assert logged_step("Paparazzi", set_by_hand, set_by_hand, ns)["learning_rate"] == 3e-4
+    # and that step is what the run took then: the same for every vertex of a fine mesh
+    V, F = icosphere(3)
+    p = PaparazziParams(**{**logged_step("Paparazzi", logged_params("Paparazzi", old), old, ns),
+                           "iterations": 1})
+    run = Paparazzi(V, F, "neural-style", NeuralStyleParams(), p)
+    assert run.learning_rate == 1e-3 and not run.fine_step
