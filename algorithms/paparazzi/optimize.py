@@ -354,8 +354,7 @@ class PaparazziParams:
                                          "guided 1e-5, slic 6e-5, neural-style 1e-3; l0's and "
                                          "neural-style's are smaller on a mesh whose edges "
                                          "are shorter than a 100th of its size, and at thin "
-                                         "triangles). Larger "
-                                         "moves faster but adds noise and "
+                                         "triangles). Larger moves faster but adds noise and "
                                          "may need more self-intersection rollbacks.")
     rough_step: bool = param(True, label="Larger step on rough scans", advanced=True,
                              tooltip="With the learning rate on auto: if the filter's own pull "
@@ -367,8 +366,7 @@ class PaparazziParams:
                                      "carries the surface past that rise to a smooth one.")
     thin_step: bool = param(True, label="Smaller step at thin triangles", advanced=True,
                             tooltip="With the learning rate on auto, for l0 and neural-style: a "
-                                    "vertex of a thin "
-                                    "triangle takes a step in proportion to the triangle's "
+                                    "vertex of a thin triangle takes a step in proportion to the triangle's "
                                     "thinness, so that no facet tilts faster than an "
                                     "equilateral one (on CAD parts full of slivers l0's "
                                     "energy otherwise rises from the start). Off: every "
@@ -674,8 +672,7 @@ class Paparazzi:
 
     def thin_factors(self, V, F) -> np.ndarray:
         """Per vertex, what a step on auto of a filter with ``step_follows_edge`` (l0,
-        neural-style) is
-        scaled by beyond :meth:`edge_factor`: ``min(1, a / (sqrt(3)/2 min(ROUGH_EDGE, mean
+        neural-style) is scaled by beyond :meth:`edge_factor`: ``min(1, a / (sqrt(3)/2 min(ROUGH_EDGE, mean
         edge)))``, ``a`` the smallest altitude of the vertex's triangles (0 for a degenerate
         one: its vertex stays). A triangle's normal turns by about a step over its altitude, so
         a step that suits an equilateral triangle of the mesh's mean edge (or of ``ROUGH_EDGE``,
@@ -974,8 +971,13 @@ class Paparazzi:
         """``(2 k, 3)``: the centroids of both faces of each of the ``k`` new intersecting
         pairs (see :meth:`_new_crossings`); ``IF``: the intersecting pairs of (V, F), when
         known."""
-        new = self._new_pairs(V, F, _intersecting_pairs(V, F) if IF is None else IF)
-        return V[F[new.ravel()]].mean(1) if len(new) else np.zeros((0, 3))
+        return self._pair_points(V, F, self._new_pairs(
+            V, F, _intersecting_pairs(V, F) if IF is None else IF))
+
+    @staticmethod
+    def _pair_points(V, F, pairs) -> np.ndarray:
+        """``(2 k, 3)``: the centroids of both faces of each of the ``k`` face ``pairs``."""
+        return V[F[pairs.ravel()]].mean(1) if len(pairs) else np.zeros((0, 3))
 
     def _remeshing_crossing_points(self, V, U, G) -> np.ndarray:
         """:meth:`_new_crossing_points` of a remeshing (U, G) of ``V``, a surface with no new
@@ -1095,19 +1097,19 @@ class Paparazzi:
                                           distance_upper_bound=4.0 * self.edge_length)
         return IF[np.isinf(d).reshape(-1, 2).any(axis=1)]
 
-    def _put_back_crossing(self, V, F, before, pairs) -> tuple[np.ndarray | None, np.ndarray]:
+    def _put_back_crossing(self, V, F, before, new) -> tuple[np.ndarray | None, np.ndarray]:
         """``PaparazziParams.put_back_crossing_only``: ``(U, back)``, ``V`` with the corners of
         its new crossing triangles put back at ``before`` (the last checked positions, same
         triangles ``F``, free of new crossings), then the corners of any triangles that still
         cross, up to :data:`PUT_BACK_ROUNDS` times; ``U`` is None if crossings remain (the
         caller then falls back to putting back everything within :data:`HOLD_RADIUS`).
-        ``pairs``: ``V``'s intersecting pairs. Growing by the crossing triangles only, not by
+        ``new``: ``V``'s new intersecting pairs (:meth:`_new_pairs`). Growing by the crossing triangles only, not by
         rings, matters: on a noisy scan the border between put-back and moved vertices folds
         anew wherever it runs (the sliver scan: a ring a round grew to 88k of 156k vertices
         in 8 rounds, still crossing; the crossing corners alone, 3,190 vertices, then 3,228,
         were clean after one round)."""
         back = np.zeros(len(V), dtype=bool)
-        back[F[self._new_pairs(V, F, pairs)].ravel()] = True
+        back[F[new].ravel()] = True
         U = V.copy()
         added = back.copy()
         # the intersecting pairs of U with a triangle whose corners went back: only those can be
@@ -1257,9 +1259,10 @@ class Paparazzi:
                 # back), then the remeshing of a surface known free of new crossings, so that
                 # a remeshing is judged by the crossings it makes (in the part it changed)
                 pairs = _intersecting_pairs(V, F)
-                spots = self._new_crossing_points(V, F, pairs)
+                new = self._new_pairs(V, F, pairs)
+                spots = self._pair_points(V, F, new)
                 if len(spots) and p.put_back_crossing_only:
-                    U, back = self._put_back_crossing(V, F, good[0], pairs)
+                    U, back = self._put_back_crossing(V, F, good[0], new)
                     if U is not None:
                         # only the crossing triangles' corners go back; they move again from
                         # the next step (first moment cleared, second kept: a small restart)

@@ -244,8 +244,8 @@ def cmd_paparazzi(args: argparse.Namespace) -> int:
             "rough_input": run.rough_input,
             "fine_step": run.fine_step,
             # FilterSpec.step_follows_edge (l0, neural-style): the share of vertices whose
-            # step on auto was
-            # smaller for their thin triangles at the start (None: not such a run)
+            # step on auto was smaller for their thin triangles at the start (None: not such
+            # a run)
             "thin_step_share": outcome.get("thin_step_share"),
             "rough_probe": run.rough, "rough_share": run.rough_share,
             "initial_monitor_energy": outcome["initial_monitor_energy"],

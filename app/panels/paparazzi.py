@@ -387,8 +387,8 @@ class PaparazziPanel(MethodPanel):
                 text = f"auto ({value:g}; rough up to {rough:g})"
             elif name == "learning_rate" and getattr(spec, "step_follows_edge", False):
                 # FilterSpec.step_follows_edge (l0, neural-style): smaller on a mesh finer
-                # than ROUGH_EDGE,
-                # and at the vertices of thin triangles (Paparazzi.thin_factors, thin_step)
+                # than ROUGH_EDGE, and at the vertices of thin triangles (Paparazzi.thin_factors,
+                # thin_step)
                 text = (f"auto ({value:g}; smaller on fine meshes and thin triangles)"
                         if getattr(self.form.params(), "thin_step", True)
                         else f"auto ({value:g}; smaller on fine meshes)")

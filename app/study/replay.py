@@ -88,8 +88,7 @@ class ReplayReport:
 #: 2026): before it every vertex of an l0 run took the same step (False); its
 #: ``put_back_crossing_only`` (issue 38, 1 December 2026, tenth session): before it the steps'
 #: crossings put back and held the surface within 4 edge lengths (False). Cubic's,
-#: Analogies', Smooth's and
-#: the multigrid flow's ``hold_crossings`` (issue 38): before it a run kept whatever crossings
+#: Analogies', Smooth's and the multigrid flow's ``hold_crossings`` (issue 38): before it a run kept whatever crossings
 #: the style or the flow made (False).
 ADDED_FIELDS: dict[str, dict] = {"Paparazzi": {"remesh_scope": "all", "rough_step": False,
                                                "plateau_step": False, "lowest_fallback": False,
@@ -141,11 +140,11 @@ def logged_step(recipe_name: str, values: dict, raw: dict, options: dict) -> dic
             or "put_back_crossing_only" in raw or values.get("learning_rate")):
         return values
     from algorithms.paparazzi import get_filter
-    from algorithms.params import params_from_dict
+    from app.recipes.paparazzi import resolve_filter_params
 
     spec = get_filter("neural-style")
-    fp = params_from_dict(spec.params, dict(options.get("filter_params") or {}))
-    return {**values, "learning_rate": spec.step(fp)}
+    return {**values, "learning_rate": spec.step(resolve_filter_params(
+        spec, options.get("filter_params")))}
 
 
 def files_dir(log_path) -> Path:

@@ -225,8 +225,8 @@ def test_crossings_that_come_back_beside_held_parts_stop_the_run_with_a_value_to
     V, F = icosphere(2)
 
     class Crossing(Paparazzi):
-        def _new_crossing_points(self, V, F, IF=None):
-            return V[:1].copy()
+        def _new_pairs(self, V, F, IF):
+            return np.array([[0, 1]], dtype=np.int64)        # faces 0 and 1 cross, always
 
     run = Crossing(V, F, "guided", None, PaparazziParams(
         iterations=40, learning_rate=4e-4, resolution=16, remesh_every=1, monitor_every=0,
@@ -293,7 +293,9 @@ def test_a_crossing_puts_back_only_the_corners_of_the_crossing_triangles():
     X[crush, 2] -= 0.06
     X[lift, 2] += 0.002
     pairs = intersecting_pairs_here(X, F)
-    U, back = run._put_back_crossing(X, F, before, pairs)
+    new = run._new_pairs(X, F, pairs)
+    np.testing.assert_array_equal(new, pairs)                # a clean input: every pair is new
+    U, back = run._put_back_crossing(X, F, before, new)
     assert U is not None and len(run._new_crossing_points(U, F)) == 0
     corners = np.unique(F[pairs].ravel())
     assert back[corners].all()                              # at least the crossing corners
@@ -305,9 +307,10 @@ def test_a_crossing_puts_back_only_the_corners_of_the_crossing_triangles():
     assert 0 < back.sum() < wide.sum() / 3
     # put back where it already was (nothing to go back to): crossings stay, and the caller
     # falls back to the wide put-back (None)
-    assert run._put_back_crossing(X, F, X, pairs)[0] is None
+    assert run._put_back_crossing(X, F, X, new)[0] is None
     # a surface with no new crossings is returned as it is
-    U2, back2 = run._put_back_crossing(before, F, before, intersecting_pairs_here(before, F))
+    U2, back2 = run._put_back_crossing(before, F, before, run._new_pairs(
+        before, F, intersecting_pairs_here(before, F)))
     assert not back2.any()
     np.testing.assert_array_equal(U2, before)
 
@@ -779,12 +782,13 @@ def test_a_run_whose_energy_ends_above_its_start_returns_its_lowest_shape():
     assert PaparazziParams().lowest_fallback is True
 
     class Poisoned(P):
-        # the end's check of the lowest (unchecked) shape finds a crossing
+        # the end's check of the lowest (unchecked) shape finds a crossing (the loop's own
+        # checks test the new pairs directly: this is the run's only call)
         n = 0
 
         def _new_crossing_points(self, V, F, IF=None):
             Poisoned.n += 1
-            return (np.zeros((1, 3)) if Poisoned.n == 2
+            return (np.zeros((1, 3)) if Poisoned.n == 1
                     else super()._new_crossing_points(V, F, IF))
 
     def runs(cases):
@@ -809,7 +813,7 @@ def test_a_run_whose_energy_ends_above_its_start_returns_its_lowest_shape():
         np.testing.assert_array_equal(steps[-1].V, steps[k - 1].V)
         np.testing.assert_array_equal(steps[-1].F, steps[k - 1].F)
         assert "kept the shape of iteration" in steps[-1].message
-        assert Poisoned.n == 2
+        assert Poisoned.n == 1
         for key in ("poisoned", "off"):
             last = got[key][-1]
             assert last.metrics["kept_iteration"] == 600
