@@ -34,6 +34,20 @@ def plural(n: int, singular: str, plural_form: str | None = None) -> str:
     return f"{n:,} {word}"
 
 
+def number(x: float, digits: int = 3) -> str:
+    """``x`` to ``digits`` significant digits as a person writes it: "471", "999.8" -> "1,000",
+    "0.864", "12,345" (whole numbers of ``digits`` digits or more in full, with commas), never
+    "1e+03"; scientific only below 0.001 or from a million on ("2.5e-05", "1.3e+06")."""
+    x = float(x)
+    if not math.isfinite(x) or x == 0.0:
+        return f"{x:g}"
+    if not 1e-3 <= abs(x) < 1e6:
+        return f"{x:.{digits}g}"
+    lead = math.floor(math.log10(abs(float(f"{x:.{digits}g}"))))     # after rounding: 999.8 -> 3
+    decimals = max(0, digits - 1 - lead)
+    return f"{x:,.{decimals}f}"
+
+
 def article(word: str) -> str:
     """ "a cube", "an octahedron" (by the first letter; enough for the app's own words)."""
     return ("an " if word[:1].lower() in "aeiou" else "a ") + word

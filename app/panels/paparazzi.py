@@ -44,7 +44,7 @@ from app.panels.base import MethodPanel
 from app.recipes.paparazzi import (describe_filter_file, ensure_filter, filter_names,
                                    filter_options, manifold_report, monitor_points, rgb8)
 from app.recipes.paparazzi import filter_spec as get_filter
-from app.widgets import article, plural
+from app.widgets import article, number, plural
 
 #: the panel's default number of iterations: a 3,000-vertex mesh takes about 10-20 s at the
 #: filter's resolution (the command line and the thesis use 1000 or more)
@@ -628,7 +628,7 @@ class PaparazziPanel(MethodPanel):
         if e0 and e1 is not None:
             views = int(m.get("monitor_views") or 1)
             extra.append(f"monitor energy{f' (mean of {views} views)' if views > 1 else ''} "
-                         f"{e0:.3g} → {e1:.3g} ({100 * (e1 - e0) / e0:+.0f} %)")
+                         f"{number(e0)} → {number(e1)} ({100 * (e1 - e0) / e0:+.0f} %)")
         F = getattr(step, "F", None)
         if F is not None:
             extra.append(f"{len(step.V):,} vertices, {len(F):,} triangles")
@@ -649,6 +649,6 @@ class PaparazziPanel(MethodPanel):
         kept = int(m.get("kept_iteration") or step.iteration)
         if kept < step.iteration:       # PaparazziParams.lowest_fallback
             extra.append(f"the result is the shape of iteration {kept}, whose energy was the "
-                         f"lowest (the last one's: {m.get('last_monitor_energy', 0):.3g})")
+                         f"lowest (the last one's: {number(m.get('last_monitor_energy', 0))})")
         if extra:
             self.status_label.setText(self.status_label.text() + "\n" + "; ".join(extra) + ".")

@@ -261,7 +261,13 @@ def test_panel_tabs_scroll_and_leave_the_3d_view_half_the_window(window, dialogs
 
 # -- defect 6: wording ------------------------------------------------------------------------------
 def test_counts_and_articles_read_right(window, dialogs, qtbot):
-    from app.widgets import article, plural
+    from app.widgets import article, number, plural
+
+    # numbers in status lines as a person writes them (the Paparazzi panel's energies read
+    # "1e+03 → 471" before)
+    assert [number(x) for x in (999.8, 471.2, 0.86421, 12345.0, 1.0, 100.0, -2.5)] == \
+        ["1,000", "471", "0.864", "12,345", "1.00", "100", "-2.50"]
+    assert number(2.5e-5) == "2.5e-05" and number(1.3e6) == "1.3e+06" and number(0) == "0"
 
     assert plural(1, "level") == "1 level" and plural(2, "cycle") == "2 cycles"
     assert plural(1, "vertex", "vertices") == "1 vertex"
