@@ -638,8 +638,10 @@ class PaparazziPanel(MethodPanel):
             notes = ([f"{plural(back, 'corner')} of crossing triangles put back"] if back
                      else []) + ([f"{plural(held, 'vertex', 'vertices')} near the crossings "
                                   f"held still"] if held else [])
-            extra.append(plural(int(m["rollbacks"]), "self-intersection rollback")
-                         + (f" ({'; '.join(notes)})" if notes else ""))
+            # (a check puts back only what crosses, not the whole run: "rollbacks" read as if
+            # the run had been undone that many times)
+            extra.append(plural(int(m["rollbacks"]), "check") + " found the surface crossing "
+                         "itself" + (f" ({'; '.join(notes)})" if notes else ""))
         if m.get("rough_input"):
             extra.append(f"rough surface: the filter's larger step "
                          f"({m.get('base_learning_rate', 0):g}) was used")
