@@ -370,10 +370,11 @@ class PaparazziParams:
                                      "carries the surface past that rise to a smooth one.")
     thin_step: bool = param(True, label="Smaller step at thin triangles", advanced=True,
                             tooltip="With the learning rate on auto, for l0 and neural-style: a "
-                                    "vertex of a thin triangle takes a step in proportion to the triangle's "
-                                    "thinness, so that no facet tilts faster than an "
-                                    "equilateral one (on CAD parts full of slivers l0's "
-                                    "energy otherwise rises from the start). Off: every "
+                                    "vertex of a thin triangle takes a step in proportion to "
+                                    "the triangle's thinness, so that no facet tilts "
+                                    "faster than an equilateral one (on CAD parts full of "
+                                    "slivers l0's energy otherwise rises from the start). "
+                                    "Off: every "
                                     "vertex takes the same step (before 1 December 2026).")
     plateau_step: bool = param(False, label="Smaller step when the energy climbs", advanced=True,
                                tooltip="Every 50 iterations the monitor energy is checked; once "
@@ -676,16 +677,16 @@ class Paparazzi:
 
     def thin_factors(self, V, F) -> np.ndarray:
         """Per vertex, what a step on auto of a filter with ``step_follows_edge`` (l0,
-        neural-style) is scaled by beyond :meth:`edge_factor`: ``min(1, a / (sqrt(3)/2 min(ROUGH_EDGE, mean
-        edge)))``, ``a`` the smallest altitude of the vertex's triangles (0 for a degenerate
-        one: its vertex stays). A triangle's normal turns by about a step over its altitude, so
-        a step that suits an equilateral triangle of the mesh's mean edge (or of ``ROUGH_EDGE``,
-        where :meth:`edge_factor` shrank the step) turns a sliver's normal by far more: NAdam
-        moves every vertex by about the learning rate whatever its pull, and on sliver-laden CAD
-        parts l0's energy rose from the first steps (conrod +24 % in 25 steps at a tenth of the
-        step) and the run failed. With this factor no vertex's triangles turn faster than an
-        equilateral one's (issue 38; docs/results/paparazzi.md, "l0's step on thin
-        triangles"). A vertex of no triangle keeps the full step."""
+        neural-style) is scaled by beyond :meth:`edge_factor`: ``min(1, a / (sqrt(3)/2
+        min(ROUGH_EDGE, mean edge)))``, ``a`` the smallest altitude of the vertex's triangles
+        (0 for a degenerate one: its vertex stays). A triangle's normal turns by about a step
+        over its altitude, so a step that suits an equilateral triangle of the mesh's mean edge
+        (or of ``ROUGH_EDGE``, where :meth:`edge_factor` shrank the step) turns a sliver's
+        normal by far more: NAdam moves every vertex by about the learning rate whatever its
+        pull, and on sliver-laden CAD parts l0's energy rose from the first steps (conrod +24 %
+        in 25 steps at a tenth of the step) and the run failed. With this factor no vertex's
+        triangles turn faster than an equilateral one's (issue 38; docs/results/paparazzi.md,
+        "l0's step on thin triangles"). A vertex of no triangle keeps the full step."""
         V = np.asarray(V, dtype=np.float64)
         F = np.asarray(F, dtype=np.int64)
         a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
@@ -1107,11 +1108,11 @@ class Paparazzi:
         triangles ``F``, free of new crossings), then the corners of any triangles that still
         cross, up to :data:`PUT_BACK_ROUNDS` times; ``U`` is None if crossings remain (the
         caller then falls back to putting back everything within :data:`HOLD_RADIUS`).
-        ``new``: ``V``'s new intersecting pairs (:meth:`_new_pairs`). Growing by the crossing triangles only, not by
-        rings, matters: on a noisy scan the border between put-back and moved vertices folds
-        anew wherever it runs (the sliver scan: a ring a round grew to 88k of 156k vertices
-        in 8 rounds, still crossing; the crossing corners alone, 3,190 vertices, then 3,228,
-        were clean after one round)."""
+        ``new``: ``V``'s new intersecting pairs (:meth:`_new_pairs`). Growing by the crossing
+        triangles only, not by rings, matters: on a noisy scan the border between put-back and
+        moved vertices folds anew wherever it runs (the sliver scan: a ring a round grew to 88k
+        of 156k vertices in 8 rounds, still crossing; the crossing corners alone, 3,190
+        vertices, then 3,228, were clean after one round)."""
         back = np.zeros(len(V), dtype=bool)
         back[F[new].ravel()] = True
         U = V.copy()

@@ -88,8 +88,8 @@ class ReplayReport:
 #: 2026): before it every vertex of an l0 run took the same step (False); its
 #: ``put_back_crossing_only`` (issue 38, 1 December 2026, tenth session): before it the steps'
 #: crossings put back and held the surface within 4 edge lengths (False). Cubic's,
-#: Analogies', Smooth's and the multigrid flow's ``hold_crossings`` (issue 38): before it a run kept whatever crossings
-#: the style or the flow made (False).
+#: Analogies', Smooth's and the multigrid flow's ``hold_crossings`` (issue 38): before it a
+#: run kept whatever crossings the style or the flow made (False).
 ADDED_FIELDS: dict[str, dict] = {"Paparazzi": {"remesh_scope": "all", "rough_step": False,
                                                "plateau_step": False, "lowest_fallback": False,
                                                "remesh_spoiled_only": False,
