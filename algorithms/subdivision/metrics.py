@@ -74,12 +74,24 @@ def bending_energy(V, F, edges=None) -> float:
     """Discrete-shells bending energy ``sum_e 3 theta_e^2 |e|^2 / (A_1 + A_2)`` over the
     interior edges (module docstring); dimensionless. ``edges``: ``_interior_edges(F,
     len(V))`` when already known (two meshes with the same faces share it)."""
+    return float(_bending_terms(V, F, edges)[1].sum())
+
+
+def _bending_terms(V, F, edges=None) -> tuple[np.ndarray, np.ndarray]:
+    """(face a of each interior edge, its term of :func:`bending_energy`)."""
     V = np.asarray(V, dtype=np.float64)
     N, A = _face_normals(V, np.asarray(F, dtype=np.int64))
     fa, fb, i, j = _interior_edges(F, len(V)) if edges is None else edges
     theta = np.arccos(np.clip((N[fa] * N[fb]).sum(axis=1), -1.0, 1.0))
     e2 = ((V[i] - V[j]) ** 2).sum(axis=1)
-    return float((3.0 * theta ** 2 * e2 / np.maximum(A[fa] + A[fb], 1e-300)).sum())
+    return fa, 3.0 * theta ** 2 * e2 / np.maximum(A[fa] + A[fb], 1e-300)
+
+
+def bending_per_part(V, F, part, n_parts: int, edges=None) -> np.ndarray:
+    """(n_parts,) :func:`bending_energy` of each part (``part``: each triangle's part; the two
+    triangles of an interior edge are in the same part)."""
+    fa, terms = _bending_terms(V, F, edges)
+    return np.bincount(np.asarray(part)[fa], terms, minlength=int(n_parts))
 
 
 def planar_faces(V, F, tolerance_degrees: float = 0.5, rings: int = 2) -> np.ndarray:

@@ -112,7 +112,9 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
            "vertices": int(len(V)), "faces": int(len(F)), "seconds": dt, "note": note,
            # vertices where the guard blended the level before back in (the network's result
            # crossed itself there)
-           "unsmoothed_vertices": int((last.metrics or {}).get("unsmoothed_vertices", 0))}
+           "unsmoothed_vertices": int((last.metrics or {}).get("unsmoothed_vertices", 0)),
+           # parts of the mesh the guard handed to Loop (the network made the others)
+           "loop_parts": int((last.metrics or {}).get("loop_parts", 0))}
     if args.json:
         print_json(out)
     else:

@@ -210,7 +210,9 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
         metrics = dict(last.metrics)   # the guard's (bending_vs_butterfly, unsmoothed_vertices)
         fallback = bool(getattr(last, "fallback", False))
         levels_used = tuple(last.levels_used) or (("loop" if fallback else "neural"),) * levels
-        method_used = "+".join(dict.fromkeys(levels_used))   # neural, loop or neural+loop
+        # neural, loop or neural+loop (a level is "neural+loop" where the guard handed some of
+        # the mesh's parts to Loop)
+        method_used = "+".join(dict.fromkeys(x for lv in levels_used for x in lv.split("+")))
         reason = str(getattr(last, "fallback_reason", "")) if fallback else ""
     else:
         from algorithms.subdivision.baselines import subdivide_baseline
@@ -233,11 +235,18 @@ def method_words(method_used: str, fallback: bool, levels_used=()) -> str:
     names = {"neural": "neural", "loop": "Loop", "butterfly": "modified butterfly",
              "midpoint": "mid-point"}
     if method_used == "neural+loop":
-        k = list(levels_used).count("neural") if levels_used else 0
-        n = len(levels_used)
+        used = list(levels_used)
+        k = used.count("neural")
+        n = len(used)
 
         def span(a, b):
             return f"level {a}" if a == b else f"levels {a}-{b}"
+        if "neural+loop" in used:      # the guard handed some parts to Loop
+            j = used.index("neural+loop") + 1
+            last = used.index("loop") + 1 if "loop" in used else n + 1
+            said = (f"neural subdivision, with Loop instead of the network on some parts "
+                    f"({span(j, last - 1)})")
+            return said + (f", then Loop on every part ({span(last, n)})" if last <= n else "")
         if k and n > k:
             return (f"neural subdivision ({span(1, k)}), then Loop instead of the network "
                     f"({span(k + 1, n)})")

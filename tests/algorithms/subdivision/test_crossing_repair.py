@@ -113,3 +113,67 @@ def test_pairs_the_previous_levels_own_surface_shows_are_left_alone():
     assert moved == 0
     assert left == len(own)            # left, and said
     np.testing.assert_array_equal(out, VM)
+
+
+def _pushed_through(depth: float):
+    """Two sheets 0.1 apart, refined once, with the middle of the top one pushed down to
+    ``depth`` (through the bottom sheet at z = 0 when ``depth`` < 0)."""
+    V, F = _two_sheets(0.1)
+    F1 = refine(F, len(V))
+    VM = midpoints_in_refine_numbering(V, F, F1)
+    V_net = VM.copy()
+    middle = ((V_net[:, 2] > 0.05) & (np.abs(V_net[:, 0] - 0.5) < 0.15)
+              & (np.abs(V_net[:, 1] - 0.5) < 0.15))
+    V_net[middle, 2] = depth
+
+    def new_pairs(X):
+        return new_crossing_pairs(intersecting_pairs(X, F1), 1, np.zeros((0, 2)))
+
+    return V, F, F1, VM, V_net, new_pairs
+
+
+def test_a_crossing_is_moved_back_only_as_far_as_it_takes():
+    # pushed 0.02 through: a fraction of the way back to the previous level's surface ends it,
+    # so the blend keeps more of the network's shape than going all the way back would
+    V, F, F1, VM, V_net, new_pairs = _pushed_through(-0.02)
+    assert len(new_pairs(V_net)) > 0
+    out, moved, left = _blend_back_where_crossed(V_net, F1, V, F, new_pairs(V_net), new_pairs)
+    assert left == 0 and len(new_pairs(out)) == 0
+    step = np.linalg.norm(out - V_net, axis=1)
+    full = np.linalg.norm(VM - V_net, axis=1)
+    changed = step > 0
+    assert changed.sum() == moved > 0
+    # every moved vertex went less than all the way (the full blend would put the crossing
+    # triangles' corners on VM), and the middle is still below where the previous level was
+    assert (step[changed] < full[changed] - 1e-12).all()
+    mid = V_net[:, 2] == -0.02
+    assert (out[mid, 2] < VM[mid, 2] - 0.01).all() and (out[mid, 2] > 0).all()
+
+
+def test_a_deep_crossing_still_gets_the_whole_blend():
+    # pushed 0.5 through: only the full blend (weight 1 at the corners) clears the bottom sheet
+    from algorithms.subdivision import inference
+
+    V, F, F1, VM, V_net, new_pairs = _pushed_through(-0.5)
+    out, moved, left = _blend_back_where_crossed(V_net, F1, V, F, new_pairs(V_net), new_pairs)
+    assert left == 0 and len(new_pairs(out)) == 0
+    mid = V_net[:, 2] == -0.5
+    # the deepest corners are the crossing triangles', weight 1: back on the previous level
+    assert np.isclose(out[mid, 2], VM[mid, 2]).any()
+    assert max(inference.BLEND_FRACTIONS) < 1
+
+
+def test_the_least_blend_looks_only_near_the_blend_and_finds_the_same():
+    from algorithms.mesh.intersections import intersecting_pairs_touching
+
+    V, F, F1, VM, V_net, new_pairs = _pushed_through(-0.02)
+
+    def near(X, faces):
+        return new_crossing_pairs(intersecting_pairs_touching(X, F1, faces), 1,
+                                  np.zeros((0, 2)))
+
+    a = _blend_back_where_crossed(V_net, F1, V, F, new_pairs(V_net), new_pairs)
+    b = _blend_back_where_crossed(V_net, F1, V, F, new_pairs(V_net), new_pairs,
+                                  new_pairs_near=near)
+    np.testing.assert_array_equal(a[0], b[0])
+    assert a[1:] == b[1:]

@@ -329,9 +329,14 @@ def test_the_guard_blends_the_level_before_back_in_where_the_network_crosses_its
     assert f"crossed itself in {made} places where the input does not" in guarded.note
     assert (f"the surface of the level before was blended back in ({n} vertices, level 1, "
             f"left unsmoothed)") in guarded.note
-    # where the weight is 1 the vertex is the level before's (the input split at midpoints)
+    # every changed vertex moved straight towards the level before (the input split at
+    # midpoints), never past it, and only as far as it took (the least blend)
     W = midpoints_in_refine_numbering(V, F, refine(F, len(V)))
-    assert np.isclose(guarded.V[changed], W[changed]).all(axis=1).any()
+    d = guarded.V[changed] - forced.V[changed]
+    D = W[changed] - forced.V[changed]
+    t = (d * D).sum(axis=1) / (D * D).sum(axis=1)
+    assert (t > 0).all() and (t <= 1 + 1e-9).all()
+    np.testing.assert_allclose(d, t[:, None] * D, atol=1e-9)
     # two levels: level 2 goes on from the repaired level 1, and crosses nowhere new either
     two = list(neural_subdivision_iter(V, F, 2, net, dense="guard"))[-1]
     assert two.levels_used == ("neural", "neural") and not two.fallback
@@ -352,3 +357,64 @@ def test_the_blend_note_says_what_was_changed_and_what_is_left():
         "The network's result crossed itself in 900 places where the input does not; there "
         "the surface of the level before was blended back in (1,200 vertices, levels 1, 2, "
         "left unsmoothed); 40 crossings are left (Loop subdivision's: 12).")
+
+
+def _two_spheres():
+    from algorithms.mesh.primitives import icosphere
+
+    V, F = icosphere(2)
+    return np.vstack([V, V + [3.0, 0.0, 0.0]]), np.vstack([F, F + len(V)])
+
+
+def test_the_guard_hands_only_the_bumpy_part_to_loop():
+    """Issue 36: a mesh of several parts is judged part by part (parts share no vertex, so each
+    keeps its own scheme's stencils): the part whose result is bumpy gets Loop subdivision's
+    positions, the other keeps the network's."""
+    from algorithms.mesh.subdivision import loop_subdivide
+    from algorithms.subdivision.inference import _Guard
+
+    V, F = _two_spheres()
+    n = len(V) // 2
+    Vb, Fb = subdivide_baseline(V, F, 1, "butterfly")   # the network's numbering
+    rng = np.random.default_rng(1)
+    part = np.zeros(len(Vb), int)
+    part[np.unique(Fb[len(F) // 2 * 4:])] = 1
+    V_net = Vb + 1e-3 * rng.standard_normal(Vb.shape) * (part == 0)[:, None]   # faint
+    V_net[part == 1] *= 1.0 + 0.05 * rng.standard_normal((int((part == 1).sum()), 1))
+    g = _Guard(V, F, 2.6)
+    why, out = g.check(1, V_net, Fb, (V, F))
+    assert why == "" and out is not None
+    np.testing.assert_array_equal(out[part == 0], V_net[part == 0])
+    # the bumpy part is Loop's: its old vertices where Loop puts them, its new ones the same
+    # points (Loop numbers them in another order)
+    VL, FL = loop_subdivide(V, F, 1)
+    old = np.arange(len(V)) >= n
+    np.testing.assert_allclose(out[:len(V)][old], VL[:len(V)][old], atol=1e-12)
+    new_ours = out[len(V):][part[len(V):] == 1]
+    part_l = np.zeros(len(VL), int)
+    part_l[np.unique(FL[len(F) // 2 * 4:])] = 1
+    new_loop = VL[len(V):][part_l[len(V):] == 1]
+    np.testing.assert_allclose(np.sort(new_ours.round(9), axis=0),
+                               np.sort(new_loop.round(9), axis=0), atol=1e-9)
+    assert g.levels_used(2) == ("neural+loop", "neural+loop")
+    assert "on 1 of the mesh's 2 parts (50 % of its triangles)" in g.parts_note()
+    assert g.parts_reason().startswith("at level 1 on 1 of 2 parts (50 % of the triangles)")
+    # a part already given to Loop is not judged again; when every part fails, the level fails
+    g2 = _Guard(V, F, 2.6)
+    bumpy = Vb * (1.0 + 0.05 * rng.standard_normal((len(Vb), 1)))
+    why, out = g2.check(1, bumpy, Fb, (V, F))
+    assert "as bent as modified butterfly's" in why and out is None
+    assert not g2.part_fallbacks
+
+
+def test_a_one_part_mesh_is_judged_whole():
+    from algorithms.mesh.primitives import icosphere
+    from algorithms.subdivision.inference import _Guard
+
+    V, F = icosphere(2)
+    Vb, Fb = subdivide_baseline(V, F, 1, "butterfly")
+    g = _Guard(V, F, 2.6)
+    assert g.n_parts == 1
+    why, out = g.check(1, Vb, Fb, (V, F))
+    assert why == "" and out is None and g.levels_used(1) == ("neural",)
+    assert abs(g.ratio - 1.0) < 1e-12
