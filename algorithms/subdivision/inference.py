@@ -1014,10 +1014,14 @@ class _Guard:
             return ""
         n = int(self.loop_part.sum())
         share = float(self.loop_part[self.face_part].mean())
+        if len(self.part_fallbacks) == 1:   # the counts are said once
+            k, _, _, why = self.part_fallbacks[0]
+            said = f"at level {k} {why}"
+        else:
+            said = self.parts_reason()
         return (f"Loop subdivision was used instead of the network on {n:,} of the mesh's "
                 f"{self.n_parts:,} parts ({100 * share:.0f} % of its triangles): "
-                f"{self.parts_reason()} (more than {self.factor:g}x); the network made the "
-                f"other parts.")
+                f"{said} (more than {self.factor:g}x); the network made the other parts.")
 
     def blend_note(self) -> str:
         if not self.unsmoothed:
