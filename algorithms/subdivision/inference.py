@@ -918,8 +918,10 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
             metrics["unsmoothed_vertices"] = float(guard.unsmoothed)
         if guard.loop_part.any():
             metrics["loop_parts"] = float(guard.loop_part.sum())
-        note = " ".join(x for x in (note, guard.note, guard.parts_note(), guard.blend_note())
-                        if x)
+        if guard.bumps:
+            metrics["loop_blended_vertices"] = float(sum(m for *_, m in guard.bumps))
+        note = " ".join(x for x in (note, guard.note, guard.parts_note(), guard.bump_note(),
+                                    guard.blend_note()) if x)
         yield SubdividedStep(1000, 1000, out, metrics, f"{len(F_next):,} triangles", F=F_next,
                              note=note, levels_used=guard.levels_used(lv),
                              fallback=bool(guard.part_fallbacks),
@@ -996,6 +998,9 @@ class _Guard:
         self.loop_part = np.zeros(self.n_parts, bool)
         #: (level, parts handed to Loop at it, their share of the input's triangles, why)
         self.part_fallbacks: list[tuple[int, int, float, str]] = []
+        #: (level, input triangles, vertices) where Loop's positions were blended in over
+        #: the network's bulges or dimples (:meth:`_bump_repair`)
+        self.bumps: list[tuple[int, int, int]] = []
 
     def levels_used(self, made: int) -> tuple:
         """What made each of the first ``made`` levels: "neural", or "neural+loop" from the
@@ -1023,6 +1028,18 @@ class _Guard:
                 f"{self.n_parts:,} parts ({100 * share:.0f} % of its triangles): "
                 f"{said} (more than {self.factor:g}x); the network made the other parts.")
 
+    def bump_note(self) -> str:
+        """Where Loop's positions were blended in over the network's bulges or dimples."""
+        if not self.bumps:
+            return ""
+        tri = sum(q for _, q, _ in self.bumps)
+        moved = sum(m for *_, m in self.bumps)
+        at = ", ".join(str(k) for k, *_ in self.bumps)
+        levels = f"level{'s' if len(self.bumps) > 1 else ''} {at}"
+        return (f"The network's result bulged or dimpled over {tri:,} of the input's "
+                f"triangles; Loop subdivision's positions were blended in there ({moved:,} "
+                f"vertices, {levels}), the network made the rest.")
+
     def blend_note(self) -> str:
         if not self.unsmoothed:
             return ""
@@ -1040,14 +1057,17 @@ class _Guard:
         passes, else why it fails; ``blended`` is None, or the result with the previous level's
         surface blended back in where it crossed itself (``prev``: the ``(V, F)`` the network
         subdivided at this level, see :func:`_blend_back_where_crossed`)."""
-        why, failing = self._check(k, V_net, F_net)
+        why, failing, repaired = self._check(k, V_net, F_net, prev)
         if why:
             return why, None
         mixed = None
+        if repaired is not None:   # Loop's positions blended in where the network bulged
+            V_net = mixed = repaired
         if failing is not None and failing.any():
-            # those parts from here on by Loop, from the level before (parts share no vertex,
-            # so each keeps its own scheme's stencils)
             self.loop_part |= failing
+        if self.loop_part.any():
+            # those parts from their level on by Loop, from the level before (parts share no
+            # vertex, so each keeps its own scheme's stencils), at every later level too
             V_net = mixed = self._loop_parts(V_net, F_net, prev)
         if prev is None:
             return "", mixed
@@ -1073,26 +1093,53 @@ class _Guard:
     def _loop_parts(self, V_net, F_net, prev) -> np.ndarray:
         """``V_net`` with the vertices of the parts handed to Loop (``loop_part``) at Loop
         subdivision's positions of the level before ``prev`` (in the numbering of ``F_net``)."""
-        from ..mesh.subdivision import loop_matrix
-
-        V_prev, F_prev = prev
-        S, F_loop = loop_matrix(F_prev, len(V_prev))
-        V_loop = np.asarray(S @ np.asarray(V_prev, np.float64))
-        # igl's numbering (face a, b, c -> [a, ab, ca], [b, bc, ab], ...) to refine's (centre
-        # child ab, bc, ca); old vertices keep their indices
-        where = np.arange(len(V_net))
-        kids_l = F_loop.reshape(-1, 4, 3)
-        centre = np.asarray(F_net, np.int64).reshape(-1, 4, 3)[:, 3]
-        where[centre[:, 0]] = kids_l[:, 0, 1]
-        where[centre[:, 1]] = kids_l[:, 1, 1]
-        where[centre[:, 2]] = kids_l[:, 0, 2]
+        V_loop = _loop_positions(prev[0], prev[1], F_net, len(V_net))
         k = int(round(np.log(len(F_net) / len(self.F0)) / np.log(4)))
         face_part = np.repeat(self.face_part, 4 ** k)
         vert = np.zeros(len(V_net), bool)
         vert[np.asarray(F_net)[self.loop_part[face_part]].ravel()] = True
         out = np.array(V_net, np.float64)
-        out[vert] = V_loop[where[vert]]
+        out[vert] = V_loop[vert]
         return out
+
+    def _bump_repair(self, k, V_net, F_net, prev, edges, active) -> tuple | None:
+        """Loop's positions blended in over the fewest input triangles whose children carry
+        the network's excess bending (its terms minus butterfly's, each interior edge's term
+        split between its two triangles), enough of them that the rest would be within
+        ``factor``; None when that takes more than :data:`BUMP_SHARE` of the ``active`` input
+        triangles (then the whole level fails, as before). Weight 1 on those children's
+        corners and the ring around them, 1/2 on the next ring, as the crossing blend.
+        Returns (positions, input triangles repaired)."""
+        from ..mesh.topology import vertex_adjacency
+        from .metrics import _bending_terms
+
+        fa, fb = edges[0], edges[1]
+        _, tn = _bending_terms(V_net, F_net, edges)
+        _, tb = _bending_terms(self.Vb, self.Fb, edges)
+        parent = np.repeat(np.arange(len(self.F0)), 4 ** k)
+        n0 = len(self.F0)
+
+        def per_face(t):
+            return (np.bincount(parent[fa], 0.5 * t, minlength=n0)
+                    + np.bincount(parent[fb], 0.5 * t, minlength=n0))
+        pn, pb = per_face(tn), per_face(tb)
+        pn[~active] = 0.0
+        pb[~active] = 0.0
+        excess = pn - pb
+        order = np.argsort(-excess)
+        order = order[excess[order] > 0]
+        need = pn.sum() - self.factor * pb.sum()
+        if need <= 0 or not len(order):
+            return None
+        q = int(np.searchsorted(np.cumsum(excess[order]), need) + 1)
+        if q > max(1, int(BUMP_SHARE * active.sum())) or q > len(order):
+            return None
+        bumpy = np.isin(parent, order[:q])
+        n = len(V_net)
+        ring1, ring2 = _rings(vertex_adjacency(F_net, n), F_net, np.flatnonzero(bumpy), n)
+        w = np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0))
+        V_loop = _loop_positions(prev[0], prev[1], F_net, n)
+        return (1.0 - w)[:, None] * np.asarray(V_net, np.float64) + w[:, None] * V_loop, q
 
     def _loop_crossings(self, k: int) -> int:
         """How many new crossings Loop subdivision of the input to ``k`` levels makes."""
@@ -1125,13 +1172,14 @@ class _Guard:
         return new_crossing_pairs_away(pairs, k, self.F0, self.input_pairs
                                        if self.input_pairs is not None else np.zeros((0, 2)))
 
-    def _check(self, k: int, V_net, F_net) -> str:
+    def _check(self, k: int, V_net, F_net, prev=None) -> tuple:
+        """``(why, failing parts or None, repaired positions or None)``."""
         from .baselines import subdivide_baseline
         from .metrics import (_interior_edges, bending_energy, bending_per_part, planar_faces,
                               planar_normal_deviation)
 
         if self.note:     # butterfly could not run: nothing to compare with
-            return "", None
+            return "", None, None
         try:
             self.Vb, self.Fb = subdivide_baseline(self.Vb, self.Fb, k - self.level, "butterfly")
             self.level = k
@@ -1141,55 +1189,98 @@ class _Guard:
         except Stylize3DError:
             self.note = ("(Modified butterfly could not run on this mesh, so the network's "
                          "result was not compared with it.)")
-            return "", None
-        failing = None
+            return "", None, None
+        failing = repaired = None
+        part = np.repeat(self.face_part, 4 ** k)
+        mine = ~self.loop_part
+
+        def ratio_of(X, sel=None):
+            if self.n_parts == 1:
+                return bending_energy(X, F_net, edges) / ref if ref > 0 else float("inf")
+            net_p = bending_per_part(X, F_net, part, self.n_parts, edges)
+            return _ratio(net_p, ref_p, mine if sel is None else sel)
         if self.n_parts > 1:
+            ref_p = bending_per_part(self.Vb, self.Fb, part, self.n_parts, edges)
+        bent = ratio_of(V_net)
+        if bent > self.factor and same and prev is not None:
+            # a few bulges or dimples (face at 200 vertices, level 1: 78 % of the excess
+            # bending in one of 390 input triangles): Loop's positions blended in there only
+            fixed = self._bump_repair(k, V_net, F_net, prev, edges, mine[self.face_part])
+            if fixed is not None:
+                bent_fixed = ratio_of(fixed[0])
+                if bent_fixed <= self.factor:
+                    repaired, bent = fixed[0], bent_fixed
+                    moved = int((np.abs(repaired - V_net).max(axis=1) > 0).sum())
+                    self.bumps.append((k, fixed[1], moved))
+        if bent > self.factor and self.n_parts > 1:
             # judged whole first (as a one-part mesh, with the factor tuned so); only where the
             # whole fails is each part judged, and only the parts that fail get Loop
-            part = np.repeat(self.face_part, 4 ** k)
-            mine = ~self.loop_part
             net_p = bending_per_part(V_net, F_net, part, self.n_parts, edges)
-            ref_p = bending_per_part(self.Vb, self.Fb, part, self.n_parts, edges)
-
-            def ratio(sel):
-                r = ref_p[sel].sum()
-                return net_p[sel].sum() / r if r > 0 else (0.0 if not net_p[sel].sum()
-                                                           else float("inf"))
-            bent = ratio(mine)
-            if bent > self.factor:
-                # below 1e-10 a triangle a part's bending is rounding (the float32 network on
-                # a flat part, which butterfly keeps exactly flat), not a bump
-                tiny = 1e-10 * np.bincount(part, minlength=self.n_parts)
-                failing = mine & (net_p > self.factor * ref_p + tiny)
-                ok = mine & ~failing
-                if ok.any():
-                    worst = ratio(failing)
-                    self.part_fallbacks.append((
-                        k, int(failing.sum()), float(failing[self.face_part].mean()),
-                        f"the network's result was {worst:.2f}x as bent as modified "
-                        f"butterfly's there" if np.isfinite(worst) and worst < 1e6 else
-                        "the network's result was bent where modified butterfly's is flat"))
-                    bent = ratio(ok)
-                else:
-                    failing = None
-            self.ratio = float(bent)
-        else:
-            bent = bending_energy(V_net, F_net, edges) / ref if ref > 0 else float("inf")
-            self.ratio = float(bent)
+            # below 1e-10 a triangle a part's bending is rounding (the float32 network on
+            # a flat part, which butterfly keeps exactly flat), not a bump
+            tiny = 1e-10 * np.bincount(part, minlength=self.n_parts)
+            failing = mine & (net_p > self.factor * ref_p + tiny)
+            ok = mine & ~failing
+            if ok.any():
+                worst = _ratio(net_p, ref_p, failing)
+                self.part_fallbacks.append((
+                    k, int(failing.sum()), float(failing[self.face_part].mean()),
+                    f"the network's result was {worst:.2f}x as bent as modified "
+                    f"butterfly's there" if np.isfinite(worst) and worst < 1e6 else
+                    "the network's result was bent where modified butterfly's is flat"))
+                bent = _ratio(net_p, ref_p, ok)
+            else:
+                failing = None
+        self.ratio = float(bent)
         if bent > self.factor:
             return (f"the network's result was {bent:.2f}x as bent as modified butterfly's "
                     f"(bumps, dimples or creases that it has not; more than {self.factor:g}x)"
                     if np.isfinite(bent) and bent < 1e6 else
-                    "the network's result was bent where modified butterfly's is flat"), None
+                    "the network's result was bent where modified butterfly's is flat"), None, None
+        X = V_net if repaired is None else repaired
         if self.planar is None:
             self.planar = planar_faces(self.V0, self.F0)
         if self.planar.any():
-            dev = planar_normal_deviation(self.V0, self.F0, V_net, F_net, k, self.planar)
+            dev = planar_normal_deviation(self.V0, self.F0, X, F_net, k, self.planar)
             dev_b = planar_normal_deviation(self.V0, self.F0, self.Vb, self.Fb, k, self.planar)
             if dev > dev_b + GUARD_PLANAR_DEGREES:
+                if repaired is not None:
+                    self.bumps.pop()
                 return (f"the network's result bent its flat sides by {dev:.1f} degrees (RMS; "
-                        f"modified butterfly: {dev_b:.1f})"), None
-        return "", failing
+                        f"modified butterfly: {dev_b:.1f})"), None, None
+        return "", failing, repaired
+
+
+def _ratio(net_p, ref_p, sel) -> float:
+    """The bending of the parts ``sel`` over butterfly's there (inf where butterfly's is flat
+    and the network's is not)."""
+    r = ref_p[sel].sum()
+    return net_p[sel].sum() / r if r > 0 else (0.0 if not net_p[sel].sum() else float("inf"))
+
+
+#: the guard's local repair of bulges and dimples (:meth:`_Guard._bump_repair`): at most this
+#: share of the input's triangles (chosen before it was measured: a repair for a few isolated
+#: defects; more than that, and the network is not the scheme for this mesh)
+BUMP_SHARE = 0.02
+
+
+def _loop_positions(V_prev, F_prev, F_net, n: int) -> np.ndarray:
+    """Loop subdivision's positions of one level of ``(V_prev, F_prev)``, in the numbering of
+    ``F_net`` (:func:`refine`'s: each new vertex numbered as in the network's level; ``n``
+    vertices)."""
+    from ..mesh.subdivision import loop_matrix
+
+    S, F_loop = loop_matrix(F_prev, len(V_prev))
+    V_loop = np.asarray(S @ np.asarray(V_prev, np.float64))
+    # igl's numbering (face a, b, c -> [a, ab, ca], [b, bc, ab], ...) to refine's (centre
+    # child ab, bc, ca); old vertices keep their indices
+    where = np.arange(n)
+    kids_l = F_loop.reshape(-1, 4, 3)
+    centre = np.asarray(F_net, np.int64).reshape(-1, 4, 3)[:, 3]
+    where[centre[:, 0]] = kids_l[:, 0, 1]
+    where[centre[:, 1]] = kids_l[:, 1, 1]
+    where[centre[:, 2]] = kids_l[:, 0, 2]
+    return V_loop[where]
 
 
 #: the guard's local repair of crossings (:func:`_blend_back_where_crossed`): at most this many
@@ -1397,6 +1488,9 @@ def _guard_fallback(V, F, lv: int, li: int, kept, why: str, guard: _Guard, plan:
     if guard.part_fallbacks:   # parts the earlier levels had already handed to Loop
         metrics["loop_parts"] = float(guard.loop_part.sum())
         said = f"{guard.parts_note()} {said}"
+    if guard.bumps:   # earlier levels the network kept, with Loop blended in over bulges
+        metrics["loop_blended_vertices"] = float(sum(m for *_, m in guard.bumps))
+        said = f"{said} {guard.bump_note()}"
     if guard.unsmoothed:   # earlier levels the network kept, repaired where they crossed
         metrics["unsmoothed_vertices"] = float(guard.unsmoothed)
         said = f"{said} {guard.blend_note()}"

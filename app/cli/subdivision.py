@@ -114,7 +114,9 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
            # crossed itself there)
            "unsmoothed_vertices": int((last.metrics or {}).get("unsmoothed_vertices", 0)),
            # parts of the mesh the guard handed to Loop (the network made the others)
-           "loop_parts": int((last.metrics or {}).get("loop_parts", 0))}
+           "loop_parts": int((last.metrics or {}).get("loop_parts", 0)),
+           # vertices where the guard blended Loop's positions in over the network's bulges
+           "loop_blended_vertices": int((last.metrics or {}).get("loop_blended_vertices", 0))}
     if args.json:
         print_json(out)
     else:

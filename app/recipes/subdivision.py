@@ -277,9 +277,12 @@ def _subdivision_outcome(last: Step) -> dict:
             out["fallback_reason"] = str(last.fallback_reason)
     # the guard's local repair of crossings (said in the note too): the level before blended
     # back in where the network crossed itself
-    count = int((last.metrics or {}).get("unsmoothed_vertices", 0))
-    if count:
-        out["unsmoothed_vertices"] = count
+    # and the other places where Loop was used instead of the network: parts of the mesh, and
+    # the vertices blended in over the network's bulges (both said in the note too)
+    for key in ("unsmoothed_vertices", "loop_parts", "loop_blended_vertices"):
+        count = int((last.metrics or {}).get(key, 0))
+        if count:
+            out[key] = count
     return out
 
 

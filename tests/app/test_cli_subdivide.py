@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 
 from algorithms.mesh import read_mesh
+from tests.app.subdivision_inputs import two_parts as _two_parts
+from tests.app.subdivision_inputs import untrained_weights as _untrained_weights
 from tests.conftest import ROOT
 
 HAND = ROOT / "tests" / "data" / "hand_lowres.obj"
@@ -145,25 +147,31 @@ def test_what_ran_is_said_in_the_line_the_json_and_the_batch_report(tmp_path, ca
 
     from app.cli import main as cli_main
 
-    # fandisk as it is, 2 levels: level 1 is 1.04x as bent as butterfly's, level 2 1.38x (its
-    # kept creases), over the guard's 1.25x on a dense mesh: Loop makes level 2. (bob as it is
-    # served here until the network was averaged with its mirror image: its level 2 was 2.3x
-    # then, 1.15x now, and is kept.)
+    # an untrained network on fandisk as it is, 2 levels: level 1 passes once Loop is blended
+    # in over 118 bulging triangles, level 2 is 2.09x as bent as butterfly's (over the
+    # guard's 1.25x on a dense mesh): Loop makes level 2
+    bad = _untrained_weights(tmp_path)
     blob = str(ROOT / "tests" / "data" / "fandisk.off")
-    assert cli_main(["subdivide", blob, "-o", str(tmp_path / "a.obj")]) == 0
+    assert cli_main(["subdivide", blob, "-o", str(tmp_path / "a.obj"), "--weights", bad]) == 0
     out = capsys.readouterr().out
     assert ("neural subdivision (level 1), then Loop instead of the network (level 2), "
             "2 level(s)") in out
-    assert cli_main(["subdivide", blob, "-o", str(tmp_path / "b.obj"), "--json"]) == 0
+    assert cli_main(["subdivide", blob, "-o", str(tmp_path / "b.obj"), "--json",
+                     "--weights", bad]) == 0
     d = _json.loads(capsys.readouterr().out)
     assert d["method"] == "neural" and d["method_used"] == "neural+loop"
     assert d["fallback"] is True and d["levels_used"] == ["neural", "loop"]
     assert "as bent as modified butterfly's" in d["note"]
     assert "Loop subdivision made level 2" in d["note"]
-    assert d["fallback_reason"].startswith("at level 2 the network's result was 1.3")
-    # camelhead as it is: level 1 is 1.76x as bent as butterfly's (dimples): all Loop
-    cam = str(ROOT / "tests" / "data" / "camelhead.off")
-    assert cli_main(["subdivide", cam, "-o", str(tmp_path / "f.obj"), "--json"]) == 0
+    assert d["fallback_reason"].startswith("at level 2 the network's result was 2.09")
+    # the level it kept says where Loop was blended in over bulges
+    assert d["loop_blended_vertices"] == 2687
+    assert ("bulged or dimpled over 118 of the input's triangles; Loop subdivision's positions "
+            "were blended in there (2,687 vertices, level 1)") in d["note"]
+    # hand_lowres: level 1 is 2.24x as bent as butterfly's (bumps everywhere): all Loop
+    hand_path = str(HAND)
+    assert cli_main(["subdivide", hand_path, "-o", str(tmp_path / "f.obj"), "--json",
+                     "--weights", bad]) == 0
     d = _json.loads(capsys.readouterr().out)
     assert d["method_used"] == "loop" and d["levels_used"] == ["loop", "loop"]
     assert d["fallback"] is True and "as bent as modified butterfly's" in d["note"]
@@ -175,29 +183,30 @@ def test_what_ran_is_said_in_the_line_the_json_and_the_batch_report(tmp_path, ca
     assert cli_main(["subdivide", blob, "-o", str(tmp_path / "d.obj"), "--levels", "1",
                      "--method", "butterfly"]) == 0
     assert "modified butterfly subdivision, 1 level" in capsys.readouterr().out
-    # the batch: fandisk's level 2 and both of camelhead's are Loop's; the report counts two
+    # the batch: fandisk's level 2 and both of hand_lowres's are Loop's; the report counts two
     # substitutions, and each record says what ran and why
-    assert cli_main(["batch", "subdivide", blob, cam, "-o", str(tmp_path / "batch"),
-                     "--workers", "1", "--json"]) == 0
+    assert cli_main(["batch", "subdivide", blob, hand_path, "-o", str(tmp_path / "batch"),
+                     "--workers", "1", "--json", "--weights", bad]) == 0
     cap = capsys.readouterr()
     assert _json.loads(cap.out)["substituted"] == 2
     recs = {Path(r["input"]).name: r for r in (
         _json.loads(x) for x in (tmp_path / "batch" / "batch-report.jsonl").read_text()
         .splitlines() if '"done"' in x)}
-    assert set(recs) == {"fandisk.off", "camelhead.off"}
-    fan, camel = recs["fandisk.off"]["figures"], recs["camelhead.off"]["figures"]
+    assert set(recs) == {"fandisk.off", "hand_lowres.obj"}
+    fan, hand = recs["fandisk.off"]["figures"], recs["hand_lowres.obj"]["figures"]
     assert fan["method_used"] == "neural+loop" and fan["fallback"] is True
     assert fan["levels_used"] == ["neural", "loop"]
-    assert fan["fallback_reason"].startswith("at level 2 the network's result was 1.3")
-    assert camel["method_used"] == "loop" and camel["fallback"] is True
-    assert camel["levels_used"] == ["loop", "loop"]
-    (line,) = [x for x in cap.err.splitlines() if "camelhead.off (" in x]
+    assert fan["fallback_reason"].startswith("at level 2 the network's result was 2.09")
+    assert fan["loop_blended_vertices"] == 2687
+    assert hand["method_used"] == "loop" and hand["fallback"] is True
+    assert hand["levels_used"] == ["loop", "loop"]
+    (line,) = [x for x in cap.err.splitlines() if "hand_lowres.obj (" in x]
     assert line.endswith("; Loop subdivision instead of the network)")
     (line,) = [x for x in cap.err.splitlines() if "fandisk.off (" in x]
     assert "then Loop instead of the network (level 2)" in line
-    assert camel["fallback_reason"].startswith("at level 1 the network's result was 1.7")
+    assert hand["fallback_reason"].startswith("at level 1 the network's result was 2.24")
     assert "x as bent as modified butterfly's (bumps, dimples or creases that it has not; more than 1.25x)" in \
-        camel["fallback_reason"]
+        hand["fallback_reason"]
 
 
 def test_a_coarsening_that_collapses_the_mesh_is_refused(tmp_path, capsys, monkeypatch):
@@ -255,36 +264,29 @@ def test_coarsening_problem_on_a_closed_mesh_that_stays_whole():
 
 def test_parts_handed_to_loop_are_said_in_the_line_the_json_and_the_batch_report(tmp_path,
                                                                                   capsys):
-    """Issue 36: a mesh of several parts is judged part by part. fandisk as it is beside a
-    small smooth sphere at the same edge length: at level 2 fandisk's part is 1.38x as bent as
-    butterfly's (over the 1.25x of a dense mesh), the sphere's passes, so Loop makes fandisk's
-    part of level 2 and the network the sphere's; every report says so."""
+    """Issue 36: a mesh of several parts that fails as a whole is judged part by part; only
+    the parts that fail get Loop, and every report says so."""
     import json as _json
 
-    from algorithms.mesh import read_mesh, write_mesh
-    from algorithms.mesh.primitives import icosphere
-    from algorithms.subdivision.inference import mean_edge_length
     from app.cli import main as cli_main
 
-    f = read_mesh(ROOT / "tests" / "data" / "fandisk.off")
-    S, FS = icosphere(2)
-    S = S * (mean_edge_length(f.V, f.F) / mean_edge_length(S, FS))
-    S = S + [f.V[:, 0].max() - S[:, 0].min() + 0.5, 0.0, 0.0]
-    path = tmp_path / "two.obj"
-    write_mesh(path, np.vstack([f.V, S]), np.vstack([f.F, FS + len(f.V)]))
-    assert cli_main(["subdivide", str(path), "-o", str(tmp_path / "a.obj"), "--json"]) == 0
+    path = _two_parts(tmp_path)
+    bad = _untrained_weights(tmp_path)
+    assert cli_main(["subdivide", str(path), "-o", str(tmp_path / "a.obj"), "--json",
+                     "--weights", bad]) == 0
     d = _json.loads(capsys.readouterr().out)
     assert d["method_used"] == "neural+loop" and d["fallback"] is True
     assert d["levels_used"] == ["neural", "neural+loop"] and d["loop_parts"] == 1
-    assert d["fallback_reason"].startswith("at level 2 on 1 of 2 parts (98 % of the "
-                                           "triangles) the network's result was 1.3")
+    assert d["fallback_reason"].startswith("at level 2 on 1 of 2 parts (83 % of the "
+                                           "triangles) the network's result was 7.")
     assert ("Loop subdivision was used instead of the network on 1 of the mesh's 2 parts "
-            "(98 % of its triangles)") in d["note"]
-    assert cli_main(["subdivide", str(path), "-o", str(tmp_path / "b.obj")]) == 0
+            "(83 % of its triangles): at level 2 the network's result was 7.") in d["note"]
+    assert cli_main(["subdivide", str(path), "-o", str(tmp_path / "b.obj"),
+                     "--weights", bad]) == 0
     assert ("neural subdivision, with Loop instead of the network on some parts (level 2), "
             "2 level(s)") in capsys.readouterr().out
     assert cli_main(["batch", "subdivide", str(path), "-o", str(tmp_path / "batch"),
-                     "--workers", "1", "--json"]) == 0
+                     "--workers", "1", "--json", "--weights", bad]) == 0
     cap = capsys.readouterr()
     assert _json.loads(cap.out)["substituted"] == 1
     (rec,) = [_json.loads(x) for x in (tmp_path / "batch" / "batch-report.jsonl").read_text()
@@ -293,5 +295,6 @@ def test_parts_handed_to_loop_are_said_in_the_line_the_json_and_the_batch_report
     assert fig["method_used"] == "neural+loop" and fig["levels_used"] == ["neural",
                                                                         "neural+loop"]
     assert fig["fallback_reason"].startswith("at level 2 on 1 of 2 parts")
+    assert fig["loop_parts"] == 1
     (line,) = [x for x in cap.err.splitlines() if "two.obj (" in x]
     assert "with Loop instead of the network on some parts (level 2)" in line

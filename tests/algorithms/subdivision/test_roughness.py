@@ -419,3 +419,86 @@ def test_a_one_part_mesh_is_judged_whole():
     why, out = g.check(1, Vb, Fb, (V, F))
     assert why == "" and out is None and g.levels_used(1) == ("neural",)
     assert abs(g.ratio - 1.0) < 1e-12
+
+
+def test_an_isolated_bulge_gets_loop_there_and_the_network_elsewhere():
+    """Issue 36: a level whose excess bending sits in a few input triangles (face at 200
+    vertices: 78 % of it in one of 390) keeps the network, with Loop's positions blended in
+    around those triangles only; the note and ``bumps`` say where."""
+    from algorithms.mesh.primitives import icosphere
+    from algorithms.mesh.topology import vertex_adjacency
+    from algorithms.subdivision.inference import _Guard, _loop_positions
+
+    V, F = icosphere(2)
+    Vb, Fb = subdivide_baseline(V, F, 1, "butterfly")      # the network's numbering
+    V_net = Vb.copy()
+    kids = Fb[4 * 7:4 * 7 + 4]                              # the children of input triangle 7
+    centre = np.unique(kids[3])                             # its three new (edge) vertices
+    V_net[centre] *= 1.5                                    # a bulge over that one triangle
+    g = _Guard(V, F, 2.6)
+    why, out = g.check(1, V_net, Fb, (V, F))
+    assert why == "" and out is not None
+    assert g.bumps and g.bumps[0][:2] == (1, 1)             # level 1, one input triangle
+    moved = np.abs(out - V_net).max(axis=1) > 0
+    assert g.bumps[0][2] == moved.sum() > 0
+    # Loop's positions (weight 1) on the bulge; the network's, untouched, four rings out (the
+    # bulging vertices lie on triangle 7's edges, so the triangle repaired may be a neighbour
+    # across one of them, whose far corner is two rings out; the blend reaches two rings
+    # around it)
+    VL = _loop_positions(V, F, Fb, len(Vb))
+    np.testing.assert_allclose(out[centre], VL[centre], atol=1e-12)
+    A = vertex_adjacency(Fb, len(Vb))
+    near = np.zeros(len(Vb), bool)
+    near[np.unique(kids)] = True
+    for _ in range(4):
+        near |= A @ near.astype(float) > 0
+    np.testing.assert_array_equal(out[~near], V_net[~near])
+    assert moved.sum() < 0.06 * len(Vb) and g.ratio <= 2.6
+    assert g.bump_note() == (
+        f"The network's result bulged or dimpled over 1 of the input's triangles; Loop "
+        f"subdivision's positions were blended in there ({moved.sum():,} vertices, level 1), "
+        f"the network made the rest.")
+
+
+def test_bulges_over_many_triangles_fail_the_level():
+    """More than BUMP_SHARE (2 %) of the input's triangles to repair: the network is not the
+    scheme for this mesh, the level fails as before and nothing is blended."""
+    from algorithms.mesh.primitives import icosphere
+    from algorithms.subdivision.inference import BUMP_SHARE, _Guard
+
+    V, F = icosphere(2)                                     # 320 triangles: at most 6
+    Vb, Fb = subdivide_baseline(V, F, 1, "butterfly")
+    V_net = Vb.copy()
+    for f in range(0, 320, 16):                             # 20 triangles far apart
+        V_net[np.unique(Fb[4 * f + 3])] *= 1.15
+    assert 20 > BUMP_SHARE * len(F)
+    g = _Guard(V, F, 2.6)
+    why, out = g.check(1, V_net, Fb, (V, F))
+    assert "as bent as modified butterfly's" in why and out is None and not g.bumps
+
+
+def test_a_part_handed_to_loop_stays_loop_at_the_next_level():
+    """A part that failed at level 1 gets Loop's positions at level 2 too, even when the
+    rest of the mesh passes there (it is judged no more)."""
+    from algorithms.subdivision.inference import _Guard, _loop_positions
+
+    V, F = _two_spheres()
+    Vb, Fb = subdivide_baseline(V, F, 1, "butterfly")
+    part = np.zeros(len(Vb), int)
+    part[np.unique(Fb[len(F) // 2 * 4:])] = 1
+    rng = np.random.default_rng(1)
+    V_net = Vb.copy()
+    V_net[part == 1] *= 1.0 + 0.05 * rng.standard_normal((int((part == 1).sum()), 1))
+    g = _Guard(V, F, 2.6)
+    why, out1 = g.check(1, V_net, Fb, (V, F))
+    assert why == "" and g.loop_part.tolist() == [False, True]
+    V2, F2 = subdivide_baseline(V, F, 2, "butterfly")      # level 2's numbering
+    part2 = np.zeros(len(V2), int)
+    part2[np.unique(F2[len(F) // 2 * 16:])] = 1
+    V2_net = V2 + 1e-4 * rng.standard_normal(V2.shape)   # the network, fine everywhere
+    why, out2 = g.check(2, V2_net, F2, (out1, Fb))
+    assert why == "" and out2 is not None
+    np.testing.assert_array_equal(out2[part2 == 0], V2_net[part2 == 0])
+    VL = _loop_positions(out1, Fb, F2, len(V2))
+    np.testing.assert_allclose(out2[part2 == 1], VL[part2 == 1], atol=1e-12)
+    assert g.levels_used(2) == ("neural+loop", "neural+loop")
