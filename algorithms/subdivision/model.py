@@ -87,10 +87,12 @@ class SubdivideParams:
                                      "run it (scaled to its training edge length) and, level by "
                                      "level, keep its result unless it is more than 2.6x as "
                                      "bent as modified butterfly's (1.25x on a denser mesh) or "
-                                     "bends flat sides (where it crosses itself, the level "
-                                     "before is blended back in there); "
-                                     "from there Loop subdivision makes the "
-                                     "levels (a message says so); loop: Loop whenever the mesh "
+                                     "bends flat sides (a few isolated bulges get Loop's "
+                                     "positions there instead; where it crosses itself, the "
+                                     "level before is blended back in there); "
+                                     "from there Loop subdivision makes the levels (only for "
+                                     "the parts that fail, on a mesh of several parts; a "
+                                     "message says so); loop: Loop whenever the mesh "
                                      "is denser than trained; "
                                      "scale: always the network, scaled; off: as is.")
 

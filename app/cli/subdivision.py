@@ -309,9 +309,11 @@ def add_parsers(sub) -> None:
                    help="neural: guard (the network, scaled to its training edge length on a "
                         "denser mesh; level by level its result is kept unless it is more than "
                         "2.6x as bent as modified butterfly's, 1.25x on a denser mesh, or bends "
-                        "flat sides; from there Loop subdivision makes the levels; where it "
-                        "crosses itself, the level before is blended back in there; all said on "
-                        "stderr and in --json levels_used), loop "
+                        "flat sides (a few isolated bulges get Loop's positions there "
+                        "instead); from there Loop subdivision makes the levels (only for the "
+                        "parts that fail, on a mesh of several parts); where it crosses itself, "
+                        "the level before is blended back in there; all said on stderr and in "
+                        "--json levels_used, loop_parts, loop_blended_vertices), loop "
                         "(Loop on any mesh denser than the training meshes), scale (always the "
                         "network, scaled), off (as is). Default: guard.")
     s.add_argument("--coarsen-first", type=int, metavar="N",
