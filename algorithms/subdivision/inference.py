@@ -1060,11 +1060,13 @@ class _Guard:
                 + (f"; {self.crossings_left[0]:,} crossings are left (Loop subdivision's: "
                    f"{self.crossings_left[1]:,})." if self.crossings_left else "."))
 
-    def check(self, k: int, V_net, F_net, prev=None) -> tuple[str, np.ndarray | None]:
-        """``(why, blended)``: ``why`` is '' when the network's result after ``k`` levels
-        passes, else why it fails; ``blended`` is None, or the result with the previous level's
-        surface blended back in where it crossed itself (``prev``: the ``(V, F)`` the network
-        subdivided at this level, see :func:`_blend_back_where_crossed`)."""
+    def check(self, k: int, V_net, F_net, prev) -> tuple[str, np.ndarray | None]:
+        """``(why, positions)``: ``why`` is '' when the network's result after ``k`` levels
+        passes, else why it fails; ``positions`` is None (the network's result as it is), or
+        the result with Loop's positions over its bulges and over the parts handed to Loop,
+        and the previous level's surface blended back in where it crossed itself (``prev``:
+        the ``(V, F)`` the network subdivided at this level, see
+        :func:`_blend_back_where_crossed`)."""
         why, failing, repaired = self._check(k, V_net, F_net, prev)
         if why:
             return why, None
@@ -1077,8 +1079,6 @@ class _Guard:
             # those parts from their level on by Loop, from the level before (parts share no
             # vertex, so each keeps its own scheme's stencils), at every later level too
             V_net = mixed = self._loop_parts(V_net, F_net, prev)
-        if prev is None:
-            return "", mixed
         net_pairs = self._new_pairs(V_net, F_net, k)
         crossed = len(net_pairs)
         if not crossed:
@@ -1180,7 +1180,7 @@ class _Guard:
         return new_crossing_pairs_away(pairs, k, self.F0, self.input_pairs
                                        if self.input_pairs is not None else np.zeros((0, 2)))
 
-    def _check(self, k: int, V_net, F_net, prev=None) -> tuple:
+    def _check(self, k: int, V_net, F_net, prev) -> tuple:
         """``(why, failing parts or None, repaired positions or None)``."""
         from .baselines import subdivide_baseline
         from .metrics import (_interior_edges, bending_energy, bending_per_part, planar_faces,
@@ -1210,7 +1210,7 @@ class _Guard:
         if self.n_parts > 1:
             ref_p = bending_per_part(self.Vb, self.Fb, part, self.n_parts, edges)
         bent = ratio_of(V_net)
-        if bent > self.factor and same and prev is not None:
+        if bent > self.factor and same:
             # a few bulges or dimples (face at 200 vertices, level 1: 78 % of the excess
             # bending in one of 390 input triangles): Loop's positions blended in there only
             fixed = self._bump_repair(k, V_net, F_net, prev, edges, mine[self.face_part])

@@ -64,14 +64,17 @@ def _dry_run(job, args, inputs, outputs, report) -> int:
 
 def _substitution(rec: dict) -> str:
     """``"; Loop subdivision instead of the network"`` for a record whose method fell back to
-    another scheme (its figures' ``fallback``), else ''."""
+    another scheme (its figures' ``fallback``), and where the guard blended Loop's positions
+    in over the network's bulges, how many vertices; else ''."""
     fig = rec.get("figures") or {}
+    blended = int(fig.get("loop_blended_vertices") or 0)   # the guard's Loop over bulges
+    extra = f"; Loop's positions blended in at {blended:,} vertices" if blended else ""
     if not fig.get("fallback"):
-        return ""
+        return extra
     from app.recipes.subdivision import method_words
 
     return "; " + method_words(str(fig.get("method_used", "")), True,
-                               fig.get("levels_used") or ())
+                               fig.get("levels_used") or ()) + extra
 
 
 def _one_line(message: str, limit: int = 240) -> str:
@@ -135,7 +138,8 @@ class _Progress:
             tail = f": {_one_line(rec['message'])}" if rec["status"] == "failed" else \
                 f" -> {rec['output']} ({rec['seconds']:.1f} s{_substitution(rec)})"
             say(f"{rec['status']:6s} {rec['input']}{tail}")
-        if rec is not None and rec["status"] == "done" and _substitution(rec):
+        if rec is not None and rec["status"] == "done" and \
+                (rec.get("figures") or {}).get("fallback"):
             self.substituted += 1
         if rec is not None and rec["status"] == "failed":
             self.failed += 1

@@ -154,8 +154,8 @@ def test_what_ran_is_said_in_the_line_the_json_and_the_batch_report(tmp_path, ca
     blob = str(ROOT / "tests" / "data" / "fandisk.off")
     assert cli_main(["subdivide", blob, "-o", str(tmp_path / "a.obj"), "--weights", bad]) == 0
     out = capsys.readouterr().out
-    assert ("neural subdivision (level 1), then Loop instead of the network (level 2), "
-            "2 level(s)") in out
+    assert ("neural subdivision (level 1), then Loop instead of the network (level 2) (Loop's "
+            "positions blended in at 2,687 vertices over its bulges), 2 level(s)") in out
     assert cli_main(["subdivide", blob, "-o", str(tmp_path / "b.obj"), "--json",
                      "--weights", bad]) == 0
     d = _json.loads(capsys.readouterr().out)
@@ -204,6 +204,7 @@ def test_what_ran_is_said_in_the_line_the_json_and_the_batch_report(tmp_path, ca
     assert line.endswith("; Loop subdivision instead of the network)")
     (line,) = [x for x in cap.err.splitlines() if "fandisk.off (" in x]
     assert "then Loop instead of the network (level 2)" in line
+    assert line.endswith("; Loop's positions blended in at 2,687 vertices)")
     assert hand["fallback_reason"].startswith("at level 1 the network's result was 2.24")
     assert "x as bent as modified butterfly's (bumps, dimples or creases that it has not; more than 1.25x)" in \
         hand["fallback_reason"]
@@ -260,6 +261,28 @@ def test_coarsening_problem_on_a_closed_mesh_that_stays_whole():
     F2 = np.concatenate([m.F, m.F + len(m.V)])
     why = coarsening_problem(V2, F2, Vc, Fc, 300)
     assert "1 of its 2 parts vanished" in why and "size shrank" in why
+
+
+def test_bulges_given_loop_are_said_in_the_line_and_the_json(tmp_path, capsys):
+    """Issue 36: fandisk as it is, 2 levels, with the shipped network: level 2 is 1.38x as
+    bent as butterfly's (over the 1.25x of a dense mesh), with the excess in 195 of its 14,454
+    triangles; the guard blends Loop's positions in there and keeps the network elsewhere, and
+    the last line, the note and --json say how many vertices."""
+    import json as _json
+
+    from app.cli import main as cli_main
+
+    src = str(ROOT / "tests" / "data" / "fandisk.off")
+    assert cli_main(["subdivide", src, "-o", str(tmp_path / "a.obj"), "--json"]) == 0
+    d = _json.loads(capsys.readouterr().out)
+    assert d["method_used"] == "neural" and d["fallback"] is False
+    assert d["levels_used"] == ["neural", "neural"] and d["loop_blended_vertices"] == 7984
+    assert ("bulged or dimpled over 195 of the input's triangles; Loop subdivision's positions "
+            "were blended in there (7,984 vertices, level 2), the network made the rest.") \
+        in d["note"]
+    assert cli_main(["subdivide", src, "-o", str(tmp_path / "b.obj")]) == 0
+    assert ("neural subdivision (Loop's positions blended in at 7,984 vertices over its "
+            "bulges), 2 level(s)") in capsys.readouterr().out
 
 
 def test_parts_handed_to_loop_are_said_in_the_line_the_json_and_the_batch_report(tmp_path,
