@@ -1040,13 +1040,17 @@ class _Guard:
         """Where Loop's positions were blended in over the network's bulges or dimples."""
         if not self.bumps:
             return ""
-        tri = sum(q for _, q, _ in self.bumps)
         moved = sum(m for *_, m in self.bumps)
-        at = ", ".join(str(k) for k, *_ in self.bumps)
-        levels = f"level{'s' if len(self.bumps) > 1 else ''} {at}"
-        return (f"The network's result bulged or dimpled over {tri:,} of the input's "
-                f"triangles; Loop subdivision's positions were blended in there ({moved:,} "
-                f"vertices, {levels}), the network made the rest.")
+        if len(self.bumps) == 1:
+            k, q, _ = self.bumps[0]
+            where, levels = f"{q:,} of the input's triangles", f"level {k}"
+        else:   # per level (a triangle may be repaired at more than one)
+            where = "the input's triangles (" + ", ".join(
+                f"{q:,} at level {k}" for k, q, _ in self.bumps) + ")"
+            levels = "levels " + ", ".join(str(k) for k, *_ in self.bumps)
+        return (f"The network's result bulged or dimpled over {where}; Loop subdivision's "
+                f"positions were blended in there ({moved:,} vertices, {levels}), the network "
+                f"made the rest.")
 
     def blend_note(self) -> str:
         if not self.unsmoothed:

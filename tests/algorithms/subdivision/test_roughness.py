@@ -458,6 +458,10 @@ def test_an_isolated_bulge_gets_loop_there_and_the_network_elsewhere():
         f"The network's result bulged or dimpled over 1 of the input's triangles; Loop "
         f"subdivision's positions were blended in there ({moved.sum():,} vertices, level 1), "
         f"the network made the rest.")
+    g.bumps = [(1, 3, 40), (2, 5, 120)]      # at two levels: counted per level
+    assert g.bump_note().startswith("The network's result bulged or dimpled over the input's "
+                                    "triangles (3 at level 1, 5 at level 2); Loop subdivision's "
+                                    "positions were blended in there (160 vertices, levels 1, 2)")
 
 
 def test_bulges_over_many_triangles_fail_the_level():
