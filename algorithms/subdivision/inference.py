@@ -1009,6 +1009,8 @@ class _Guard:
         #: (level, input triangles, vertices) where Loop's positions were blended in over
         #: the network's bulges or dimples (:meth:`_bump_repair`)
         self.bumps: list[tuple[int, int, int]] = []
+        #: and which input triangles, level by level
+        self.bump_triangles: list[np.ndarray] = []
 
     def levels_used(self, made: int) -> tuple:
         """What made each of the first ``made`` levels: "neural", or "neural+loop" from the
@@ -1114,20 +1116,17 @@ class _Guard:
         out[vert] = V_loop[vert]
         return out
 
-    def _bump_repair(self, k, V_net, F_net, prev, edges, active) -> tuple | None:
+    def _bump_repair(self, k, V_net, F_net, prev, edges, tn, tb, active) -> tuple | None:
         """Loop's positions blended in over the fewest input triangles whose children carry
-        the network's excess bending (its terms minus butterfly's, each interior edge's term
-        split between its two triangles), enough of them that the rest would be within
-        ``factor``; None when that takes more than :data:`BUMP_SHARE` of the ``active`` input
-        triangles (then the whole level fails, as before). Weight 1 on those children's
+        the network's excess bending (its terms ``tn`` minus butterfly's ``tb``, each interior
+        edge's term split between its two triangles), enough of them that the rest would be
+        within ``factor``; None when that takes more than :data:`BUMP_SHARE` of the ``active``
+        input triangles (then the whole level fails, as before). Weight 1 on those children's
         corners and the ring around them, 1/2 on the next ring, as the crossing blend.
-        Returns (positions, input triangles repaired)."""
+        Returns (positions, the input triangles repaired)."""
         from ..mesh.topology import vertex_adjacency
-        from .metrics import _bending_terms
 
         fa, fb = edges[0], edges[1]
-        _, tn = _bending_terms(V_net, F_net, edges)
-        _, tb = _bending_terms(self.Vb, self.Fb, edges)
         parent = np.repeat(np.arange(len(self.F0)), 4 ** k)
         n0 = len(self.F0)
 
@@ -1151,7 +1150,8 @@ class _Guard:
         ring1, ring2 = _rings(vertex_adjacency(F_net, n), F_net, np.flatnonzero(bumpy), n)
         w = np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0))
         V_loop = _loop_positions(prev[0], prev[1], F_net, n)
-        return (1.0 - w)[:, None] * np.asarray(V_net, np.float64) + w[:, None] * V_loop, q
+        return ((1.0 - w)[:, None] * np.asarray(V_net, np.float64) + w[:, None] * V_loop,
+                np.sort(order[:q]))
 
     def _loop_crossings(self, k: int) -> int:
         """How many new crossings Loop subdivision of the input to ``k`` levels makes."""
@@ -1187,7 +1187,7 @@ class _Guard:
     def _check(self, k: int, V_net, F_net, prev) -> tuple:
         """``(why, failing parts or None, repaired positions or None)``."""
         from .baselines import subdivide_baseline
-        from .metrics import (_interior_edges, bending_energy, bending_per_part, planar_faces,
+        from .metrics import (_bending_terms, _interior_edges, bending_energy, planar_faces,
                               planar_normal_deviation)
 
         if self.note:     # butterfly could not run: nothing to compare with
@@ -1197,40 +1197,52 @@ class _Guard:
             self.level = k
             same = self.Fb.shape == F_net.shape and np.array_equal(self.Fb, F_net)
             edges = _interior_edges(F_net, len(V_net)) if same else None
-            ref = bending_energy(self.Vb, self.Fb, edges)
+            # each interior edge's bending term, computed once a mesh and level: the whole
+            # ratio, the parts' and the bulges' all sum them
+            tb = _bending_terms(self.Vb, self.Fb, edges)[1] if same else None
+            ref = float(tb.sum()) if same else bending_energy(self.Vb, self.Fb)
         except Stylize3DError:
             self.note = ("(Modified butterfly could not run on this mesh, so the network's "
                          "result was not compared with it.)")
             return "", None, None
         failing = repaired = None
-        part = np.repeat(self.face_part, 4 ** k)
         mine = ~self.loop_part
+        # parts judged apart only where both results share the network's numbering
+        by_part = same and self.n_parts > 1
+        if by_part:
+            edge_part = np.repeat(self.face_part, 4 ** k)[edges[0]]
+            ref_p = np.bincount(edge_part, tb, minlength=self.n_parts)
 
-        def ratio_of(X, sel=None):
-            if self.n_parts == 1:
-                return bending_energy(X, F_net, edges) / ref if ref > 0 else float("inf")
-            net_p = bending_per_part(X, F_net, part, self.n_parts, edges)
-            return _ratio(net_p, ref_p, mine if sel is None else sel)
-        if self.n_parts > 1:
-            ref_p = bending_per_part(self.Vb, self.Fb, part, self.n_parts, edges)
-        bent = ratio_of(V_net)
+        def terms(X):
+            return _bending_terms(X, F_net, edges)[1]
+
+        def ratio_of(t, sel=None):
+            if not by_part:
+                return float(t.sum()) / ref if ref > 0 else float("inf")
+            return _ratio(np.bincount(edge_part, t, minlength=self.n_parts), ref_p,
+                          mine if sel is None else sel)
+        tn = terms(V_net) if same else None
+        bent = ratio_of(tn) if same else (bending_energy(V_net, F_net) / ref if ref > 0
+                                          else float("inf"))
         if bent > self.factor and same:
             # a few bulges or dimples (face at 200 vertices, level 1: 78 % of the excess
             # bending in one of 390 input triangles): Loop's positions blended in there only
-            fixed = self._bump_repair(k, V_net, F_net, prev, edges, mine[self.face_part])
+            fixed = self._bump_repair(k, V_net, F_net, prev, edges, tn, tb,
+                                      mine[self.face_part])
             if fixed is not None:
-                bent_fixed = ratio_of(fixed[0])
+                bent_fixed = ratio_of(terms(fixed[0]))
                 if bent_fixed <= self.factor:
                     repaired, bent = fixed[0], bent_fixed
                     moved = int((np.abs(repaired - V_net).max(axis=1) > 0).sum())
-                    self.bumps.append((k, fixed[1], moved))
-        if bent > self.factor and self.n_parts > 1:
+                    self.bumps.append((k, len(fixed[1]), moved))
+                    self.bump_triangles.append(fixed[1])
+        if bent > self.factor and by_part:
             # judged whole first (as a one-part mesh, with the factor tuned so); only where the
             # whole fails is each part judged, and only the parts that fail get Loop
-            net_p = bending_per_part(V_net, F_net, part, self.n_parts, edges)
+            net_p = np.bincount(edge_part, tn, minlength=self.n_parts)
             # below 1e-10 a triangle a part's bending is rounding (the float32 network on
             # a flat part, which butterfly keeps exactly flat), not a bump
-            tiny = 1e-10 * np.bincount(part, minlength=self.n_parts)
+            tiny = 1e-10 * np.bincount(self.face_part, minlength=self.n_parts) * 4 ** k
             failing = mine & (net_p > self.factor * ref_p + tiny)
             ok = mine & ~failing
             if ok.any():
@@ -1258,6 +1270,7 @@ class _Guard:
             if dev > dev_b + GUARD_PLANAR_DEGREES:
                 if repaired is not None:
                     self.bumps.pop()
+                    self.bump_triangles.pop()
                 return (f"the network's result bent its flat sides by {dev:.1f} degrees (RMS; "
                         f"modified butterfly: {dev_b:.1f})"), None, None
         return "", failing, repaired

@@ -87,13 +87,6 @@ def _bending_terms(V, F, edges=None) -> tuple[np.ndarray, np.ndarray]:
     return fa, 3.0 * theta ** 2 * e2 / np.maximum(A[fa] + A[fb], 1e-300)
 
 
-def bending_per_part(V, F, part, n_parts: int, edges=None) -> np.ndarray:
-    """(n_parts,) :func:`bending_energy` of each part (``part``: each triangle's part; the two
-    triangles of an interior edge are in the same part)."""
-    fa, terms = _bending_terms(V, F, edges)
-    return np.bincount(np.asarray(part)[fa], terms, minlength=int(n_parts))
-
-
 def planar_faces(V, F, tolerance_degrees: float = 0.5, rings: int = 2) -> np.ndarray:
     """(m,) bool: triangles whose neighbourhood is planar -- no edge within ``rings`` vertex
     rings of them bends by more than ``tolerance_degrees``."""

@@ -68,13 +68,12 @@ def _substitution(rec: dict) -> str:
     in over the network's bulges, how many vertices; else ''."""
     fig = rec.get("figures") or {}
     blended = int(fig.get("loop_blended_vertices") or 0)   # the guard's Loop over bulges
-    extra = f"; Loop's positions blended in at {blended:,} vertices" if blended else ""
-    if not fig.get("fallback"):
-        return extra
+    if not fig.get("fallback") and not blended:
+        return ""
     from app.recipes.subdivision import method_words
 
-    return "; " + method_words(str(fig.get("method_used", "")), True,
-                               fig.get("levels_used") or ()) + extra
+    return "; " + method_words(str(fig.get("method_used", "")), bool(fig.get("fallback")),
+                               fig.get("levels_used") or (), blended)
 
 
 def _one_line(message: str, limit: int = 240) -> str:

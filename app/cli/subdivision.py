@@ -124,11 +124,8 @@ def cmd_subdivide(args: argparse.Namespace) -> int:
 
         if note:
             say(f"stylize3d subdivide: {note}")
-        blended = out["loop_blended_vertices"]   # the guard's Loop over bulges, said here too
-        extra = (f" (Loop's positions blended in at {blended:,} vertices over its bulges)"
-                 if blended else "")
-        print(f"Wrote {args.output}: {method_words(method_used, fallback, levels_used)}"
-              f"{extra}, {params.levels} "
+        said = method_words(method_used, fallback, levels_used, out["loop_blended_vertices"])
+        print(f"Wrote {args.output}: {said}, {params.levels} "
               f"level(s), {len(data.F):,} -> {len(F):,} triangles in {dt:.2f} s.")
     return 0
 

@@ -229,9 +229,16 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
                    fallback=fallback, levels_used=levels_used, fallback_reason=reason)
 
 
-def method_words(method_used: str, fallback: bool, levels_used=()) -> str:
+def method_words(method_used: str, fallback: bool, levels_used=(), blended: int = 0) -> str:
     """ "neural subdivision", "Loop subdivision instead of the network", "neural subdivision
-    (level 1), then Loop instead of the network (level 2)", ... (what ran)."""
+    (level 1), then Loop instead of the network (level 2)", ... (what ran); with ``blended``
+    (the guard's ``loop_blended_vertices``), where Loop's positions replaced the network's."""
+    extra = (f" (Loop's positions blended in at {blended:,} vertices over its bulges)"
+             if blended else "")
+    return _scheme_words(method_used, fallback, levels_used) + extra
+
+
+def _scheme_words(method_used: str, fallback: bool, levels_used=()) -> str:
     names = {"neural": "neural", "loop": "Loop", "butterfly": "modified butterfly",
              "midpoint": "mid-point"}
     if method_used == "neural+loop":

@@ -204,7 +204,8 @@ def test_what_ran_is_said_in_the_line_the_json_and_the_batch_report(tmp_path, ca
     assert line.endswith("; Loop subdivision instead of the network)")
     (line,) = [x for x in cap.err.splitlines() if "fandisk.off (" in x]
     assert "then Loop instead of the network (level 2)" in line
-    assert line.endswith("; Loop's positions blended in at 2,687 vertices)")
+    assert line.endswith("(level 2) (Loop's positions blended in at 2,687 vertices over its "
+                         "bulges))")
     assert hand["fallback_reason"].startswith("at level 1 the network's result was 2.24")
     assert "x as bent as modified butterfly's (bumps, dimples or creases that it has not; more than 1.25x)" in \
         hand["fallback_reason"]
@@ -267,7 +268,7 @@ def test_bulges_given_loop_are_said_in_the_line_and_the_json(tmp_path, capsys):
     """Issue 36: fandisk as it is, 2 levels, with the shipped network: level 2 is 1.38x as
     bent as butterfly's (over the 1.25x of a dense mesh), with the excess in 195 of its 14,454
     triangles; the guard blends Loop's positions in there and keeps the network elsewhere, and
-    the last line, the note and --json say how many vertices."""
+    the last line, the note, --json and the batch say how many vertices."""
     import json as _json
 
     from app.cli import main as cli_main
@@ -283,6 +284,18 @@ def test_bulges_given_loop_are_said_in_the_line_and_the_json(tmp_path, capsys):
     assert cli_main(["subdivide", src, "-o", str(tmp_path / "b.obj")]) == 0
     assert ("neural subdivision (Loop's positions blended in at 7,984 vertices over its "
             "bulges), 2 level(s)") in capsys.readouterr().out
+    # the batch: said on the mesh's line and in its record, not counted as a substitution
+    assert cli_main(["batch", "subdivide", src, "-o", str(tmp_path / "batch"), "--workers",
+                     "1", "--json"]) == 0
+    cap = capsys.readouterr()
+    assert _json.loads(cap.out)["substituted"] == 0
+    (rec,) = [_json.loads(x) for x in (tmp_path / "batch" / "batch-report.jsonl").read_text()
+              .splitlines() if '"done"' in x]
+    assert rec["figures"]["loop_blended_vertices"] == 7984
+    assert rec["figures"]["fallback"] is False
+    (line,) = [x for x in cap.err.splitlines() if "fandisk.off (" in x]
+    assert line.endswith("; neural subdivision (Loop's positions blended in at 7,984 vertices "
+                         "over its bulges))")
 
 
 def test_parts_handed_to_loop_are_said_in_the_line_the_json_and_the_batch_report(tmp_path,

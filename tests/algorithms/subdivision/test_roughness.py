@@ -439,20 +439,25 @@ def test_an_isolated_bulge_gets_loop_there_and_the_network_elsewhere():
     why, out = g.check(1, V_net, Fb, (V, F))
     assert why == "" and out is not None
     assert g.bumps and g.bumps[0][:2] == (1, 1)             # level 1, one input triangle
+    (chosen,) = g.bump_triangles[0]
+    # the bulging vertices lie on triangle 7's edges: the triangle repaired is 7 or one of its
+    # three neighbours across those edges
+    shares_edge = [f for f in range(len(F)) if len(set(F[f]) & set(F[7])) >= 2]
+    assert chosen in shares_edge
     moved = np.abs(out - V_net).max(axis=1) > 0
     assert g.bumps[0][2] == moved.sum() > 0
-    # Loop's positions (weight 1) on the bulge; the network's, untouched, four rings out (the
-    # bulging vertices lie on triangle 7's edges, so the triangle repaired may be a neighbour
-    # across one of them, whose far corner is two rings out; the blend reaches two rings
-    # around it)
+    # Loop's positions (weight 1) on the chosen triangle's children's corners and one ring,
+    # blended on the next ring, and the network's, untouched, beyond
     VL = _loop_positions(V, F, Fb, len(Vb))
-    np.testing.assert_allclose(out[centre], VL[centre], atol=1e-12)
     A = vertex_adjacency(Fb, len(Vb))
-    near = np.zeros(len(Vb), bool)
-    near[np.unique(kids)] = True
-    for _ in range(4):
-        near |= A @ near.astype(float) > 0
-    np.testing.assert_array_equal(out[~near], V_net[~near])
+    ring1 = np.zeros(len(Vb), bool)
+    ring1[np.unique(Fb[4 * chosen:4 * chosen + 4])] = True
+    ring1 |= A @ ring1.astype(float) > 0
+    ring2 = ring1 | (A @ ring1.astype(float) > 0)
+    np.testing.assert_allclose(out[ring1], VL[ring1], atol=1e-12)
+    np.testing.assert_allclose(out[ring2 & ~ring1], 0.5 * (V_net + VL)[ring2 & ~ring1],
+                               atol=1e-12)
+    np.testing.assert_array_equal(out[~ring2], V_net[~ring2])
     assert moved.sum() < 0.06 * len(Vb) and g.ratio <= 2.6
     assert g.bump_note() == (
         f"The network's result bulged or dimpled over 1 of the input's triangles; Loop "
@@ -479,6 +484,7 @@ def test_bulges_over_many_triangles_fail_the_level():
     g = _Guard(V, F, 2.6)
     why, out = g.check(1, V_net, Fb, (V, F))
     assert "as bent as modified butterfly's" in why and out is None and not g.bumps
+    assert not g.bump_triangles
 
 
 def test_a_part_handed_to_loop_stays_loop_at_the_next_level():
