@@ -195,3 +195,58 @@ def test_steps_are_small_and_stoppable():
     first = next(gen)
     gen.close()
     assert first.iteration < 100 and first.message.startswith("Level 1 of 2")
+
+
+def test_group_sums_equal_reduceat_on_unsorted_and_sorted_groups():
+    """The stage's sums over groups of half-flaps (runs of equal-size groups summed as one
+    reshaped array) equal np.add.reduceat's, whatever the order of the sizes."""
+    from algorithms.subdivision.inference import _group_sums
+
+    rng = np.random.default_rng(3)
+    for sizes in (np.sort(rng.integers(1, 9, 300)), rng.integers(1, 9, 300),
+                  np.r_[np.full(40, 2), np.full(3, 1)]):
+        starts = np.r_[0, np.cumsum(sizes)[:-1]]
+        o = rng.standard_normal((int(sizes.sum()), 32)).astype(np.float32)
+        ref = np.add.reduceat(o.astype(np.float64), starts, axis=0)
+        got = _group_sums(o, starts, sizes)
+        assert got.shape == ref.shape and got.dtype == np.float32
+        assert np.abs(got - ref).max() <= 1e-5 * np.abs(ref).max()
+
+
+def test_two_threads_give_the_same_bits_as_one(monkeypatch):
+    """The plain and the mirrored chain on two threads (the default on two cores) give
+    exactly what one thread gives, with progress steps and stopping as before; with the user's
+    thread limit at 1 (NUMBA_NUM_THREADS / OMP_NUM_THREADS) no second thread is used."""
+    import threading
+
+    from algorithms.subdivision import inference as inf
+
+    m = read_mesh(DATA / "hand_lowres.obj")
+    net = load_network(None)
+    assert net.mirror_average
+    monkeypatch.setattr(inf, "PARALLEL_FLAPS", 1000)
+    seen = set()
+    real = inf._stage
+
+    def spy(*a, **k):
+        for n in real(*a, **k):
+            seen.add(threading.get_ident())
+            yield n
+
+    monkeypatch.setattr(inf, "_stage", spy)
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "2")
+    two = list(neural_subdivision_iter(m.V, m.F, 2, net, chunk=2000, dense="scale"))
+    assert len(seen) == 2
+    seen.clear()
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "1")
+    one = list(neural_subdivision_iter(m.V, m.F, 2, net, chunk=2000, dense="scale"))
+    assert seen == {threading.get_ident()}
+    assert np.array_equal(two[-1].V, one[-1].V) and np.array_equal(two[-1].F, one[-1].F)
+    assert [s.iteration for s in two[:-1]] == sorted(s.iteration for s in two[:-1])
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "2")
+    before = threading.active_count()
+    gen = neural_subdivision_iter(m.V, m.F, 2, net, chunk=2000, dense="scale")
+    for _ in range(5):
+        next(gen)
+    gen.close()
+    assert threading.active_count() == before
