@@ -273,7 +273,7 @@ def _inference_meshes(tmp: Path) -> list:
     return out
 
 
-def _process_seconds(args: list, repeat: int) -> tuple[float, float]:
+def _process_seconds(args: list, repeat: int, env: dict | None = None) -> tuple[float, float]:
     """Median wall time and median CPU time (user + system) of a whole ``python ...`` process
     (OMP / BLAS threads as a user has). The CPU time is what the process itself needs: on a
     machine whose cores are busy with other work the wall time is mostly waiting."""
@@ -286,7 +286,8 @@ def _process_seconds(args: list, repeat: int) -> tuple[float, float]:
     def once():
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t = time.perf_counter()
-        r = subprocess.run([sys.executable, *args], cwd=root, capture_output=True, text=True)
+        r = subprocess.run([sys.executable, *args], cwd=root, capture_output=True, text=True,
+                           env=None if env is None else {**os.environ, **env})
         walls.append(time.perf_counter() - t)
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpus.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
@@ -318,11 +319,15 @@ def inference(repeat: int) -> int:
             # --dense-input scale: the network runs even where the default would use Loop
             t_n = _process_seconds(base + ["--dense-input", "scale"], repeat)
             t_l = _process_seconds(base + ["--method", "loop"], repeat)
+            # the network's two mirror chains on one thread (a user's thread limit of 1)
+            t_1 = _process_seconds(base + ["--dense-input", "scale"], repeat,
+                                   {"NUMBA_NUM_THREADS": "1"})
             target = 1.2 if len(F) < 5000 else 2.0
             print(f"  stylize3d subdivide {label:9s} ({len(V)} V / {len(F)} F -> {16 * len(F)} F):"
                   f" neural {t_n[0]:5.2f} s / {t_n[1]:5.2f} s (target <= {target} s), Loop "
                   f"{t_l[0]:5.2f} s / {t_l[1]:5.2f} s, ratio {t_n[0] / t_l[0]:4.2f} / "
-                  f"{t_n[1] / t_l[1]:4.2f}", flush=True)
+                  f"{t_n[1] / t_l[1]:4.2f}; neural on one thread {t_1[0]:5.2f} s / "
+                  f"{t_1[1]:5.2f} s, ratio {t_1[0] / t_l[0]:4.2f}", flush=True)
         print(f"  ({_load()})")
         import torch
 
