@@ -55,9 +55,18 @@ flaps are the right size but far flatter than any the network saw), so:
 * a mesh within :data:`SCALE_TOLERANCE` of the training edge length is used as the formulation
   scales it (the author's outputs and the Table 4.2 protocol, 350-450 vertices, unchanged);
 * a coarser one is scaled so its mean edge length is the training one;
-* a denser one gets Loop subdivision instead (``dense="loop"``, the default), with a message
-  saying so and suggesting 'Coarsen first' to a vertex count the network was trained for; or,
-  on request, the network scaled (``"scale"``) or as is (``"off"``).
+* a denser one is scaled like a coarser one and its result compared with butterfly's
+  (``dense="guard"``, the application's default; :class:`_Guard`), or gets Loop subdivision
+  instead (``"loop"``, this function's default), with a message saying so and suggesting
+  'Coarsen first' to a vertex count the network was trained for; or, on request, the network
+  scaled without the comparison (``"scale"``) or as is (``"off"``).
+
+A mesh of several parts (sharing no vertex) is judged part by part (:func:`_part_ratios`:
+each part's density as if it were alone; a scene's gaps would otherwise make every part look
+denser: fandisk 4 diagonals from a small sphere read "45x denser", alone 5.7x), and 'Coarsen
+first' (:func:`coarsen_for_network`) simplifies each part to its share of the count, so that
+the advised count brings every part into range. The network still sees the whole mesh in one
+frame.
 
 Every such decision is said in ``SubdividedStep.note`` (empty when nothing was done);
 ``adapt_scale=False`` turns the guard off.
@@ -84,6 +93,7 @@ from .weights_file import NotATorchFile, read_torch_file
 
 __all__ = ["Network", "load_network", "WeightsError", "shipped_weights_path", "network_from_state", "neural_subdivision_iter",
            "neural_subdivide_np", "SubdividedStep", "scale_plan", "mean_edge_length",
+           "coarsen_for_network",
            "FORMULATIONS", "SCALE_TOLERANCE", "CHUNK_FLAPS", "OUR_FORMAT",
            "SHIPPED_REFERENCE_EDGE", "AUTHOR_REFERENCE_EDGE", "ScalePlan",
            "DENSE_CHOICES"]
@@ -528,31 +538,158 @@ def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = Tru
         return ScalePlan(c, s)
     ell = mean_edge_length(V, F, edges) * s
     ratio = ell / network.reference_edge
-    if not np.isfinite(ratio) or ratio <= 0 or 1 / SCALE_TOLERANCE <= ratio <= SCALE_TOLERANCE:
-        return ScalePlan(c, s, ratio=ratio)
+    parts = _part_ratios(network, V, F)
     trained = "the coarse meshes (a few hundred vertices) the network was trained on"
+    if not np.isfinite(ratio) or ratio <= 0 or 1 / SCALE_TOLERANCE <= ratio <= SCALE_TOLERANCE:
+        if parts is None or dense == "off":
+            return ScalePlan(c, s, ratio=ratio)
+        # in range as a whole; a part denser than trained is said, with the advice
+        denser = [r for _, r in parts if r < 1 / SCALE_TOLERANCE]
+        advice = _advice(len(V), parts)
+        if not denser:
+            return ScalePlan(c, s, ratio=ratio)
+        coarsen = (f" 'Coarsen first' to about {advice} vertices lets the network work as "
+                   f"trained on them." if advice else "")
+        return ScalePlan(c, s, f"{_of_parts(len(denser), len(parts), 'this mesh')} edges "
+                               f"shorter than those of {trained} (up to {1 / min(denser):.1f}x); "
+                               f"the network may leave slight dimples there.{coarsen}",
+                         ratio=ratio, advice=advice)
     if ratio > 1:
         return ScalePlan(c, s / ratio, f"This mesh's edges are {ratio:.1f}x longer than those of "
                                        f"{trained}, so it was scaled to match before "
                                        f"subdividing and scaled back after.", ratio=ratio)
-    # vertices for 'Coarsen first': edge length ~ 1 / sqrt(vertices), x 1.5 as QSlim keeps
-    # vertices where the detail is (its mean edge is longer than a uniform mesh's), within
-    # the training meshes' range and the Table 4.2 protocol's
-    advice = int(np.clip(round(1.5 * len(V) * ratio * ratio, -1), 150, 450))
     how = f"its edges are {1 / ratio:.1f}x shorter than those of {trained}"
+    if parts is None:
+        advice = _advice(len(V), [(len(V), ratio)])
+    else:
+        # a scene of parts: the density each part has on its own (gaps between parts make the
+        # whole look denser in the network's frame), and what each part needs
+        advice = _advice(len(V), parts)
+        denser = [r for _, r in parts if r < 1 / SCALE_TOLERANCE]
+        if denser:
+            how = (f"{_of_parts(len(denser), len(parts))} edges shorter than those of "
+                   f"{trained}, up to {1 / min(denser):.1f}x")
+        else:
+            apart = (f"This mesh's {len(parts)} parts lie apart: over the whole its edges are "
+                     f"{1 / ratio:.1f}x shorter than those of {trained} (each part's own are "
+                     f"in range)")
+            if dense in ("scale", "guard"):
+                return ScalePlan(c, s / ratio, f"{apart}, so it was scaled to match.",
+                                 ratio=ratio)
+            if dense == "loop":
+                return ScalePlan(c, s, f"{apart}, so Loop subdivision was used; "
+                                       f"'Mesh denser than trained' = scale (--dense-input "
+                                       f"scale) runs the network.", fallback=True,
+                                 ratio=ratio, reason="the mesh's parts lie apart (denser as "
+                                                     "a whole than the training meshes)")
     if dense == "off":
         return ScalePlan(c, s, ratio=ratio)
+    coarsen = (f" 'Coarsen first' to about {advice} vertices lets the network work as trained."
+               if advice else "")
     if dense in ("scale", "guard"):
         return ScalePlan(c, s / ratio, f"This mesh is denser than the network was trained for "
                                        f"({how}), so it was scaled to match; it may still show "
-                                       f"slight dimples. 'Coarsen first' to about {advice} "
-                                       f"vertices lets the network work as trained.",
-                         ratio=ratio, advice=advice)
+                                       f"slight dimples.{coarsen}", ratio=ratio, advice=advice)
+    see = (f" Set 'Coarsen first' to about {advice} vertices to see the network rebuild the "
+           f"detail." if advice else "")
     return ScalePlan(c, s, f"This mesh is denser than the network was trained for ({how}); the "
-                           f"network would leave dimples, so Loop subdivision was used. Set "
-                           f"'Coarsen first' to about {advice} vertices to see the network "
-                           f"rebuild the detail.", fallback=True, ratio=ratio,
+                           f"network would leave dimples, so Loop subdivision was used.{see}",
+                     fallback=True, ratio=ratio, advice=advice,
                      reason=f"the mesh is denser than the training meshes ({how})")
+
+
+def _of_parts(k: int, n: int, whose: str = "its") -> str:
+    """"1 of its 2 parts has" / "2 of its 3 parts have"."""
+    return f"{k} of {whose}{chr(39) + 's' if whose != 'its' else ''} {n} parts " \
+           f"{'has' if k == 1 else 'have'}"
+
+
+def _advice(n: int, parts: list) -> int:
+    """Vertices for 'Coarsen first' (0: coarsening would not help): over ``parts`` [(vertices,
+    ratio of the mean edge length to the training one)], a denser part's vertices x ratio^2 (its
+    edges at the training length: edge length ~ 1 / sqrt(vertices)) x 1.5 (QSlim keeps vertices
+    where the detail is, so its mean edge is longer than a uniform mesh's), within 150-450 (the
+    training meshes' range and the Table 4.2 protocol's), the other parts as they are. 0 when
+    that is not clearly fewer than the mesh has (``n``): asking again after coarsening, or a
+    mesh as coarse as coarsening can usefully make it."""
+    want = 0.0
+    for nv, ratio in parts:
+        want += (float(np.clip(1.5 * nv * ratio * ratio, 150, 450))
+                 if ratio < 1 / SCALE_TOLERANCE else nv)
+    advice = int(round(want, -1))
+    return advice if advice <= ADVICE_SHARE * n else 0
+
+
+#: 'Coarsen first' is advised only to a count at most this share of the mesh's vertices
+ADVICE_SHARE = 0.8
+
+
+def _part_ratios(network: Network, V: np.ndarray, F: np.ndarray, *, indices: bool = False):
+    """For a mesh of several parts (sharing no vertex): [(vertices, ratio)] per part with
+    triangles, the ratio of its mean edge length to the training meshes' with the part
+    normalized as if it were alone ([(vertex indices, ratio)] with ``indices``); None for one
+    part, or where a part cannot be normalized alone. (The network itself sees the whole mesh
+    in one frame: each part in its own frame made tiny parts -- octagonal_pocket's 4-vertex
+    bits -- swell, Hausdorff 1.6 -> 2.8 % on the corpus, docs/results/subdivision.md.)"""
+    from ..mesh.topology import connected_components
+
+    F = np.asarray(F, dtype=np.int64)
+    if len(F) == 0:
+        return None
+    k, face_part = connected_components(F, len(V))
+    if k < 2:
+        return None
+    out = []
+    for p in range(k):
+        Fp = F[face_part == p]
+        idx = np.unique(Fp)
+        try:
+            _, s = network.normalization(V[idx])
+        except InvalidMeshError:
+            return None
+        ratio = mean_edge_length(V, Fp) * s / network.reference_edge
+        if not np.isfinite(ratio) or ratio <= 0:
+            return None
+        out.append((idx if indices else len(idx), float(ratio)))
+    return out
+
+
+def coarsen_for_network(network: Network | None, V: np.ndarray, F: np.ndarray,
+                        vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """'Coarsen first': QSlim to about ``vertices`` vertices
+    (:func:`~.metrics.coarsen_to_vertices`). On a mesh of several parts with a network, each
+    part is coarsened on its own to its share of ``vertices``, the shares in proportion to what
+    :func:`scale_plan` wants of each (a denser part: the count that brings its edges to the
+    training length; another: the vertices it has), none above what a part has. (QSlim on the
+    whole scene spends its budget by absolute error: a small part loses its vertices first
+    and a big dense one stays dense, so the advice of the note would never be reached.)"""
+    from .metrics import coarsen_to_vertices
+
+    parts = None
+    if network is not None and network.reference_edge and len(F):
+        parts = _part_ratios(network, np.asarray(V, dtype=np.float64), F, indices=True)
+    if parts is None:
+        return coarsen_to_vertices(V, F, vertices)
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    want = np.array([_advice(10 ** 12, [(len(idx), r)]) or len(idx) for idx, r in parts],
+                    dtype=np.float64)
+    have = np.array([len(idx) for idx, _ in parts], dtype=np.float64)
+    share = np.minimum(have, np.maximum(4.0, np.round(vertices * want / want.sum())))
+    from ..mesh.topology import connected_components
+
+    _, face_part = connected_components(F, len(V))
+    Vs, Fs, base = [], [], 0
+    for p, (idx, _) in enumerate(parts):
+        remap = np.full(len(V), -1, dtype=np.int64)
+        remap[idx] = np.arange(len(idx))
+        Vp, Fp = V[idx], remap[F[face_part == p]]
+        if share[p] < len(idx):
+            Vp, Fp = coarsen_to_vertices(Vp, Fp, int(share[p]))
+        Vs.append(np.asarray(Vp, dtype=np.float64))
+        Fs.append(np.asarray(Fp, dtype=np.int64) + base)
+        base += len(Vs[-1])
+    return np.vstack(Vs), np.vstack(Fs)
 
 
 def _argsort_int(key: np.ndarray) -> np.ndarray:
@@ -906,14 +1043,15 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
     for _ in level.build():
         yield progress(f"Level 1 of {lv}: reading the mesh")
     plan = scale_plan(network, V, F, adapt_scale, dense=dense, edges=level.E)
-    if dense == "guard" and plan.advice and len(F) * 4 ** lv > GUARD_MAX_TRIANGLES:
+    if dense == "guard" and plan.denser and len(F) * 4 ** lv > GUARD_MAX_TRIANGLES:
+        coarsen = (f"'Coarsen first' to about {plan.advice} vertices lets the network rebuild "
+                   f"the detail; " if plan.advice else "")
         plan = ScalePlan(plan.centre, plan.scale, (
             f"This mesh is denser than the network was trained for (its edges are "
             f"{1 / plan.ratio:.1f}x shorter than its training meshes'), and the result has "
             f"{len(F) * 4 ** lv:,} triangles, over the {GUARD_MAX_TRIANGLES:,} up to which the "
             f"network's result is compared with butterfly's, so Loop subdivision was used. "
-            f"'Coarsen first' to about {plan.advice} vertices lets the network rebuild the "
-            f"detail; 'Mesh denser than trained' = scale (--dense-input scale) runs it "
+            f"{coarsen}'Mesh denser than trained' = scale (--dense-input scale) runs it "
             f"anyway."), fallback=True, ratio=plan.ratio,
             advice=plan.advice, reason=f"the result would have {len(F) * 4 ** lv:,} triangles, "
                                        f"over the {GUARD_MAX_TRIANGLES:,} the guard compares")

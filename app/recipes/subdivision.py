@@ -174,10 +174,12 @@ def subdivision_steps(state, params, options: dict | None = None, cache: dict | 
     if params.coarsen_first and params.coarsen_first < len(V):
         def work(progress):
             from algorithms.errors import ParameterError
-            from algorithms.subdivision.metrics import coarsen_to_vertices, coarsening_problem
+            from algorithms.subdivision.inference import coarsen_for_network
+            from algorithms.subdivision.metrics import coarsening_problem
 
             progress(0.1, f"QSlim to {params.coarsen_first} vertices")
-            Vc, Fc = coarsen_to_vertices(V, F, params.coarsen_first)
+            # a scene of parts: each part to its share (what the network wants of it)
+            Vc, Fc = coarsen_for_network(net, V, F, params.coarsen_first)
             why = coarsening_problem(V, F, Vc, Fc, params.coarsen_first)
             if why:   # issue 36 item 4: never subdivide a collapsed copy
                 raise ParameterError(

@@ -334,3 +334,36 @@ def test_parts_handed_to_loop_are_said_in_the_line_the_json_and_the_batch_report
     assert fig["loop_parts"] == 1
     (line,) = [x for x in cap.err.splitlines() if "two.obj (" in x]
     assert "with Loop instead of the network on some parts (level 2)" in line
+
+
+def test_coarsen_first_to_the_advised_count_on_a_scene_is_not_advised_again(tmp_path, capsys):
+    """Issue 36 item 4 on a scene of separate parts (the hand beside a small sphere far away):
+    the command's advice counts each part as if it were alone, and `--coarsen-first` to that
+    count simplifies each part to its share, so the next note has no advice left (before: the
+    scene's gap made the hand read far denser, the advice sat at the 150 floor, and following
+    it gave the same advice again)."""
+    import re
+
+    from algorithms.mesh import write_mesh
+    from algorithms.mesh.primitives import icosphere
+    from app.cli import main as cli_main
+
+    f = read_mesh(HAND)
+    d = float(np.linalg.norm(np.ptp(f.V, axis=0)))
+    S, FS = icosphere(1, radius=0.1 * d)
+    S = S + f.V.max(axis=0) + [10 * d, 0.0, 0.0]
+    src = tmp_path / "scene.obj"
+    write_mesh(src, np.vstack([f.V, S]), np.vstack([f.F, FS + len(f.V)]))
+    out = tmp_path / "o.obj"
+    assert cli_main(["subdivide", str(src), "-o", str(out), "--json"]) == 0
+    first = json.loads(capsys.readouterr().out)
+    said = re.search(r"'Coarsen first' to about (\d+) vertices", first["note"])
+    assert said and "1 of its 2 parts has edges shorter" in first["note"]
+    advice = int(said.group(1))
+    assert 150 < advice < 450            # not the floor: the hand's own count + the sphere's
+    assert cli_main(["subdivide", str(src), "-o", str(out), "--overwrite", "--json",
+                     "--coarsen-first", str(advice)]) == 0
+    second = json.loads(capsys.readouterr().out)
+    assert "Coarsen first" not in second["note"]
+    assert second["method_used"] == "neural" and not second["fallback"]
+    assert abs(second["vertices"] - 16 * advice) < 0.15 * 16 * advice  # ~advice coarse vertices

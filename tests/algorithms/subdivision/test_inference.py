@@ -250,3 +250,86 @@ def test_two_threads_give_the_same_bits_as_one(monkeypatch):
         next(gen)
     gen.close()
     assert threading.active_count() == before
+
+
+def _scene(gap_diagonals: float = 4.0):
+    """hand_lowres (denser than the network's training meshes) beside a small coarse
+    icosphere, ``gap_diagonals`` hand diagonals away: the scene's extent, not the hand's, set
+    the network's frame before (the hand read "much denser", and 'Coarsen first' was advised
+    to the 150 floor again after following it)."""
+    from algorithms.mesh.primitives import icosphere
+
+    m = read_mesh(DATA / "hand_lowres.obj")
+    d = float(np.linalg.norm(np.ptp(m.V, axis=0)))
+    S, FS = icosphere(1, radius=0.1 * d)
+    S = S + m.V.max(axis=0) + [gap_diagonals * d, 0.0, 0.0]
+    return m, np.vstack([m.V, S]), np.vstack([m.F, FS + len(m.V)]), len(m.V)
+
+
+def test_a_scene_is_judged_part_by_part():
+    """Issue 36 item 4: on a mesh of several parts, the density the note states and the
+    'Coarsen first' count come from each part as if it were alone, whatever the gap between
+    the parts (before: the scene's extent made the hand read far denser the further the sphere
+    was, and the advice sat at the 150 floor). The network still sees the whole mesh in one
+    frame (each part in its own frame was tried: tiny parts swelled)."""
+    net = load_network(None)
+    m, V, F, nh = _scene()
+    alone = scale_plan(net, m.V, m.F, dense="guard")
+    near = scale_plan(net, V, F, dense="guard")
+    far = scale_plan(net, *_scene(40.0)[1:3], dense="guard")
+    assert np.ndim(near.scale) == 0 and near.scale == pytest.approx(
+        scale_plan(net, V, F, adapt=False).scale / near.ratio)
+    for plan in (near, far):
+        assert "1 of its 2 parts has edges shorter" in plan.note
+        assert f"up to {1 / alone.ratio:.1f}x" in plan.note
+    assert far.ratio < near.ratio < alone.ratio     # the whole scene, in the network's frame
+    # the hand's count (as alone) + the sphere's 42 vertices (in range: kept), to 10
+    assert near.advice == far.advice and abs(near.advice - (alone.advice + 42)) <= 10
+    # in range as a whole, with a denser part (the hand inside six coarse spheres): said,
+    # with the advice, and nothing done to the frame
+    from algorithms.mesh.primitives import icosphere
+
+    S, FS = icosphere(2, radius=0.5 * np.ptp(m.V, axis=0).max())
+    S = S + m.V.mean(axis=0)
+    Vi = np.vstack([m.V] + [S] * 6)
+    Fi = np.vstack([m.F] + [FS + len(m.V) + i * len(S) for i in range(6)])
+    inside = scale_plan(net, Vi, Fi, dense="guard")
+    assert 1 / SCALE_TOLERANCE <= inside.ratio <= SCALE_TOLERANCE and not inside.fallback
+    assert inside.note.startswith("1 of this mesh's 7 parts has edges shorter")
+    assert abs(inside.advice - (alone.advice + 6 * len(S))) <= 10   # the hand's + the spheres'
+    assert f"'Coarsen first' to about {inside.advice} vertices" in inside.note
+    assert inside.scale == scale_plan(net, Vi, Fi, adapt=False).scale
+
+
+def test_coarsen_first_on_a_scene_reaches_what_it_advised():
+    """The advice on a scene sums what each part needs, and 'Coarsen first' to it coarsens
+    each part to its share: after it no part is denser than trained and nothing is advised
+    again (before: QSlim on the whole scene took the small part's vertices first, and the
+    advice came back). On one part nothing changes: the same QSlim as before."""
+    from algorithms.subdivision.inference import coarsen_for_network
+    from algorithms.subdivision.metrics import coarsen_to_vertices, coarsening_problem
+
+    net = load_network(None)
+    m, V, F, nh = _scene()
+    plan = scale_plan(net, V, F, dense="guard")
+    assert plan.advice and f"'Coarsen first' to about {plan.advice} vertices" in plan.note
+    Vc, Fc = coarsen_for_network(net, V, F, plan.advice)
+    assert abs(len(Vc) - plan.advice) <= 0.1 * plan.advice
+    assert coarsening_problem(V, F, Vc, Fc, plan.advice) == ""
+    after = scale_plan(net, Vc, Fc, dense="guard")
+    assert after.advice == 0 and "Coarsen first" not in after.note
+    assert "parts lie apart" in after.note and "each part's own are in range" in after.note
+    a = coarsen_for_network(net, m.V, m.F, 300)
+    b = coarsen_to_vertices(m.V, m.F, 300)
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def test_no_advice_to_coarsen_what_coarsening_would_not_help():
+    """'Coarsen first' is advised only to clearly fewer vertices than the mesh has: a mesh
+    already near the advised count (the 150 floor) is scaled, and the note says no more."""
+    from algorithms.subdivision.inference import ADVICE_SHARE, _advice
+
+    assert _advice(2000, [(2000, 0.3)]) == 270
+    assert _advice(160, [(160, 0.3)]) == 0            # 150 of 160: not clearly fewer
+    assert _advice(1000, [(1000, 0.9)]) == 0          # not denser
+    assert _advice(int(150 / ADVICE_SHARE) + 10, [(int(150 / ADVICE_SHARE) + 10, 0.1)]) == 150
