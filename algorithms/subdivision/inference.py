@@ -869,37 +869,80 @@ def _flaps(Vc, Dc, ijkl, has_l, slots):
     return geo, rows
 
 
-def _stage(module: _Module, Vc, Dc, Z, group: dict, out: np.ndarray,
-           chunk: int) -> Iterator[int]:
-    """Run ``module`` over the flaps of ``group`` in chunks, averaging into ``out`` (N, 32):
-    [world displacement, feature]; yields the number of flaps done after each chunk."""
+def _chain_sums(module: _Module, geo, frames, Zw, ijkl, starts, counts, flip: bool):
+    """One chain's part of a chunk: the network on the flap vectors ``geo``, its displacement
+    back to world axes through the flap ``frames`` (``flip``: the mirror chain, whose frame's
+    normal is the plain frame's negated, and mirrored back; see :func:`_mirrored_stage`), summed
+    over the groups; (groups, 32)."""
+    x, y, z = frames
+    with _OneBlasThread():
+        o = module.hidden(geo, Zw, ijkl)
+    o0, o1, o2 = o[:, 0].copy(), o[:, 1].copy(), o[:, 2].copy()
+    if flip:
+        np.negative(o2, out=o2)
+    for d in range(3):  # the displacement back to world axes
+        o[:, d] = o0 * x[d] + o1 * y[d] + o2 * z[d]
+    return _group_sums(o, starts, counts)
+
+
+def _mirrored_flaps(geo: np.ndarray) -> np.ndarray:
+    """The flap vectors of the mirror image: the same with their normal components negated."""
+    geo_m = geo.copy()
+    np.negative(geo_m[:, 2::3], out=geo_m[:, 2::3])
+    return geo_m
+
+
+def _mirror_chain_sums(module: _Module, Vc, Dc, has_l, Zw, ijkl, starts, counts):
+    """:func:`_chain_sums` of the mirror chain with the flaps computed here (a worker thread's
+    part of a chunk)."""
+    geo, frames = _flaps(Vc, Dc, ijkl, has_l, module.slots)
+    return _chain_sums(module, _mirrored_flaps(geo), frames, Zw, ijkl, starts, counts, True)
+
+
+def _stage(module: _Module, Vc, Dc, Zs: list, group: dict, outs: list, chunk: int,
+           pool=None) -> Iterator[int]:
+    """Run ``module`` over the flaps of ``group`` in chunks for each chain (``Zs``: the
+    features of the plain chain and, when two, of the mirror chain), averaging into ``outs``
+    (N, 32) each: [world displacement, feature]; yields the number of flaps done (over the
+    chains) after each chunk. The mirror image's flap frames and vectors are the plain ones
+    with the normal components negated (exactly, in floating point: every operation is odd or
+    even in the mirrored coordinate), so one thread computes them once; with ``pool`` (a worker
+    thread for the mirror chain) each thread computes its own copy, at the same time."""
     ijkl, has_l = group["ijkl"], group["has_l"]
     starts, counts, dst, inv = group["starts"], group["counts"], group["dst"], group["inv"]
     H = len(ijkl)
-    Zw = None
-    if module.Wz is not None and Z is not None:
-        with _OneBlasThread():
-            Zw = Z @ module.Wz  # (n, 4 H1): the feature columns, once per vertex
-    out[:] = 0
+    Zws = []
+    for Z in Zs:
+        Zw = None
+        if module.Wz is not None and Z is not None:
+            with _OneBlasThread():
+                Zw = Z @ module.Wz  # (n, 4 H1): the feature columns, once per vertex
+        Zws.append(Zw)
+    for out in outs:
+        out[:] = 0
     G = len(starts)
     cuts = np.unique(np.r_[0, np.searchsorted(starts, np.arange(chunk, H, chunk)), G])
     for ga, gb in zip(cuts[:-1], cuts[1:]):
         s0 = starts[ga]
         s1 = starts[gb] if gb < G else H
         sl = slice(s0, s1)
-        geo, (x, y, z) = _flaps(Vc, Dc, ijkl[sl], has_l[sl], module.slots)
-        with _OneBlasThread():
-            o = module.hidden(geo, Zw, ijkl[sl])
-        o0, o1, o2 = o[:, 0].copy(), o[:, 1].copy(), o[:, 2].copy()
-        for d in range(3):  # the displacement back to world axes
-            o[:, d] = o0 * x[d] + o1 * y[d] + o2 * z[d]
-        sums = _group_sums(o, starts[ga:gb] - s0, counts[ga:gb])
-        out[dst[ga:gb]] = sums * inv[ga:gb, None]
-        yield s1 - s0
-
-
-#: the mirror of :func:`_mirrored_stage`: world x negated
-_MIRROR = np.array([-1.0, 1.0, 1.0], dtype=np.float32)
+        rest = (ijkl[sl], starts[ga:gb] - s0, counts[ga:gb])
+        later = None
+        if len(Zs) == 2 and pool is not None:   # the worker makes its own copy of the frames
+            later = pool.submit(_mirror_chain_sums, module, Vc, Dc, has_l[sl], Zws[1], *rest)
+        try:
+            geo, frames = _flaps(Vc, Dc, ijkl[sl], has_l[sl], module.slots)
+            sums = [_chain_sums(module, geo, frames, Zws[0], *rest, False)]
+        finally:
+            if later is not None:
+                sums_m = later.result()
+        if len(Zs) == 2:
+            if later is None:
+                sums_m = _chain_sums(module, _mirrored_flaps(geo), frames, Zws[1], *rest, True)
+            sums.append(sums_m)
+        for out, sm in zip(outs, sums):
+            out[dst[ga:gb]] = sm * inv[ga:gb, None]
+        yield (s1 - s0) * len(Zs)
 
 
 def _mirrored_stage(module: _Module, X, D, Zs: list, group: dict, chunk: int, mirror: bool):
@@ -917,24 +960,26 @@ def _mirrored_stage(module: _Module, X, D, Zs: list, group: dict, chunk: int, mi
     off flat by 1.1-2.2 degrees RMS -- and the bias of the network's displacement along the
     normal on flaps flatter than it was trained on (dimples on dense meshes) cancels to the
     part odd in the curvature. ``X``, ``D``: (n, 3) float32 positions and differential
-    coordinates (``D`` None: not used)."""
-    outs, gens = [], []
-    for c, Z in enumerate(Zs if mirror else Zs[:1]):
-        sign = _MIRROR if c else None
-        Xc = X if sign is None else X * sign
-        Dc = None if D is None else (D if sign is None else D * sign)
-        out = np.empty((group["N"], FEATURES), np.float32)
-        outs.append(out)
-        gens.append(_stage(module, Xc.T.copy(), None if Dc is None else Dc.T.copy(), Z, group,
-                           out, chunk))
-    if len(gens) == 2 and len(group["ijkl"]) >= PARALLEL_FLAPS and _two_threads():
-        yield from _lockstep(gens)
+    coordinates (``D`` None: not used).
+
+    The two chains share the flap frames (:func:`_stage`); where two cores may be used
+    (:func:`_two_threads`) and the stage is big enough, the mirror chain's network runs on a
+    worker thread (NumPy releases Python's lock in its loops and products; BLAS held to one
+    thread each). The result is the same, bit for bit, either way."""
+    chains = Zs if mirror else Zs[:1]
+    outs = [np.empty((group["N"], FEATURES), np.float32) for _ in chains]
+    Vc = X.T.copy()
+    Dc = None if D is None else D.T.copy()
+    if len(chains) == 2 and len(group["ijkl"]) >= PARALLEL_FLAPS and _two_threads():
+        from concurrent.futures import ThreadPoolExecutor
+
+        with _OneBlasThread(), ThreadPoolExecutor(max_workers=1) as pool:
+            yield from _stage(module, Vc, Dc, chains, group, outs, chunk, pool)
     else:
-        for g in gens:
-            yield from g
+        yield from _stage(module, Vc, Dc, chains, group, outs, chunk)
     disp, feats = None, []
-    for c, out in enumerate(outs):
-        d = out[:, :3] if c == 0 else out[:, :3] * _MIRROR
+    for out in outs:   # the mirror chain's displacement is already mirrored back
+        d = out[:, :3]
         disp = d if disp is None else 0.5 * (disp + d)
         feats.append(out[:, 3:].copy())
     return disp, feats
@@ -961,25 +1006,6 @@ def _two_threads() -> bool:
         return len(os.sched_getaffinity(0)) > 1
     except (AttributeError, OSError):
         return (os.cpu_count() or 1) > 1
-
-
-def _lockstep(gens: list) -> Iterator[int]:
-    """Advance two :func:`_stage` generators chunk by chunk, the second on a worker thread;
-    yields the flaps both did (the same cuts: the same group). BLAS is held to one thread
-    for the whole region (each chain's products on its own core)."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    a, b = gens
-    with _OneBlasThread(), ThreadPoolExecutor(max_workers=1) as pool:
-        while True:
-            fb = pool.submit(next, b, None)
-            try:
-                ka = next(a, None)
-            finally:
-                kb = fb.result()
-            if ka is None and kb is None:
-                return
-            yield (ka or 0) + (kb or 0)
 
 
 @dataclass
