@@ -624,30 +624,57 @@ def _advice(n: int, parts: list) -> int:
 ADVICE_SHARE = 0.8
 
 
-def _part_ratios(network: Network, V: np.ndarray, F: np.ndarray, *, indices: bool = False):
-    """For a mesh of several parts (sharing no vertex): [(vertices, ratio)] per part with
-    triangles, the ratio of its mean edge length to the training meshes' with the part
-    normalized as if it were alone ([(vertex indices, ratio)] with ``indices``); None for one
-    part, or where a part cannot be normalized alone. (The network itself sees the whole mesh
-    in one frame: each part in its own frame made tiny parts -- octagonal_pocket's 4-vertex
-    bits -- swell, Hausdorff 1.6 -> 2.8 % on the corpus, docs/results/subdivision.md.)"""
+def _parts(F: np.ndarray, n: int):
+    """The mesh's parts (triangles sharing vertices): None for one part; else, per part, its
+    vertex indices and its triangles' rows, from one sort each (a scan of thousands of
+    fragments costs no more than one of a few)."""
     from ..mesh.topology import connected_components
 
     F = np.asarray(F, dtype=np.int64)
     if len(F) == 0:
         return None
-    k, face_part = connected_components(F, len(V))
+    k, face_part = connected_components(F, n)
     if k < 2:
         return None
+    vertex_part = np.full(n, -1, dtype=np.int64)
+    vertex_part[F.reshape(-1)] = np.repeat(face_part, 3)
+    used = np.flatnonzero(vertex_part >= 0)
+    vs = used[np.argsort(vertex_part[used], kind="stable")]
+    v_cut = np.searchsorted(vertex_part[vs], np.arange(k + 1))
+    fs = np.argsort(face_part, kind="stable")
+    f_cut = np.searchsorted(face_part[fs], np.arange(k + 1))
+    return [(vs[v_cut[p]:v_cut[p + 1]], fs[f_cut[p]:f_cut[p + 1]]) for p in range(k)]
+
+
+def _part_ratios(network: Network, V: np.ndarray, F: np.ndarray, *, indices: bool = False):
+    """For a mesh of several parts (sharing no vertex): [(vertices, ratio)] per part, the ratio
+    of its mean edge length to the training meshes' with the part normalized as if it were
+    alone ([(vertex indices, ratio)] with ``indices``); None for one part, or where a part
+    cannot be normalized alone. (The network itself sees the whole mesh in one frame: each
+    part in its own frame made tiny parts -- octagonal_pocket's 4-vertex bits -- swell,
+    Hausdorff 1.6 -> 2.8 % on the corpus, docs/results/subdivision.md.)"""
+    F = np.asarray(F, dtype=np.int64)
+    parts = _parts(F, len(V))
+    if parts is None:
+        return None
+    # every undirected edge once, its length summed into its part
+    a, b = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1)
+    n = len(V)
+    key = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
+    i, j = key // n, key % n
+    vertex_part = np.empty(n, dtype=np.int64)
+    for p, (idx, _) in enumerate(parts):
+        vertex_part[idx] = p
+    length = np.linalg.norm(V[i] - V[j], axis=1)
+    total = np.bincount(vertex_part[i], weights=length, minlength=len(parts))
+    count = np.bincount(vertex_part[i], minlength=len(parts))
     out = []
-    for p in range(k):
-        Fp = F[face_part == p]
-        idx = np.unique(Fp)
+    for p, (idx, _) in enumerate(parts):
         try:
             _, s = network.normalization(V[idx])
         except InvalidMeshError:
             return None
-        ratio = mean_edge_length(V, Fp) * s / network.reference_edge
+        ratio = total[p] / max(count[p], 1) * s / network.reference_edge
         if not np.isfinite(ratio) or ratio <= 0:
             return None
         out.append((idx if indices else len(idx), float(ratio)))
@@ -660,32 +687,41 @@ def coarsen_for_network(network: Network | None, V: np.ndarray, F: np.ndarray,
     (:func:`~.metrics.coarsen_to_vertices`). On a mesh of several parts with a network, each
     part is coarsened on its own to its share of ``vertices``, the shares in proportion to what
     :func:`scale_plan` wants of each (a denser part: the count that brings its edges to the
-    training length; another: the vertices it has), none above what a part has. (QSlim on the
-    whole scene spends its budget by absolute error: a small part loses its vertices first
-    and a big dense one stays dense, so the advice of the note would never be reached.)"""
+    training length; another: the vertices it has) after every part's 4 (or fewer, if it has
+    fewer), none above what a part has. (QSlim on the whole scene spends its budget by absolute
+    error: a small part loses its vertices first and a big dense one stays dense, so the advice
+    of the note would never be reached.) Where the parts cannot keep 4 vertices each, a
+    :class:`ParameterError` says the count that works."""
     from .metrics import coarsen_to_vertices
 
+    F = np.asarray(F, dtype=np.int64)
     parts = None
     if network is not None and network.reference_edge and len(F):
         parts = _part_ratios(network, np.asarray(V, dtype=np.float64), F, indices=True)
     if parts is None:
         return coarsen_to_vertices(V, F, vertices)
     V = np.asarray(V, dtype=np.float64)
-    F = np.asarray(F, dtype=np.int64)
     want = np.array([_advice(10 ** 12, [(len(idx), r)]) or len(idx) for idx, r in parts],
                     dtype=np.float64)
     have = np.array([len(idx) for idx, _ in parts], dtype=np.float64)
-    share = np.minimum(have, np.maximum(4.0, np.round(vertices * want / want.sum())))
-    from ..mesh.topology import connected_components
-
-    _, face_part = connected_components(F, len(V))
+    floor = np.minimum(have, 4.0)   # every part keeps at least a tetrahedron's worth
+    budget = float(vertices) - floor.sum()
+    if budget < 0:
+        raise ParameterError(
+            f"This mesh has {len(parts):,} separate parts, too many to share "
+            f"{int(vertices):,} vertices (each part keeps at least 4: {int(floor.sum()):,} in "
+            f"all). Set 'Coarsen first' to {int(floor.sum()):,} or more, or to 0 to subdivide "
+            f"the mesh as it is.")
+    share = floor + np.minimum(have - floor, np.round(budget * want / want.sum()))
+    rows = _parts(F, len(V))
+    remap = np.full(len(V), -1, dtype=np.int64)
     Vs, Fs, base = [], [], 0
-    for p, (idx, _) in enumerate(parts):
-        remap = np.full(len(V), -1, dtype=np.int64)
+    for (idx, _), (_, faces), k in zip(parts, rows, share):
         remap[idx] = np.arange(len(idx))
-        Vp, Fp = V[idx], remap[F[face_part == p]]
-        if share[p] < len(idx):
-            Vp, Fp = coarsen_to_vertices(Vp, Fp, int(share[p]))
+        Vp, Fp = V[idx], remap[F[faces]]
+        remap[idx] = -1
+        if k < len(idx):
+            Vp, Fp = coarsen_to_vertices(Vp, Fp, int(k))
         Vs.append(np.asarray(Vp, dtype=np.float64))
         Fs.append(np.asarray(Fp, dtype=np.int64) + base)
         base += len(Vs[-1])
@@ -967,6 +1003,7 @@ def _mirrored_stage(module: _Module, X, D, Zs: list, group: dict, chunk: int, mi
     worker thread (NumPy releases Python's lock in its loops and products; BLAS held to one
     thread each). The result is the same, bit for bit, either way."""
     chains = Zs if mirror else Zs[:1]
+    chunk = max(1, chunk // len(chains))   # about ``chunk`` flaps of work between two steps
     outs = [np.empty((group["N"], FEATURES), np.float32) for _ in chains]
     Vc = X.T.copy()
     Dc = None if D is None else D.T.copy()

@@ -356,3 +356,28 @@ def test_the_mirror_average_commutes_with_a_mirror(monkeypatch, threads):
     V1 = neural_subdivide_np(m.V, m.F, 2, net, dense="scale")[0]
     V1m = neural_subdivide_np(m.V * M, m.F, 2, net, dense="scale")[0]
     assert np.abs(V1m * M - V1).max() > 1e-4 * diag
+
+
+def test_coarsen_first_keeps_every_part_or_says_the_count_that_does():
+    """Each part keeps at least 4 vertices (what it has, if fewer), the rest of the count is
+    shared as the parts need it; a count too small for that is refused with the count that
+    works (whole-mesh QSlim made parts vanish there)."""
+    from algorithms.errors import ParameterError
+    from algorithms.mesh.primitives import icosphere
+    from algorithms.mesh.topology import connected_components
+    from algorithms.subdivision.inference import coarsen_for_network
+
+    net = load_network(None)
+    m = read_mesh(DATA / "hand_lowres.obj")
+    S, FS = icosphere(1, radius=0.02 * np.ptp(m.V, axis=0).max())
+    Vs, Fs, n = [m.V], [m.F], len(m.V)
+    for i in range(30):   # 30 small 42-vertex spheres in a row beside the hand
+        Vs.append(S + m.V.max(axis=0) + [0.05 * (i + 1) * np.ptp(m.V, axis=0).max(), 0, 0])
+        Fs.append(FS + n)
+        n += len(S)
+    V, F = np.vstack(Vs), np.vstack(Fs)
+    with pytest.raises(ParameterError, match=r"31 separate parts.*'Coarsen first' to 124 or more"):
+        coarsen_for_network(net, V, F, 100)
+    Vc, Fc = coarsen_for_network(net, V, F, 400)
+    assert connected_components(Fc, len(Vc))[0] == 31
+    assert 0.9 * 400 <= len(Vc) <= 1.1 * 400
