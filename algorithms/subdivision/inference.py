@@ -599,9 +599,9 @@ def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = Tru
 
 
 def _of_parts(k: int, n: int, whose: str = "its") -> str:
-    """"1 of its 2 parts has" / "2 of its 3 parts have"."""
-    return f"{k} of {whose}{chr(39) + 's' if whose != 'its' else ''} {n} parts " \
-           f"{'has' if k == 1 else 'have'}"
+    """"1 of its 2 parts has" / "2 of this mesh's 3 parts have"."""
+    owner = whose if whose == "its" else f"{whose}'s"
+    return f"{k} of {owner} {n} parts {'has' if k == 1 else 'have'}"
 
 
 def _advice(n: int, parts: list) -> int:
@@ -612,12 +612,16 @@ def _advice(n: int, parts: list) -> int:
     training meshes' range and the Table 4.2 protocol's), the other parts as they are. 0 when
     that is not clearly fewer than the mesh has (``n``): asking again after coarsening, or a
     mesh as coarse as coarsening can usefully make it."""
-    want = 0.0
-    for nv, ratio in parts:
-        want += (float(np.clip(1.5 * nv * ratio * ratio, 150, 450))
-                 if ratio < 1 / SCALE_TOLERANCE else nv)
-    advice = int(round(want, -1))
+    advice = int(round(sum(_wanted(nv, ratio) for nv, ratio in parts), -1))
     return advice if advice <= ADVICE_SHARE * n else 0
+
+
+def _wanted(nv: int, ratio: float) -> float:
+    """The vertices a part of ``nv`` vertices needs to be as the network was trained (see
+    :func:`_advice`)."""
+    if ratio < 1 / SCALE_TOLERANCE:
+        return float(np.clip(1.5 * nv * ratio * ratio, 150, 450))
+    return float(nv)
 
 
 #: 'Coarsen first' is advised only to a count at most this share of the mesh's vertices
@@ -701,8 +705,7 @@ def coarsen_for_network(network: Network | None, V: np.ndarray, F: np.ndarray,
     if parts is None:
         return coarsen_to_vertices(V, F, vertices)
     V = np.asarray(V, dtype=np.float64)
-    want = np.array([_advice(10 ** 12, [(len(idx), r)]) or len(idx) for idx, r in parts],
-                    dtype=np.float64)
+    want = np.array([_wanted(len(idx), r) for idx, r in parts])
     have = np.array([len(idx) for idx, _ in parts], dtype=np.float64)
     floor = np.minimum(have, 4.0)   # every part keeps at least a tetrahedron's worth
     budget = float(vertices) - floor.sum()
