@@ -5,7 +5,8 @@ for each λ (the peer, in the same run), then progressive meshes with each copy 
 the change of the area-weighted mean L1 norm of the unit vertex normals ("change"), its ratio
 to full resolution's, and the share of area whose normal lies within 10° of an axis ("share")
 with its difference in points. With ``--long N`` full resolution also runs on for N iterations
-without the stopping rule (printed every 50), to see how far the rule is from convergence.
+without the stopping rule (printed every 50), to see how far the rule is from convergence, and
+so does the finished path from the copy's result (do both reach the same look?).
 
 Each copy size is measured twice: the copy alone (thesis Alg. 4: stylize the copy, put the
 details back) and *finished* (the product's default, ``ProgressiveParams.finish``: then the
@@ -124,6 +125,16 @@ def main(argv=None) -> int:
                  ratio=ch / full[lam][0], share_points=100 * (sh - full[lam][1]),
                  iterations=k, energy=last.metrics["energy"],
                  seconds=alone + time.perf_counter() - t, preprocessing_seconds=pre + set_up)
+            if a.long:   # the same iterations without the rule from the copy's result
+                t = time.perf_counter()
+                for s in st.steps(CubicParams(lam=lam, rel_displacement_tol=0.0,
+                                              max_iterations=a.long),
+                                  lam_per_vertex=lam_v(lam), initial=Vp):
+                    if s.iteration % 50 == 0 or s.iteration == a.long:
+                        emit(lam=lam, method=f"finished m={m}, no rule", iteration=s.iteration,
+                             change=c0 - mean_l1_of_normals(s.V, F), share=axis_share(s.V, F),
+                             relative_move=s.metrics.get("displacement"),
+                             energy=s.metrics["energy"], seconds=time.perf_counter() - t)
     print()
     print("| λ | full: change / share / iterations / energy / seconds | " +
           " | ".join(f"m {m} alone: ratio / Δshare | m {m} finished: ratio / Δshare / "
@@ -140,7 +151,36 @@ def main(argv=None) -> int:
                       f"{q['energy']:.4f} / {q['seconds']:.1f}"]
         print(f"| {lam:g} | {f['change']:.3f} / {f['share']:.3f} / {f['iterations']} / "
               f"{f['energy']:.4f} / {f['seconds']:.1f} | " + " | ".join(cells) + " |")
+    if a.long:
+        print()
+        print("At equal energy: full resolution run on without the rule, read (linearly "
+              "between its 50-iteration rows) where its energy equals the finished result's:")
+        for lam in a.lam:
+            for m in a.m:
+                q = next(r for r in rows if r["lam"] == lam and r["method"] == f"finished m={m}")
+                eq = equal_energy([r for r in rows if r["lam"] == lam
+                                   and r["method"] == "full, no rule"], q["energy"])
+                if eq is None:
+                    print(f"  λ {lam:g}, m {m}: full resolution did not reach the finished "
+                          f"energy {q['energy']:.4f} within {a.long} iterations")
+                    continue
+                it, ch, sh = eq
+                print(f"  λ {lam:g}, m {m}: energy {q['energy']:.4f} at full resolution's "
+                      f"iteration ~{it:.0f}: change {ch:.4f}, share {sh:.3f}; finished "
+                      f"{q['change']:.4f} / {q['share']:.3f}: ratio {q['change'] / ch:.2f}, "
+                      f"{100 * (q['share'] - sh):+.1f} points")
     return 0
+
+
+def equal_energy(run: list, energy: float):
+    """(iteration, change, share) of a run's rows (energy falling with the iterations) where
+    its energy equals ``energy``, linear between the two rows around it; None if never."""
+    run = sorted(run, key=lambda r: r["iteration"])
+    for r0, r1 in zip(run, run[1:]):
+        if r0["energy"] >= energy >= r1["energy"] and r0["energy"] > r1["energy"]:
+            t = (r0["energy"] - energy) / (r0["energy"] - r1["energy"])
+            return tuple(r0[k] + t * (r1[k] - r0[k]) for k in ("iteration", "change", "share"))
+    return None
 
 
 if __name__ == "__main__":
