@@ -1658,11 +1658,18 @@ def _least_blend(V_net, VM, w, A, F, pairs, new_pairs, away=None, new_pairs_near
     touches[moving] = True
     still = pairs[~touches[pairs].any(axis=1)]   # the same at every fraction
 
-    def near(X):
+    # the blended part of each moving triangle (its blended corners are adjacent: one part)
+    face_part = part[F].max(axis=1)
+
+    def near(X, faces):
+        if not len(faces):
+            return np.zeros((0, 2), np.int64)
         if new_pairs_near is not None:
-            return np.asarray(new_pairs_near(X, moving), np.int64).reshape(-1, 2)
+            return np.asarray(new_pairs_near(X, faces), np.int64).reshape(-1, 2)
         P = np.asarray(new_pairs(X), np.int64).reshape(-1, 2)
-        return P[touches[P].any(axis=1)]
+        mask = np.zeros(len(F), bool)
+        mask[faces] = True
+        return P[mask[P].any(axis=1)]
 
     def key(P):
         P = np.sort(np.asarray(P, np.int64).reshape(-1, 2), axis=1)
@@ -1671,14 +1678,21 @@ def _least_blend(V_net, VM, w, A, F, pairs, new_pairs, away=None, new_pairs_near
     def far(P):
         return away(P) if away is not None else P
 
+    def parts_of(P):   # (k, 6) the blended parts of each pair's corners (-1: none)
+        return part[F[P].reshape(len(P), -1)]
+
     allowed = key(far(pairs))               # what the full blend leaves is left anyway
     s = np.ones(n_parts)
     settled = np.zeros(n_parts, bool)
+    final = []   # the pairs each round finds at their parts' final fractions
     for frac in BLEND_FRACTIONS:
         trial = np.where(settled, s, frac)
         X = V_net.copy()
         X[blended] += (trial[label] * w[blended])[:, None] * D[blended]
-        P = far(near(X))
+        # only the triangles of unsettled parts move from the round before: the pairs among
+        # settled parts' triangles were tested at their final positions when they settled
+        Q = near(X, moving[~settled[face_part[moving]]])
+        P = far(Q)
         bad = np.zeros(n_parts, bool)
         extra = [p for p in np.asarray(P, np.int64).reshape(-1, 2)
                  if tuple(sorted(p)) not in allowed]
@@ -1690,14 +1704,25 @@ def _least_blend(V_net, VM, w, A, F, pairs, new_pairs, away=None, new_pairs_near
         newly = ~settled & ~bad
         s[newly] = frac
         settled |= newly
+        if len(Q):
+            lab = parts_of(Q)
+            done = np.where(lab >= 0, settled[np.maximum(lab, 0)], True).all(axis=1)
+            final.append(Q[done])
         if settled.all():
             break
     X = V_net.copy()
     X[blended] += (s[label] * w[blended])[:, None] * D[blended]
-    P = near(X)
+    # the parts that never settled are fully blended: their pairs there, against every
+    # other part's final fraction, are new (tested exactly as before: the whole blend if
+    # one is not the full blend's)
+    P = near(X, moving[~settled[face_part[moving]]])
     if any(tuple(sorted(p)) not in allowed for p in np.asarray(far(P), np.int64).reshape(-1, 2)):
         return full, pairs              # the parts' choices crossed each other: the full blend
-    return X, np.concatenate([still, P])
+    found = np.concatenate(final + [P]) if final else P
+    if len(found):   # each pair once (a pair is final in one round only; kept safe)
+        _, first = np.unique(np.sort(found, axis=1), axis=0, return_index=True)
+        found = found[np.sort(first)]
+    return X, np.concatenate([still, found])
 
 
 def _blend_back_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs,

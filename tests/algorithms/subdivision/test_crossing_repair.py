@@ -177,3 +177,41 @@ def test_the_least_blend_looks_only_near_the_blend_and_finds_the_same():
                                   new_pairs_near=near)
     np.testing.assert_array_equal(a[0], b[0])
     assert a[1:] == b[1:]
+
+
+def test_parts_settling_at_different_fractions_report_exactly_their_crossings():
+    """Two pushed-through spots of different depths, far apart on a finer grid: their blended
+    parts settle at different fractions (the least blend re-tests only the parts that still
+    move), and the crossing pairs returned with the result are exactly the result's, as a
+    test of the whole mesh finds them."""
+    from algorithms.subdivision.inference import BLEND_FRACTIONS, _least_blend
+    from algorithms.mesh.topology import vertex_adjacency
+
+    V0, F0 = grid(12, 12)
+    top = V0 + [0.0, 0.0, 0.1]
+    V = np.vstack([V0, top])
+    F = np.vstack([F0, F0[:, ::-1] + len(V0)])
+    F1 = refine(F, len(V))
+    VM = midpoints_in_refine_numbering(V, F, F1)
+    V_net = VM.copy()
+    upper = V_net[:, 2] > 0.05
+    for cx, depth in ((0.25, -0.02), (0.75, -0.3)):
+        spot = upper & (np.abs(V_net[:, 0] - cx) < 0.08) & (np.abs(V_net[:, 1] - 0.5) < 0.08)
+        V_net[spot, 2] = depth
+
+    def new_pairs(X):
+        return new_crossing_pairs(intersecting_pairs(X, F1), 1, np.zeros((0, 2)))
+
+    pairs = new_pairs(V_net)
+    assert len(pairs)
+    # weight 1 on the crossing triangles' corners (both spots), as the blend rounds set it
+    w = np.zeros(len(V_net))
+    w[np.unique(F1[np.unique(pairs)])] = 1.0
+    X, got = _least_blend(V_net, VM, w, vertex_adjacency(F1, len(V_net)), F1,
+                          new_pairs(V_net + w[:, None] * (VM - V_net)), new_pairs)
+    moved = np.abs(X - V_net).max(axis=1) > 0
+    frac = np.abs(X - V_net)[moved, 2] / np.abs(VM - V_net)[moved, 2]
+    fractions = set(np.round(frac, 6)) & set(BLEND_FRACTIONS + (1.0,))
+    assert len(fractions) >= 2         # the two spots settled at different fractions
+    want = {tuple(p) for p in np.sort(new_pairs(X), axis=1)}
+    assert {tuple(p) for p in np.sort(got, axis=1)} == want
