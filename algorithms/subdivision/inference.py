@@ -1762,23 +1762,26 @@ def _blend_back_where_crossed(V_net, F_net, V_prev, F_prev, pairs, new_pairs,
     far = away(pairs) if away is not None else pairs
     pairs0 = np.asarray(pairs, np.int64).reshape(-1, 2)
 
-    def pairs_of(X):
-        # only triangles with a blended corner move: the other pairs are V_net's, and the
-        # moving ones are tested on their part of the mesh only (armadillo QSlimmed to 5,002
-        # vertices, level 2: 160,000 triangles, a whole-mesh test 0.14 s a round)
+    def pairs_of(X, changed, before):
+        # only triangles with a corner whose weight changed this round move: the other
+        # pairs are the round before's (``before``), and the moving ones are tested on their
+        # part of the mesh only (armadillo QSlimmed to 5,002 vertices, level 2: 160,000
+        # triangles, a whole-mesh test 0.14 s a round)
         if new_pairs_near is None:
             return new_pairs(X)
-        moving = (w > 0)[F_net].any(axis=1)
-        keep = pairs0[~moving[pairs0].any(axis=1)]
+        moving = changed[F_net].any(axis=1)
+        keep = before[~moving[before].any(axis=1)]
         return np.concatenate([keep, np.asarray(new_pairs_near(X, np.flatnonzero(moving)),
                                                 np.int64).reshape(-1, 2)])
+    pairs = pairs0
     for _ in range(BLEND_ROUNDS):
         if not len(far):
             break
         ring1, ring2 = _rings(A, F_net, far, n)
+        w_before = w
         w = np.maximum(w, np.where(ring1, 1.0, np.where(ring2, 0.5, 0.0)))
         V = (1.0 - w)[:, None] * V_net + w[:, None] * VM
-        pairs = pairs_of(V)
+        pairs = pairs_of(V, w != w_before, np.asarray(pairs, np.int64).reshape(-1, 2))
         far = away(pairs) if away is not None else pairs
     if (w > 0).any():
         V, pairs = _least_blend(V_net, VM, w, A, F_net, pairs, new_pairs, away, new_pairs_near)

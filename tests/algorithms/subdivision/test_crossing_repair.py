@@ -215,3 +215,45 @@ def test_parts_settling_at_different_fractions_report_exactly_their_crossings():
     assert len(fractions) >= 2         # the two spots settled at different fractions
     want = {tuple(p) for p in np.sort(new_pairs(X), axis=1)}
     assert {tuple(p) for p in np.sort(got, axis=1)} == want
+
+
+def test_the_widening_rounds_retest_only_what_moved_and_find_the_same(monkeypatch):
+    """The blend's widening rounds re-test only the triangles whose corners' weights changed
+    that round (the other pairs are the round before's): the same result as testing the whole
+    mesh every round, on a wide deep push that takes three rounds."""
+    from algorithms.mesh.intersections import intersecting_pairs_touching
+    from algorithms.subdivision import inference
+
+    V0, F0 = grid(12, 12)
+    V = np.vstack([V0, V0 + [0.0, 0.0, 0.1]])
+    F = np.vstack([F0, F0[:, ::-1] + len(V0)])
+    F1 = refine(F, len(V))
+    VM = midpoints_in_refine_numbering(V, F, F1)
+    V_net = VM.copy()
+    spot = ((V_net[:, 2] > 0.05) & (np.abs(V_net[:, 0] - 0.5) < 0.2)
+            & (np.abs(V_net[:, 1] - 0.5) < 0.2))
+    V_net[spot, 2] = -0.5
+
+    def new_pairs(X):
+        return new_crossing_pairs(intersecting_pairs(X, F1), 1, np.zeros((0, 2)))
+
+    rounds, tested = [], []
+    real = inference._rings
+    monkeypatch.setattr(inference, "_rings", lambda *a, **k: rounds.append(1) or real(*a, **k))
+
+    def near(X, faces):
+        tested.append(len(faces))
+        return new_crossing_pairs(intersecting_pairs_touching(X, F1, faces), 1,
+                                  np.zeros((0, 2)))
+
+    a = _blend_back_where_crossed(V_net, F1, V, F, new_pairs(V_net), new_pairs)
+    assert len(rounds) == 3
+    rounds.clear()
+    b = _blend_back_where_crossed(V_net, F1, V, F, new_pairs(V_net), new_pairs,
+                                  new_pairs_near=near)
+    assert len(rounds) == 3 and a[2] == 0
+    np.testing.assert_array_equal(a[0], b[0])
+    assert a[1:] == b[1:]
+    # the later rounds test only part of the triangles that move
+    moving = (np.abs(a[0] - V_net).max(axis=1) > 0)[F1].any(axis=1).sum()
+    assert 0 < tested[1] < moving and 0 < tested[2] < moving
