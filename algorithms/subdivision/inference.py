@@ -451,15 +451,17 @@ def _load_network(p: Path) -> Network:
 # ------------------------------------------------------------------------------ geometry
 def mean_edge_length(V: np.ndarray, F: np.ndarray, edges: np.ndarray | None = None) -> float:
     """Mean length of the mesh's undirected edges (``edges`` (e, 2): them, if known)."""
-    if edges is not None:
-        return float(np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1).mean())
+    E = _unique_edges(F, len(V)) if edges is None else edges
+    return float(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).mean())
+
+
+def _unique_edges(F: np.ndarray, n: int) -> np.ndarray:
+    """(e, 2) the undirected edges of ``F`` (``n`` vertices), each once, sorted."""
     F = np.asarray(F, dtype=np.int64)
     a = F.reshape(-1)
     b = F[:, [1, 2, 0]].reshape(-1)
-    n = len(V)
     key = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
-    i, j = key // n, key % n
-    return float(np.linalg.norm(V[i] - V[j], axis=1).mean())
+    return np.stack([key // n, key % n], axis=1)
 
 
 @dataclass
@@ -538,7 +540,7 @@ def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = Tru
         return ScalePlan(c, s)
     ell = mean_edge_length(V, F, edges) * s
     ratio = ell / network.reference_edge
-    parts = _part_ratios(network, V, F)
+    parts = _part_ratios(network, V, F, edges)
     trained = "the coarse meshes (a few hundred vertices) the network was trained on"
     if not np.isfinite(ratio) or ratio <= 0 or 1 / SCALE_TOLERANCE <= ratio <= SCALE_TOLERANCE:
         if parts is None or dense == "off":
@@ -650,30 +652,28 @@ def _parts(F: np.ndarray, n: int):
     return [(vs[v_cut[p]:v_cut[p + 1]], fs[f_cut[p]:f_cut[p + 1]]) for p in range(k)]
 
 
-def _part_ratios(network: Network, V: np.ndarray, F: np.ndarray, *, indices: bool = False):
+def _part_ratios(network: Network, V: np.ndarray, F: np.ndarray, edges=None, *,
+                 indices: bool = False):
     """For a mesh of several parts (sharing no vertex): [(vertices, ratio)] per part, the ratio
     of its mean edge length to the training meshes' with the part normalized as if it were
-    alone ([(vertex indices, ratio)] with ``indices``); None for one part, or where a part
-    cannot be normalized alone. (The network itself sees the whole mesh in one frame: each
-    part in its own frame made tiny parts -- octagonal_pocket's 4-vertex bits -- swell,
-    Hausdorff 1.6 -> 2.8 % on the corpus, docs/results/subdivision.md.)"""
+    alone ([(vertex indices, triangle rows, ratio)] with ``indices``); None for one part, or
+    where a part cannot be normalized alone. ``edges``: the mesh's undirected edges, if known.
+    (The network itself sees the whole mesh in one frame: each part in its own frame made tiny
+    parts -- octagonal_pocket's 4-vertex bits -- swell, Hausdorff 1.6 -> 2.8 % on the corpus,
+    docs/results/subdivision.md.)"""
     F = np.asarray(F, dtype=np.int64)
     parts = _parts(F, len(V))
     if parts is None:
         return None
-    # every undirected edge once, its length summed into its part
-    a, b = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1)
-    n = len(V)
-    key = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
-    i, j = key // n, key % n
-    vertex_part = np.empty(n, dtype=np.int64)
+    E = _unique_edges(F, len(V)) if edges is None else np.asarray(edges, dtype=np.int64)
+    vertex_part = np.empty(len(V), dtype=np.int64)
     for p, (idx, _) in enumerate(parts):
         vertex_part[idx] = p
-    length = np.linalg.norm(V[i] - V[j], axis=1)
-    total = np.bincount(vertex_part[i], weights=length, minlength=len(parts))
-    count = np.bincount(vertex_part[i], minlength=len(parts))
+    length = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    total = np.bincount(vertex_part[E[:, 0]], weights=length, minlength=len(parts))
+    count = np.bincount(vertex_part[E[:, 0]], minlength=len(parts))
     out = []
-    for p, (idx, _) in enumerate(parts):
+    for p, (idx, faces) in enumerate(parts):
         try:
             _, s = network.normalization(V[idx])
         except InvalidMeshError:
@@ -681,7 +681,7 @@ def _part_ratios(network: Network, V: np.ndarray, F: np.ndarray, *, indices: boo
         ratio = total[p] / max(count[p], 1) * s / network.reference_edge
         if not np.isfinite(ratio) or ratio <= 0:
             return None
-        out.append((idx if indices else len(idx), float(ratio)))
+        out.append((idx, faces, float(ratio)) if indices else (len(idx), float(ratio)))
     return out
 
 
@@ -705,8 +705,8 @@ def coarsen_for_network(network: Network | None, V: np.ndarray, F: np.ndarray,
     if parts is None:
         return coarsen_to_vertices(V, F, vertices)
     V = np.asarray(V, dtype=np.float64)
-    want = np.array([_wanted(len(idx), r) for idx, r in parts])
-    have = np.array([len(idx) for idx, _ in parts], dtype=np.float64)
+    want = np.array([_wanted(len(idx), r) for idx, _, r in parts])
+    have = np.array([len(idx) for idx, _, _ in parts], dtype=np.float64)
     floor = np.minimum(have, 4.0)   # every part keeps at least a tetrahedron's worth
     budget = float(vertices) - floor.sum()
     if budget < 0:
@@ -716,10 +716,9 @@ def coarsen_for_network(network: Network | None, V: np.ndarray, F: np.ndarray,
             f"all). Set 'Coarsen first' to {int(floor.sum()):,} or more, or to 0 to subdivide "
             f"the mesh as it is.")
     share = floor + np.minimum(have - floor, np.round(budget * want / want.sum()))
-    rows = _parts(F, len(V))
     remap = np.full(len(V), -1, dtype=np.int64)
     Vs, Fs, base = [], [], 0
-    for (idx, _), (_, faces), k in zip(parts, rows, share):
+    for (idx, faces, _), k in zip(parts, share):
         remap[idx] = np.arange(len(idx))
         Vp, Fp = V[idx], remap[F[faces]]
         remap[idx] = -1
