@@ -477,6 +477,14 @@ class ScalePlan:
     ratio: float = float("nan")
     advice: int = 0  # vertices for 'Coarsen first' on a denser mesh (0: none)
     reason: str = ""  # with ``fallback``: why, in one short clause (the batch record's)
+    #: on a mesh of several parts, how dense it is in words (the parts judged one by one);
+    #: '' for the whole mesh's ratio (:meth:`density_words`)
+    density: str = ""
+
+    def density_words(self) -> str:
+        """How much denser than the training meshes, for the messages that follow the plan."""
+        return self.density or (f"its edges are {1 / self.ratio:.1f}x shorter than its "
+                                f"training meshes'")
 
     @property
     def denser(self) -> bool:
@@ -561,6 +569,7 @@ def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = Tru
                                        f"{trained}, so it was scaled to match before "
                                        f"subdividing and scaled back after.", ratio=ratio)
     how = f"its edges are {1 / ratio:.1f}x shorter than those of {trained}"
+    density = ""
     if parts is None:
         advice = _advice(len(V), [(len(V), ratio)])
     else:
@@ -571,19 +580,24 @@ def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = Tru
         if denser:
             how = (f"{_of_parts(len(denser), len(parts))} edges shorter than those of "
                    f"{trained}, up to {1 / min(denser):.1f}x")
+            density = (f"{_of_parts(len(denser), len(parts))} edges shorter than its training "
+                       f"meshes', up to {1 / min(denser):.1f}x")
         else:
             apart = (f"This mesh's {len(parts)} parts lie apart: over the whole its edges are "
                      f"{1 / ratio:.1f}x shorter than those of {trained} (each part's own are "
                      f"in range)")
+            density = (f"its {len(parts)} parts lie apart: over the whole its edges are "
+                       f"{1 / ratio:.1f}x shorter than its training meshes'")
             if dense in ("scale", "guard"):
                 return ScalePlan(c, s / ratio, f"{apart}, so it was scaled to match.",
-                                 ratio=ratio)
+                                 ratio=ratio, density=density)
             if dense == "loop":
                 return ScalePlan(c, s, f"{apart}, so Loop subdivision was used; "
                                        f"'Mesh denser than trained' = scale (--dense-input "
                                        f"scale) runs the network.", fallback=True,
                                  ratio=ratio, reason="the mesh's parts lie apart (denser as "
-                                                     "a whole than the training meshes)")
+                                                     "a whole than the training meshes)",
+                                 density=density)
     if dense == "off":
         return ScalePlan(c, s, ratio=ratio)
     coarsen = (f" 'Coarsen first' to about {advice} vertices lets the network work as trained."
@@ -591,12 +605,13 @@ def scale_plan(network: Network, V: np.ndarray, F: np.ndarray, adapt: bool = Tru
     if dense in ("scale", "guard"):
         return ScalePlan(c, s / ratio, f"This mesh is denser than the network was trained for "
                                        f"({how}), so it was scaled to match; it may still show "
-                                       f"slight dimples.{coarsen}", ratio=ratio, advice=advice)
+                                       f"slight dimples.{coarsen}", ratio=ratio, advice=advice,
+                         density=density)
     see = (f" Set 'Coarsen first' to about {advice} vertices to see the network rebuild the "
            f"detail." if advice else "")
     return ScalePlan(c, s, f"This mesh is denser than the network was trained for ({how}); the "
                            f"network would leave dimples, so Loop subdivision was used.{see}",
-                     fallback=True, ratio=ratio, advice=advice,
+                     fallback=True, ratio=ratio, advice=advice, density=density,
                      reason=f"the mesh is denser than the training meshes ({how})")
 
 
@@ -1112,12 +1127,12 @@ def neural_subdivision_iter(V, F, levels: int, network: Network, *, adapt_scale:
         coarsen = (f"'Coarsen first' to about {plan.advice} vertices lets the network rebuild "
                    f"the detail; " if plan.advice else "")
         plan = ScalePlan(plan.centre, plan.scale, (
-            f"This mesh is denser than the network was trained for (its edges are "
-            f"{1 / plan.ratio:.1f}x shorter than its training meshes'), and the result has "
+            f"This mesh is denser than the network was trained for ({plan.density_words()}), "
+            f"and the result has "
             f"{len(F) * 4 ** lv:,} triangles, over the {GUARD_MAX_TRIANGLES:,} up to which the "
             f"network's result is compared with butterfly's, so Loop subdivision was used. "
             f"{coarsen}'Mesh denser than trained' = scale (--dense-input scale) runs it "
-            f"anyway."), fallback=True, ratio=plan.ratio,
+            f"anyway."), fallback=True, ratio=plan.ratio, density=plan.density,
             advice=plan.advice, reason=f"the result would have {len(F) * 4 ** lv:,} triangles, "
                                        f"over the {GUARD_MAX_TRIANGLES:,} the guard compares")
     c, s, note = plan.centre, plan.scale, plan.note
@@ -1819,8 +1834,8 @@ def _guard_fallback(V, F, lv: int, li: int, kept, why: str, guard: _Guard, plan:
         yield Step(int(1000 * k / lv), 1000, V, {},
                    f"Level {k + 1} of {lv}: Loop subdivision")
         Vl, Fl = subdivide_baseline(Vl, Fl, 1, "loop")
-    where = (f"This mesh is denser than the network was trained for (its edges are "
-             f"{1 / plan.ratio:.1f}x shorter than its training meshes'); "
+    where = (f"This mesh is denser than the network was trained for "
+             f"({plan.density_words()}); "
              if plan.denser else "On this mesh ")
     if li == 0:
         said = f"{where}{why}, so Loop subdivision was used."
